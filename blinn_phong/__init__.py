@@ -1,0 +1,1 @@
+"""blinn_phong: a pure numpy local-illumination renderer (no bpy)."""
