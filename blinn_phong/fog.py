@@ -1,0 +1,144 @@
+"""Fog (atmospheric attenuation) as a function of eye distance.
+
+OpenGL 2.1 §3.10 "Fog" (same in GL 1.1 §3.9): a fog factor ``f`` in [0, 1] blends the
+fragment colour with the fog colour,
+
+* ``GL_LINEAR``: ``f = (end − c) / (end − start)``
+* ``GL_EXP``:    ``f = exp(−density · c)``
+* ``GL_EXP2``:   ``f = exp(−(density · c)²)``
+
+``f`` is clamped to [0, 1] by the specification, then ``C = f·C_r + (1 − f)·C_f`` on the
+colour; alpha is left alone. ``c`` is the eye distance. Mesa's default distance mode is
+``GL_EYE_PLANE_ABSOLUTE_NV``, ``c = |z_eye|`` (``main/fog.c``); ``GL_EYE_RADIAL_NV`` uses
+``c = ‖p_eye‖``. Both are offered by :func:`eye_distance`.
+
+On premultiplied RGBA the blend becomes ``rgb' = f·rgb + (1 − f)·α·C_f``, ``α' = α``,
+which is the specification's straight-alpha formula multiplied through by ``α``.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+__all__ = ["FOG_MODES", "apply_fog", "eye_distance", "fog_factor"]
+
+FogMode = Literal["linear", "exp", "exp2"]
+#: The three OpenGL fog modes.
+FOG_MODES: tuple[str, ...] = ("linear", "exp", "exp2")
+
+
+def _float_array(name: str, value: np.ndarray | float) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiu":
+        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    if arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got NaN or Inf")
+    return arr
+
+
+def eye_distance(eye_positions: np.ndarray, mode: Literal["plane", "radial"] = "plane") -> np.ndarray:
+    """Fog distance ``c`` of eye-space points.
+
+    Args:
+        eye_positions: (..., 3) eye-space positions (camera at the origin looking down −z), any unit.
+        mode: ``"plane"`` gives ``|z_eye|`` (GL_EYE_PLANE_ABSOLUTE_NV, Mesa's default);
+            ``"radial"`` gives ``‖p_eye‖`` (GL_EYE_RADIAL_NV).
+
+    Returns:
+        (...) distances in the unit of the positions.
+    """
+    p = _float_array("eye_positions", eye_positions)
+    if p.ndim < 1 or p.shape[-1] != 3:
+        raise ValueError(f"eye_positions must have shape (..., 3), got {p.shape}")
+    if mode == "plane":
+        return np.abs(p[..., 2])
+    if mode == "radial":
+        return np.linalg.norm(p, axis=-1)
+    raise ValueError(f"mode must be 'plane' or 'radial', got {mode!r}")
+
+
+def fog_factor(
+    distance: np.ndarray | float,
+    mode: FogMode = "exp",
+    *,
+    density: float = 1.0,
+    start: float = 0.0,
+    end: float = 1.0,
+) -> np.ndarray:
+    """The OpenGL fog factor ``f`` (1 = no fog, 0 = only fog) at eye distance ``c``.
+
+    Formulas of OpenGL 2.1 §3.10 (see the module docstring), clamped to [0, 1] as the
+    specification requires. Defaults are GL's (GL_EXP, density 1, start 0, end 1).
+
+    Args:
+        distance: eye distances ``c`` (any shape, ≥ 0 in practice), same unit as ``start``/``end``
+            and ``1/density``.
+        mode: ``"linear"``, ``"exp"`` or ``"exp2"``.
+        density: fog density (≥ 0) for the exponential modes, per unit distance.
+        start: distance where linear fog begins (f = 1).
+        end: distance where linear fog is complete (f = 0); must differ from ``start``.
+
+    Returns:
+        Array of fog factors with the shape and float dtype of ``distance``.
+    """
+    c = _float_array("distance", distance)
+    if mode == "linear":
+        if end == start:
+            raise ValueError(f"linear fog needs end != start, got start = end = {start}")
+        f = (end - c) / (end - start)
+    elif mode in ("exp", "exp2"):
+        if not np.isfinite(density) or density < 0:
+            raise ValueError(f"density must be a finite number >= 0, got {density}")
+        dc = density * c
+        f = np.exp(-dc) if mode == "exp" else np.exp(-(dc * dc))
+    else:
+        raise ValueError(f"mode must be one of {FOG_MODES}, got {mode!r}")
+    return np.clip(f, 0.0, 1.0).astype(c.dtype, copy=False)
+
+
+def apply_fog(
+    rgba: np.ndarray,
+    distance: np.ndarray,
+    fog_color: np.ndarray | tuple[float, float, float],
+    mode: FogMode = "exp",
+    *,
+    density: float = 1.0,
+    start: float = 0.0,
+    end: float = 1.0,
+) -> np.ndarray:
+    """Blend premultiplied RGBA towards the fog colour by eye distance (OpenGL §3.10).
+
+    ``rgb' = f·rgb + (1 − f)·α·C_f``, ``α' = α`` with ``f = fog_factor(distance, ...)``.
+
+    Args:
+        rgba: (..., 4) premultiplied, linear-light RGBA.
+        distance: eye distances, shape ``rgba.shape[:-1]``.
+        fog_color: linear RGB fog colour ``C_f`` (3 values).
+        mode: fog mode, see :func:`fog_factor`.
+        density: exponential density, see :func:`fog_factor`.
+        start: linear start distance, see :func:`fog_factor`.
+        end: linear end distance, see :func:`fog_factor`.
+
+    Returns:
+        (..., 4) fogged premultiplied RGBA in the dtype of ``rgba``.
+    """
+    img = _float_array("rgba", rgba)
+    if img.ndim < 1 or img.shape[-1] != 4:
+        raise ValueError(f"rgba must have shape (..., 4), got {img.shape}")
+    d = _float_array("distance", distance)
+    if d.shape != img.shape[:-1]:
+        raise ValueError(
+            f"distance must have shape {img.shape[:-1]} (rgba without its last axis), got {d.shape}"
+        )
+    cf = _float_array("fog_color", fog_color)
+    if cf.shape != (3,):
+        raise ValueError(f"fog_color must hold 3 values (linear RGB), got shape {cf.shape}")
+    f = fog_factor(d, mode, density=density, start=start, end=end)[..., None].astype(img.dtype)
+    out = img.copy()
+    alpha = img[..., 3:4]
+    out[..., :3] = f * img[..., :3] + (1.0 - f) * alpha * cf.astype(img.dtype)
+    return out
