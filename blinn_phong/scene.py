@@ -1,0 +1,539 @@
+"""Scene description: meshes, materials, lights, camera, light model.
+
+Conventions (the same as OpenGL's, so a scene can be handed to a real OpenGL
+implementation unchanged):
+
+* World space is right-handed. The camera's view matrix maps world to eye space,
+  where the eye sits at the origin looking down -Z with +Y up; the projection maps
+  eye space to clip space (OpenGL 2.1 spec §2.11, ``gluPerspective``/``glOrtho``).
+* Matrices are 4×4 numpy arrays acting on column vectors (``clip = P @ V @ M @ p``),
+  i.e. the transpose of what ``glLoadMatrixf`` reads from a C array.
+* Colours are linear-light RGB triples, non-negative, unbounded above.
+* Light positions and directions are given in world space; the renderer moves them
+  to eye space with the view matrix, as ``glLight`` does with the modelview current
+  at the call.
+
+Every class validates on construction and raises ``ValueError``/``TypeError``
+naming the field, the expectation and the value received.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from blinn_phong._checks import colour3, float_array, number, vector3
+
+__all__ = [
+    "AmbientLight",
+    "Camera",
+    "DirectionalLight",
+    "Light",
+    "LightModel",
+    "Material",
+    "Mesh",
+    "PointLight",
+    "Scene",
+    "SpotLight",
+    "look_at",
+    "orthographic_matrix",
+    "perspective_matrix",
+]
+
+Colour = tuple[float, float, float]
+Shading = Literal["flat", "gouraud", "phong"]
+SHADINGS: tuple[str, ...] = ("flat", "gouraud", "phong")
+
+
+# --------------------------------------------------------------------------- material
+
+
+@dataclass(frozen=True)
+class Material:
+    """Surface reflectances of the lighting equation (OpenGL ``glMaterial`` names).
+
+    Attributes:
+        ambient: ``a_cm``, reflectance for ambient light (linear RGB).
+        diffuse: ``d_cm``, Lambertian reflectance (linear RGB).
+        specular: ``s_cm``, specular reflectance (linear RGB).
+        emission: ``e_cm``, emitted radiance added unlit (linear RGB).
+        shininess: ``s_rm``, the specular exponent, >= 0. OpenGL limits it to
+            [0, 128]; the renderer accepts larger values outside the GL preset.
+        opacity: alpha of the surface in [0, 1] (the alpha of ``d_cm`` in OpenGL).
+
+    Defaults are OpenGL's (spec §2.14.1 table 2.11 — ambient 0.2, diffuse 0.8,
+    specular 0, emission 0, shininess 0).
+    """
+
+    ambient: Colour = (0.2, 0.2, 0.2)
+    diffuse: Colour = (0.8, 0.8, 0.8)
+    specular: Colour = (0.0, 0.0, 0.0)
+    emission: Colour = (0.0, 0.0, 0.0)
+    shininess: float = 0.0
+    opacity: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("ambient", "diffuse", "specular", "emission"):
+            object.__setattr__(self, name, colour3(getattr(self, name), f"Material.{name}"))
+        object.__setattr__(self, "shininess", number(self.shininess, "Material.shininess", low=0.0))
+        object.__setattr__(self, "opacity", number(self.opacity, "Material.opacity", low=0.0, high=1.0))
+
+
+# --------------------------------------------------------------------------- lights
+
+
+def _light_colours(
+    cls: str, color: object, intensity: object, ambient: object, diffuse: object, specular: object
+) -> tuple[Colour, Colour, Colour]:
+    """Resolve 'one colour × intensity' or explicit OpenGL-style ambient/diffuse/specular colours."""
+    base = np.asarray(colour3(color, f"{cls}.color")) * number(intensity, f"{cls}.intensity", low=0.0)
+    base3 = (float(base[0]), float(base[1]), float(base[2]))
+    amb = (0.0, 0.0, 0.0) if ambient is None else colour3(ambient, f"{cls}.ambient")
+    dif = base3 if diffuse is None else colour3(diffuse, f"{cls}.diffuse")
+    spe = base3 if specular is None else colour3(specular, f"{cls}.specular")
+    return amb, dif, spe
+
+
+def _attenuation(cls: str, constant: object, linear: object, quadratic: object) -> tuple[float, float, float]:
+    kc = number(constant, f"{cls}.constant", low=0.0)
+    kl = number(linear, f"{cls}.linear", low=0.0)
+    kq = number(quadratic, f"{cls}.quadratic", low=0.0)
+    if kc == 0.0 and kl == 0.0 and kq == 0.0:
+        raise ValueError(f"{cls}: attenuation (constant, linear, quadratic) must not all be 0, got (0, 0, 0)")
+    return kc, kl, kq
+
+
+@dataclass(frozen=True)
+class AmbientLight:
+    """A uniform ambient light: adds ``a_cm · color · intensity`` everywhere (no direction)."""
+
+    color: Colour = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "color", colour3(self.color, "AmbientLight.color"))
+        object.__setattr__(self, "intensity", number(self.intensity, "AmbientLight.intensity", low=0.0))
+
+    @property
+    def radiance(self) -> Colour:
+        """``color · intensity`` (linear RGB)."""
+        c = np.asarray(self.color) * self.intensity
+        return (float(c[0]), float(c[1]), float(c[2]))
+
+
+@dataclass(frozen=True, init=False)
+class DirectionalLight:
+    """A light at infinity shining along ``direction`` (world space; OpenGL position w = 0).
+
+    Colours: either ``color`` × ``intensity`` for diffuse and specular (ambient 0),
+    or explicit ``ambient``/``diffuse``/``specular`` as ``glLight`` takes them
+    (an explicit value overrides the one derived from ``color``).
+    """
+
+    direction: tuple[float, float, float]
+    ambient: Colour
+    diffuse: Colour
+    specular: Colour
+
+    def __init__(
+        self,
+        direction: object = (0.0, 0.0, -1.0),
+        color: object = (1.0, 1.0, 1.0),
+        intensity: object = 1.0,
+        *,
+        ambient: object = None,
+        diffuse: object = None,
+        specular: object = None,
+    ) -> None:
+        object.__setattr__(self, "direction", vector3(direction, "DirectionalLight.direction", unit=True))
+        a, d, s = _light_colours("DirectionalLight", color, intensity, ambient, diffuse, specular)
+        object.__setattr__(self, "ambient", a)
+        object.__setattr__(self, "diffuse", d)
+        object.__setattr__(self, "specular", s)
+
+
+@dataclass(frozen=True, init=False)
+class PointLight:
+    """A positional light with attenuation ``1 / (kc + kl·d + kq·d²)`` (d = distance, world units).
+
+    Colours as for :class:`DirectionalLight`. ``constant``, ``linear``,
+    ``quadratic`` must be >= 0 and not all zero (OpenGL 2.1 §2.14.1, eq. 2.4).
+    """
+
+    position: tuple[float, float, float]
+    ambient: Colour
+    diffuse: Colour
+    specular: Colour
+    constant: float
+    linear: float
+    quadratic: float
+
+    def __init__(
+        self,
+        position: object = (0.0, 0.0, 1.0),
+        color: object = (1.0, 1.0, 1.0),
+        intensity: object = 1.0,
+        *,
+        constant: object = 1.0,
+        linear: object = 0.0,
+        quadratic: object = 0.0,
+        ambient: object = None,
+        diffuse: object = None,
+        specular: object = None,
+    ) -> None:
+        object.__setattr__(self, "position", vector3(position, "PointLight.position"))
+        a, d, s = _light_colours("PointLight", color, intensity, ambient, diffuse, specular)
+        object.__setattr__(self, "ambient", a)
+        object.__setattr__(self, "diffuse", d)
+        object.__setattr__(self, "specular", s)
+        kc, kl, kq = _attenuation("PointLight", constant, linear, quadratic)
+        object.__setattr__(self, "constant", kc)
+        object.__setattr__(self, "linear", kl)
+        object.__setattr__(self, "quadratic", kq)
+
+
+@dataclass(frozen=True, init=False)
+class SpotLight:
+    """A positional light restricted to a cone around ``direction`` (world space).
+
+    Inside the cone (angle between the light→point direction and ``direction``
+    at most ``cutoff`` degrees) the factor is ``cos(angle)^exponent``; outside it
+    is 0 (OpenGL 2.1 §2.14.1). ``cutoff`` is in (0, 90] degrees, ``exponent`` >= 0.
+    Attenuation and colours as for :class:`PointLight`.
+    """
+
+    position: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    cutoff: float
+    exponent: float
+    ambient: Colour
+    diffuse: Colour
+    specular: Colour
+    constant: float
+    linear: float
+    quadratic: float
+
+    def __init__(
+        self,
+        position: object = (0.0, 0.0, 1.0),
+        direction: object = (0.0, 0.0, -1.0),
+        cutoff: object = 45.0,
+        exponent: object = 0.0,
+        color: object = (1.0, 1.0, 1.0),
+        intensity: object = 1.0,
+        *,
+        constant: object = 1.0,
+        linear: object = 0.0,
+        quadratic: object = 0.0,
+        ambient: object = None,
+        diffuse: object = None,
+        specular: object = None,
+    ) -> None:
+        object.__setattr__(self, "position", vector3(position, "SpotLight.position"))
+        object.__setattr__(self, "direction", vector3(direction, "SpotLight.direction", unit=True))
+        object.__setattr__(
+            self, "cutoff", number(cutoff, "SpotLight.cutoff (degrees)", low=0.0, high=90.0, low_open=True)
+        )
+        object.__setattr__(self, "exponent", number(exponent, "SpotLight.exponent", low=0.0))
+        a, d, s = _light_colours("SpotLight", color, intensity, ambient, diffuse, specular)
+        object.__setattr__(self, "ambient", a)
+        object.__setattr__(self, "diffuse", d)
+        object.__setattr__(self, "specular", s)
+        kc, kl, kq = _attenuation("SpotLight", constant, linear, quadratic)
+        object.__setattr__(self, "constant", kc)
+        object.__setattr__(self, "linear", kl)
+        object.__setattr__(self, "quadratic", kq)
+
+
+Light = AmbientLight | DirectionalLight | PointLight | SpotLight
+LIGHT_TYPES = (AmbientLight, DirectionalLight, PointLight, SpotLight)
+
+
+@dataclass(frozen=True)
+class LightModel:
+    """Global switches of the lighting equation (OpenGL ``glLightModel`` plus the specular form).
+
+    Attributes:
+        specular: ``"blinn"`` — ``(n·h)^s`` with the half vector (Blinn 1977; the
+            OpenGL equation), or ``"phong"`` — ``(r·v)^s`` with the mirror
+            reflection of the light direction (Phong 1975).
+        local_viewer: True: the view vector is ``-normalize(p_eye)`` (the eye at the
+            eye-space origin); False: the viewer is at infinity, ``v = (0, 0, 1)``
+            (``GL_LIGHT_MODEL_LOCAL_VIEWER``). With an orthographic camera the true
+            view direction is (0, 0, 1) everywhere, i.e. ``local_viewer=False``.
+        two_sided: light back faces with the flipped normal and the mesh's
+            ``back_material`` (``GL_LIGHT_MODEL_TWO_SIDE``). When False back faces
+            are lit with the front normal, as OpenGL does.
+        separate_specular: keep specular apart from the rest until after
+            interpolation and per-vertex clamping (``GL_SEPARATE_SPECULAR_COLOR``);
+            only changes results in the GL-compatibility preset.
+    """
+
+    specular: Literal["blinn", "phong"] = "blinn"
+    local_viewer: bool = True
+    two_sided: bool = False
+    separate_specular: bool = False
+
+    def __post_init__(self) -> None:
+        if self.specular not in ("blinn", "phong"):
+            raise ValueError(f"LightModel.specular: expected 'blinn' or 'phong', got {self.specular!r}")
+        for name in ("local_viewer", "two_sided", "separate_specular"):
+            if not isinstance(getattr(self, name), bool):
+                raise TypeError(f"LightModel.{name}: expected a bool, got {getattr(self, name)!r}")
+
+
+# --------------------------------------------------------------------------- mesh
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh in object space.
+
+    Attributes:
+        positions: (V, 3) vertex positions (object space), finite.
+        triangles: (T, 3) integer vertex indices, counter-clockwise = front
+            (OpenGL ``GL_CCW``); the last index is the provoking vertex for
+            GL-compatible flat shading.
+        normals: optional (V, 3) per-vertex normals (object space, any length;
+            zero-length normals are allowed and light as unlit-by-direction).
+            When None, smooth shading uses :func:`blinn_phong.normals.vertex_normals`
+            with ``normal_weighting``.
+        transform: 4×4 model matrix (object → world), column-vector convention.
+        material: front material.
+        back_material: material for back faces under two-sided lighting
+            (defaults to ``material``).
+        shading: per-mesh shading frequency overriding the render's, or None.
+        normal_weighting: ``"area"`` or ``"angle"`` weighting of face normals
+            when averaging vertex normals.
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    normals: np.ndarray | None = None
+    transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    material: Material = field(default_factory=Material)
+    back_material: Material | None = None
+    shading: Shading | None = None
+    normal_weighting: Literal["area", "angle"] = "area"
+
+    def __post_init__(self) -> None:
+        positions = float_array(self.positions, "Mesh.positions", (None, 3))
+        tri = np.asarray(self.triangles)
+        if tri.ndim != 2 or tri.shape[1] != 3:
+            raise ValueError(f"Mesh.triangles: expected shape (T, 3), got shape {tri.shape}")
+        if tri.size and tri.dtype.kind not in "iu":
+            raise TypeError(f"Mesh.triangles: expected integer vertex indices, got dtype {tri.dtype}")
+        tri = tri.astype(np.int64, copy=False)
+        if tri.size and (tri.min() < 0 or tri.max() >= len(positions)):
+            bad = int(np.count_nonzero((tri < 0) | (tri >= len(positions))))
+            raise ValueError(
+                f"Mesh.triangles: indices must lie in [0, {len(positions) - 1}] (V = {len(positions)}); "
+                f"got {bad} out of range, range [{int(tri.min())}, {int(tri.max())}]"
+            )
+        object.__setattr__(self, "positions", positions)
+        object.__setattr__(self, "triangles", tri)
+        if self.normals is not None:
+            object.__setattr__(
+                self, "normals", float_array(self.normals, "Mesh.normals", (len(positions), 3))
+            )
+        transform = float_array(self.transform, "Mesh.transform", (4, 4))
+        if abs(np.linalg.det(transform[:3, :3])) < 1e-300:
+            raise ValueError(
+                "Mesh.transform: the upper 3×3 must be invertible (normals use its inverse-transpose)"
+            )
+        object.__setattr__(self, "transform", transform)
+        if not isinstance(self.material, Material):
+            raise TypeError(f"Mesh.material: expected a Material, got {type(self.material).__name__}")
+        if self.back_material is not None and not isinstance(self.back_material, Material):
+            raise TypeError(
+                f"Mesh.back_material: expected a Material or None, got {type(self.back_material).__name__}"
+            )
+        if self.shading is not None and self.shading not in SHADINGS:
+            raise ValueError(f"Mesh.shading: expected one of {SHADINGS} or None, got {self.shading!r}")
+        if self.normal_weighting not in ("area", "angle"):
+            raise ValueError(
+                f"Mesh.normal_weighting: expected 'area' or 'angle', got {self.normal_weighting!r}"
+            )
+
+
+# --------------------------------------------------------------------------- camera
+
+
+def look_at(eye: object, target: object, up: object = (0.0, 1.0, 0.0)) -> np.ndarray:
+    """The 4×4 view matrix of ``gluLookAt(eye, target, up)`` (world → eye space).
+
+    The eye goes to the origin, ``target - eye`` to -Z and ``up`` (projected) to +Y.
+    Source: the ``gluLookAt`` reference page (OpenGL 2.1 GLU), matrix ``M · T(-eye)``
+    with rows s, u, -f.
+
+    Raises:
+        ValueError: eye == target, or ``up`` parallel to the viewing direction.
+    """
+    e = np.asarray(vector3(eye, "look_at eye"))
+    t = np.asarray(vector3(target, "look_at target"))
+    u = np.asarray(vector3(up, "look_at up", unit=True))
+    f = t - e
+    if np.linalg.norm(f) == 0.0:
+        raise ValueError(f"look_at: eye and target must differ, both are {tuple(e.tolist())}")
+    f = f / np.linalg.norm(f)
+    s = np.cross(f, u)
+    if np.linalg.norm(s) < 1e-12:
+        raise ValueError(
+            f"look_at: up {tuple(u.tolist())} is parallel to the viewing direction {tuple(f.tolist())}"
+        )
+    s = s / np.linalg.norm(s)
+    uu = np.cross(s, f)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = s, uu, -f
+    m[:3, 3] = -m[:3, :3] @ e
+    return m
+
+
+def perspective_matrix(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """``gluPerspective(fov_y, aspect, near, far)`` (eye → clip), ``fov_y`` in degrees.
+
+    ``f = cot(fov_y/2)``; rows ``(f/aspect,0,0,0), (0,f,0,0), (0,0,(far+near)/(near-far),
+    2·far·near/(near-far)), (0,0,-1,0)`` (GLU reference page).
+
+    Raises:
+        ValueError: near <= 0, far <= near, fov_y outside (0, 180), aspect <= 0.
+    """
+    fov_y = number(fov_y, "Camera fov_y (degrees)", low=0.0, high=180.0, low_open=True)
+    if fov_y == 180.0:
+        raise ValueError("Camera fov_y (degrees): expected a value in (0, 180), got 180.0")
+    aspect = number(aspect, "Camera aspect", low=0.0, low_open=True)
+    near = number(near, "Camera near", low=0.0, low_open=True)
+    far = number(far, "Camera far", low=0.0, low_open=True)
+    if far <= near:
+        raise ValueError(f"Camera far: expected far > near = {near}, got {far}")
+    f = 1.0 / math.tan(math.radians(fov_y) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+def orthographic_matrix(
+    left: float, right: float, bottom: float, top: float, near: float, far: float
+) -> np.ndarray:
+    """``glOrtho(left, right, bottom, top, near, far)`` (eye → clip), OpenGL 2.1 §2.11.1 eq. for Ortho.
+
+    Raises:
+        ValueError: left == right, bottom == top or near == far.
+    """
+    vals = [
+        number(v, f"Camera {n}")
+        for v, n in zip(
+            (left, right, bottom, top, near, far),
+            ("left", "right", "bottom", "top", "near", "far"),
+            strict=True,
+        )
+    ]
+    l, r, b, t, n, f = vals
+    if l == r or b == t or n == f:
+        raise ValueError(f"orthographic: need left != right, bottom != top, near != far; got {tuple(vals)}")
+    m = np.eye(4)
+    m[0, 0], m[1, 1], m[2, 2] = 2 / (r - l), 2 / (t - b), -2 / (f - n)
+    m[0, 3], m[1, 3], m[2, 3] = -(r + l) / (r - l), -(t + b) / (t - b), -(f + n) / (f - n)
+    return m
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A camera as two OpenGL-convention matrices: ``view`` (world → eye) and ``projection`` (eye → clip).
+
+    Build it with :meth:`perspective`, :meth:`orthographic` or directly from matrices.
+    ``kind`` records which projection family it is (``"perspective"``,
+    ``"orthographic"`` or ``"custom"``); it is informational.
+    """
+
+    view: np.ndarray
+    projection: np.ndarray
+    kind: Literal["perspective", "orthographic", "custom"] = "custom"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "view", float_array(self.view, "Camera.view", (4, 4)))
+        object.__setattr__(self, "projection", float_array(self.projection, "Camera.projection", (4, 4)))
+        if abs(np.linalg.det(self.view[:3, :3])) < 1e-300:
+            raise ValueError("Camera.view: the upper 3×3 must be invertible")
+
+    @classmethod
+    def perspective(
+        cls, fov_y: float, aspect: float, near: float, far: float, *, view: object | None = None
+    ) -> Camera:
+        """A perspective camera (``gluPerspective``, vertical ``fov_y`` in degrees; ``view`` default I)."""
+        return cls(
+            np.eye(4) if view is None else view, perspective_matrix(fov_y, aspect, near, far), "perspective"
+        )
+
+    @classmethod
+    def orthographic(
+        cls,
+        left: float,
+        right: float,
+        bottom: float,
+        top: float,
+        near: float,
+        far: float,
+        *,
+        view: object | None = None,
+    ) -> Camera:
+        """An orthographic camera (``glOrtho`` bounds in eye units); ``view`` defaults to identity."""
+        return cls(
+            np.eye(4) if view is None else view,
+            orthographic_matrix(left, right, bottom, top, near, far),
+            "orthographic",
+        )
+
+
+# --------------------------------------------------------------------------- scene
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Everything a render needs.
+
+    Attributes:
+        meshes: the meshes, drawn in order (ties in depth go to the earlier one,
+            as OpenGL's ``GL_LESS`` does).
+        lights: any mix of the four light types.
+        camera: the camera (required).
+        ambient: the global ambient ``a_cs`` (``GL_LIGHT_MODEL_AMBIENT``, default 0.2 grey).
+        light_model: see :class:`LightModel`.
+    """
+
+    meshes: tuple[Mesh, ...]
+    lights: tuple[Light, ...] = ()
+    camera: Camera | None = None
+    ambient: Colour = (0.2, 0.2, 0.2)
+    light_model: LightModel = field(default_factory=LightModel)
+
+    def __post_init__(self) -> None:
+        meshes = tuple(self.meshes)
+        for i, m in enumerate(meshes):
+            if not isinstance(m, Mesh):
+                raise TypeError(f"Scene.meshes[{i}]: expected a Mesh, got {type(m).__name__}")
+        lights = tuple(self.lights)
+        for i, light in enumerate(lights):
+            if not isinstance(light, LIGHT_TYPES):
+                raise TypeError(
+                    f"Scene.lights[{i}]: expected AmbientLight, DirectionalLight, PointLight or SpotLight, "
+                    f"got {type(light).__name__}"
+                )
+        if self.camera is None:
+            raise ValueError("Scene.camera: a scene needs a Camera, got None")
+        if not isinstance(self.camera, Camera):
+            raise TypeError(f"Scene.camera: expected a Camera, got {type(self.camera).__name__}")
+        if not isinstance(self.light_model, LightModel):
+            raise TypeError(
+                f"Scene.light_model: expected a LightModel, got {type(self.light_model).__name__}"
+            )
+        object.__setattr__(self, "meshes", meshes)
+        object.__setattr__(self, "lights", lights)
+        object.__setattr__(self, "ambient", colour3(self.ambient, "Scene.ambient"))
