@@ -1,0 +1,221 @@
+"""Order-independent transparency on synthetic fragments, against closed-form over stacks."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from blinn_phong.oit import (
+    depth_complexity,
+    depth_test,
+    object_draw_order,
+    resolve_a_buffer,
+    resolve_depth_peeling,
+    resolve_in_draw_order,
+    resolve_weighted_blended,
+    triangle_draw_order,
+    wboit_weights,
+)
+
+N_PIX = 64
+BG = np.array([0.2, 0.3, 0.4, 1.0])
+# straight colours, alphas, depths of three full-screen quads
+COLOURS = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+ALPHAS = np.array([0.5, 0.25, 0.8])
+DEPTHS = np.array([0.3, 0.6, 0.9])
+
+
+def premul(c, a):
+    return np.concatenate([np.asarray(c) * a, [a]])
+
+
+def analytic_stack(colours, alphas, background):
+    """Front-to-back closed form: C = Σ αᵢ cᵢ Π_{j<i}(1 − αⱼ) + T·bg, A = 1 − Π(1 − αᵢ) + T·bg.a."""
+    out = np.zeros(4)
+    t = 1.0
+    for c, a in zip(colours, alphas, strict=True):
+        out += t * premul(c, a)
+        t *= 1.0 - a
+    return out + t * background
+
+
+def quad_fragments(order, dtype=np.float64):
+    """Fragments of the three quads on every pixel, submitted in ``order``."""
+    pix, depth, rgba, quad = [], [], [], []
+    for q in order:
+        pix.append(np.arange(N_PIX))
+        depth.append(np.full(N_PIX, DEPTHS[q]))
+        rgba.append(np.tile(premul(COLOURS[q], ALPHAS[q]), (N_PIX, 1)))
+        quad.append(np.full(N_PIX, q))
+    return (
+        np.concatenate(pix),
+        np.concatenate(depth),
+        np.concatenate(rgba).astype(dtype),
+        np.concatenate(quad),
+    )
+
+
+@pytest.mark.parametrize("order", list(itertools.permutations(range(3))))
+def test_a_buffer_equals_the_analytic_stack_in_any_submission_order(order):
+    pix, depth, rgba, _ = quad_fragments(order)
+    out = resolve_a_buffer(pix, depth, rgba, N_PIX, BG)
+    expected = analytic_stack(COLOURS, ALPHAS, BG)
+    np.testing.assert_allclose(out, np.tile(expected, (N_PIX, 1)), atol=1e-14)
+
+
+def test_a_buffer_keeps_float32():
+    pix, depth, rgba, _ = quad_fragments((2, 0, 1), np.float32)
+    out = resolve_a_buffer(pix, depth, rgba, N_PIX, BG.astype(np.float32))
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out[0], analytic_stack(COLOURS, ALPHAS, BG), atol=1e-6)
+
+
+def test_empty_pixels_show_the_background():
+    out = resolve_a_buffer(np.array([3]), np.array([0.5]), np.array([[0.5, 0, 0, 0.5]]), 5, BG)
+    np.testing.assert_allclose(out[[0, 1, 2, 4]], np.tile(BG, (4, 1)))
+    np.testing.assert_allclose(out[3], [0.5 + 0.5 * 0.2, 0.15, 0.2, 1.0])
+
+
+@pytest.mark.parametrize("order", [(0, 1, 2), (2, 1, 0), (1, 2, 0)])
+def test_sorting_per_object_equals_the_a_buffer_when_objects_do_not_overlap_in_depth(order):
+    pix, depth, rgba, quad = quad_fragments(order)
+    draw = object_draw_order(quad, np.zeros_like(quad), DEPTHS)
+    sorted_img = resolve_in_draw_order(pix, draw, rgba, N_PIX, BG)
+    np.testing.assert_allclose(sorted_img, resolve_a_buffer(pix, depth, rgba, N_PIX, BG), atol=1e-14)
+    # drawing in submission order instead is wrong unless the submission was back to front
+    unsorted = resolve_in_draw_order(pix, np.repeat(np.arange(3), N_PIX), rgba, N_PIX, BG)
+    assert np.allclose(unsorted, sorted_img) == (order == (2, 1, 0))
+
+
+def interpenetrating():
+    """Quad A tilts through quad B: depth_A = x (0..1 across the row), depth_B = 0.5.
+
+    Quad A is nearer left of x = 0.5, B nearer on the right."""
+    x = (np.arange(N_PIX) + 0.5) / N_PIX
+    a = premul([1.0, 0.0, 0.0], 0.6)
+    b = premul([0.0, 0.0, 1.0], 0.5)
+    pix = np.concatenate([np.arange(N_PIX), np.arange(N_PIX)])
+    depth = np.concatenate([x, np.full(N_PIX, 0.5)])
+    rgba = np.concatenate([np.tile(a, (N_PIX, 1)), np.tile(b, (N_PIX, 1))])
+    obj = np.repeat([0, 1], N_PIX)
+    a_front = analytic_stack([[1, 0, 0], [0, 0, 1]], [0.6, 0.5], BG)
+    b_front = analytic_stack([[0, 0, 1], [1, 0, 0]], [0.5, 0.6], BG)
+    expected = np.where((x < 0.5)[:, None], a_front, b_front)
+    return pix, depth, rgba, obj, expected, x
+
+
+def test_a_buffer_is_exact_for_interpenetrating_quads():
+    pix, depth, rgba, _, expected, _ = interpenetrating()
+    np.testing.assert_allclose(resolve_a_buffer(pix, depth, rgba, N_PIX, BG), expected, atol=1e-14)
+    # and for the reversed submission
+    n = len(pix)
+    rev = np.r_[n // 2 : n, 0 : n // 2]
+    np.testing.assert_allclose(
+        resolve_a_buffer(pix[rev], depth[rev], rgba[rev], N_PIX, BG), expected, atol=1e-14
+    )
+
+
+def test_sorting_fails_measurably_on_interpenetrating_quads():
+    pix, depth, rgba, obj, expected, x = interpenetrating()
+    # object centre depths: A's centre is 0.5 - 1/(2N), nearer than B's 0.5 -> A is drawn last
+    object_depth = np.array([depth[:N_PIX].mean() - 1e-3, 0.5])
+    out = resolve_in_draw_order(
+        pix, object_draw_order(obj, np.zeros_like(obj), object_depth), rgba, N_PIX, BG
+    )
+    right = x < 0.5
+    np.testing.assert_allclose(out[right], expected[right], atol=1e-14)
+    # on the other half A is drawn over B although B is nearer: the error is exactly the
+    # difference between the two orders of the over operator
+    a_front = analytic_stack([[1, 0, 0], [0, 0, 1]], [0.6, 0.5], BG)
+    b_front = analytic_stack([[0, 0, 1], [1, 0, 0]], [0.5, 0.6], BG)
+    err = np.abs(out[~right] - expected[~right]).max()
+    assert err == pytest.approx(np.abs(a_front - b_front).max(), rel=1e-12)
+    assert err > 0.1
+
+
+def test_triangle_draw_order_sorts_far_to_near_with_ties_by_index():
+    order = triangle_draw_order(np.array([0, 1, 2, 3, 1]), np.array([0.5, 0.9, 0.1, 0.5]))
+    np.testing.assert_array_equal(order, [1, 0, 3, 2, 0])
+
+
+def test_depth_peeling_with_enough_layers_is_the_a_buffer_and_fewer_lose_the_far_ones():
+    pix, depth, rgba, _ = quad_fragments((1, 2, 0))
+    exact = resolve_a_buffer(pix, depth, rgba, N_PIX, BG)
+    for k in (3, 4, 10):
+        np.testing.assert_allclose(resolve_depth_peeling(pix, depth, rgba, N_PIX, k, BG), exact, atol=1e-14)
+    for k in (1, 2):
+        expected = analytic_stack(COLOURS[:k], ALPHAS[:k], BG)  # only the k nearest quads
+        np.testing.assert_allclose(
+            resolve_depth_peeling(pix, depth, rgba, N_PIX, k, BG), np.tile(expected, (N_PIX, 1)), atol=1e-14
+        )
+    with pytest.raises(ValueError, match="layers"):
+        resolve_depth_peeling(pix, depth, rgba, N_PIX, 0, BG)
+
+
+def test_weighted_blended_with_depth_free_weights_follows_equation_6():
+    pix, depth, rgba, _ = quad_fragments((0, 1, 2))
+    w = wboit_weights(rgba[:, 3], "constant")
+    out = resolve_weighted_blended(pix, w, rgba, N_PIX, BG)
+    # McGuire & Bavoil eq. 6 with premultiplied Cᵢ = αᵢcᵢ and wᵢ = αᵢ:
+    # (Σ Cᵢwᵢ / Σ αᵢwᵢ)(1 − Π(1 − αᵢ)) + bg·Π(1 − αᵢ)
+    t = np.prod(1 - ALPHAS)
+    w = ALPHAS
+    rgb = (w[:, None] * ALPHAS[:, None] * COLOURS).sum(0) / (w * ALPHAS).sum() * (1 - t) + BG[:3] * t
+    np.testing.assert_allclose(out[0], np.r_[rgb, 1.0], atol=1e-14)
+    # and it is not the exact answer when the colours differ
+    exact = resolve_a_buffer(pix, depth, rgba, N_PIX, BG)
+    assert np.abs(out - exact).max() > 0.05
+
+
+def test_weighted_blended_is_exact_for_one_layer_and_for_equal_colours():
+    pix = np.arange(N_PIX)
+    rgba = np.tile(premul([0.9, 0.5, 0.1], 0.7), (N_PIX, 1))
+    depth = np.full(N_PIX, 0.4)
+    w = wboit_weights(rgba[:, 3], "eq7", view_distance=np.full(N_PIX, 3.0))
+    np.testing.assert_allclose(
+        resolve_weighted_blended(pix, w, rgba, N_PIX, BG),
+        resolve_a_buffer(pix, depth, rgba, N_PIX, BG),
+        atol=1e-14,
+    )
+    # three layers of one colour with different alphas and depths
+    pix3 = np.tile(pix, 3)
+    alphas = np.repeat([0.3, 0.6, 0.2], N_PIX)
+    rgba3 = np.concatenate(
+        [np.full((3 * N_PIX, 3), [0.9, 0.5, 0.1]) * alphas[:, None], alphas[:, None]], axis=1
+    )
+    depth3 = np.repeat([1.0, 4.0, 9.0], N_PIX)
+    w3 = wboit_weights(alphas, "eq8", view_distance=depth3)
+    np.testing.assert_allclose(
+        resolve_weighted_blended(pix3, w3, rgba3, N_PIX, BG),
+        resolve_a_buffer(pix3, depth3, rgba3, N_PIX, BG),
+        atol=1e-13,
+    )
+
+
+def test_wboit_weight_equations_at_a_known_distance():
+    a = np.array([0.5])
+    z = np.array([10.0])
+    np.testing.assert_allclose(wboit_weights(a, "eq7", view_distance=z), 0.5 * 10 / (1e-5 + 4 + (0.05) ** 6))
+    np.testing.assert_allclose(wboit_weights(a, "eq8", view_distance=z), 0.5 * 10 / (1e-5 + 1 + (0.05) ** 6))
+    np.testing.assert_allclose(wboit_weights(a, "eq9", view_distance=z), 0.5 * 0.03 / (1e-5 + 0.05**4))
+    np.testing.assert_allclose(wboit_weights(a, "eq7", view_distance=np.array([0.01])), 0.5 * 3e3)  # clamped
+    np.testing.assert_allclose(wboit_weights(a, "eq10", window_depth=np.array([0.5])), 0.5 * 3e3 / 8)
+    with pytest.raises(ValueError, match="view_distance"):
+        wboit_weights(a, "eq7")
+
+
+def test_depth_test_and_depth_complexity():
+    keep = depth_test(np.array([0, 0, 1]), np.array([0.2, 0.7, 0.9]), np.array([0.5, 1.0]))
+    np.testing.assert_array_equal(keep, [True, False, True])
+    np.testing.assert_array_equal(depth_complexity(np.array([0, 0, 2]), 4), [2, 0, 1, 0])
+
+
+def test_bad_fragments_are_rejected():
+    with pytest.raises(ValueError, match="pixel indices"):
+        resolve_a_buffer(np.array([5]), np.array([0.1]), np.ones((1, 4)), 5)
+    with pytest.raises(ValueError, match="rgba"):
+        resolve_a_buffer(np.array([0]), np.array([0.1]), np.ones((1, 3)), 5)
+    with pytest.raises(ValueError, match="depth"):
+        resolve_a_buffer(np.array([0]), np.array([np.nan]), np.ones((1, 4)), 5)
+    with pytest.raises(TypeError, match="pixel"):
+        resolve_a_buffer(np.array([0.0]), np.array([0.1]), np.ones((1, 4)), 5)
