@@ -1,0 +1,73 @@
+"""Run Python code against Blender's ``bpy`` module in a fresh subprocess.
+
+Every Blender test goes through :func:`run_bpy`: the code runs under ``sys.executable`` (so
+``.venv-blender42/bin/python -m pytest -m blender`` exercises Blender 4.2), with a timeout, with a
+private ``BLENDER_USER_RESOURCES`` so no user configuration leaks in, and with the repository on
+``sys.path``. The code reports its findings by calling ``emit(obj)``; :func:`run_bpy` returns the
+last emitted object (JSON round-tripped).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[2]
+MARK = "@@RESULT@@"
+
+_PRELUDE = f"""
+import json, sys
+sys.path.insert(0, {str(REPO)!r})
+def emit(obj):
+    print({MARK!r} + json.dumps(obj), flush=True)
+"""
+
+
+class BlenderRunError(AssertionError):
+    """The Blender subprocess failed; the message carries its output."""
+
+
+def run_bpy(
+    code: str,
+    tmp_path: Path,
+    *,
+    timeout: float = 120.0,
+    args: tuple[str, ...] = (),
+    expect_success: bool = True,
+) -> Any:
+    """Run ``code`` in a subprocess with bpy importable; return what it last passed to ``emit``."""
+    script = tmp_path / "bpy_script.py"
+    script.write_text(_PRELUDE + textwrap.dedent(code), encoding="utf-8")
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(REPO))
+    done = subprocess.run(
+        [sys.executable, str(script), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=str(tmp_path),
+        env=env,
+        check=False,
+    )
+    results = [line[len(MARK) :] for line in done.stdout.splitlines() if line.startswith(MARK)]
+    if expect_success and (done.returncode != 0 or not results):
+        raise BlenderRunError(
+            f"exit {done.returncode}\nstdout:\n{done.stdout[-4000:]}\nstderr:\n{done.stderr[-4000:]}"
+        )
+    return json.loads(results[-1]) if results else None
+
+
+def bpy_version() -> tuple[int, int]:
+    """Major and minor version of the installed bpy package, without importing it."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("bpy")
+    assert spec is not None and spec.submodule_search_locations, "bpy is not installed"
+    root = Path(next(iter(spec.submodule_search_locations)))
+    names = sorted(p.name for p in root.iterdir() if p.name[:1].isdigit())
+    major, minor = names[-1].split(".")
+    return int(major), int(minor)

@@ -1,0 +1,239 @@
+"""addon.mapping against closed forms, numerical quadrature and worked values (no bpy)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from addon import mapping
+from blinn_phong.scene import perspective_matrix
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    t = np.clip(x, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _mean_over(t: np.ndarray, f: np.ndarray) -> float:
+    """Mean of samples f(t) on a uniform grid t (trapezoid rule)."""
+    return float(np.trapz(f, t) / (t[-1] - t[0]))
+
+
+# --------------------------------------------------------------------------- sizes and border
+
+
+@pytest.mark.parametrize(
+    ("res", "pct", "expected"),
+    [
+        ((1920, 1080), 100, (1920, 1080)),
+        ((1920, 1080), 50, (960, 540)),
+        ((101, 33), 50, (50, 16)),
+        ((64, 48), 200, (128, 96)),
+    ],
+)
+def test_render_size_is_integer_percentage(res: tuple[int, int], pct: int, expected: tuple[int, int]) -> None:
+    assert mapping.render_size(res[0], res[1], pct) == expected
+
+
+def test_border_matches_blender_observation_and_flips_y() -> None:
+    # Blender: 100×50 frame, border x 0.2–0.6, y 0–0.5 (from the bottom) -> a 40×25 result.
+    x0, y0, x1, y1 = mapping.border_rectangle(0.2, 0.6, 0.0, 0.5, 100, 50)
+    assert (x1 - x0, y1 - y0) == (40, 25)
+    assert (x0, x1) == (20, 60)
+    assert (y0, y1) == (25, 50)  # the bottom half, counted from the top row
+
+
+def test_border_rejects_inverted_range() -> None:
+    with pytest.raises(ValueError, match="min <= max"):
+        mapping.border_rectangle(0.6, 0.2, 0.0, 1.0, 10, 10)
+
+
+# --------------------------------------------------------------------------- camera
+
+
+def test_symmetric_frustum_equals_glu_perspective() -> None:
+    near, far, fov_y, aspect = 0.5, 40.0, 50.0, 1.6
+    top = near * math.tan(math.radians(fov_y) / 2)
+    right = top * aspect
+    got = mapping.frustum_matrix(-right, right, -top, top, near, far)
+    np.testing.assert_allclose(got, perspective_matrix(fov_y, aspect, near, far), rtol=1e-12, atol=1e-12)
+
+
+def test_frustum_maps_its_corners_to_the_ndc_cube() -> None:
+    l, r, b, t, n, f = -0.3, 0.5, -0.2, 0.4, 0.25, 10.0
+    m = mapping.frustum_matrix(l, r, b, t, n, f)
+    for corner, ndc in (
+        ((l, b, -n), (-1, -1, -1)),
+        ((r, t, -n), (1, 1, -1)),
+        ((r * f / n, b * f / n, -f), (1, -1, 1)),
+    ):
+        clip = m @ np.array([*corner, 1.0])
+        np.testing.assert_allclose(clip[:3] / clip[3], ndc, atol=1e-12)
+
+
+def test_perspective_horizontal_fit_focal_length() -> None:
+    # Pinhole camera: horizontal half-angle atan((sensor/2)/lens), so P[0,0] = 2·lens/sensor.
+    p = mapping.camera_projection(kind="PERSP", width=640, height=480, lens_mm=35.0, sensor_width_mm=36.0)
+    assert p[0, 0] == pytest.approx(2 * 35.0 / 36.0, rel=1e-12)
+    assert p[1, 1] == pytest.approx(2 * 35.0 / 36.0 * 640 / 480, rel=1e-12)  # square pixels
+
+
+def test_auto_fit_uses_sensor_width_along_the_longer_side() -> None:
+    # Portrait frame: AUTO fits the sensor width to the (longer) vertical side.
+    p = mapping.camera_projection(
+        kind="PERSP",
+        width=300,
+        height=600,
+        lens_mm=50.0,
+        sensor_width_mm=36.0,
+        sensor_height_mm=24.0,
+        sensor_fit="AUTO",
+    )
+    assert p[1, 1] == pytest.approx(2 * 50.0 / 36.0, rel=1e-12)
+    v = mapping.camera_projection(
+        kind="PERSP",
+        width=300,
+        height=600,
+        lens_mm=50.0,
+        sensor_width_mm=36.0,
+        sensor_height_mm=24.0,
+        sensor_fit="VERTICAL",
+    )
+    assert v[1, 1] == pytest.approx(2 * 50.0 / 24.0, rel=1e-12)
+
+
+def test_shift_moves_the_view_plane_by_a_fraction_of_the_fitted_side() -> None:
+    # Shift s (fraction of the fitted side) moves the window centre by 2·s in NDC along x for a
+    # horizontal fit, and by 2·s·width/height along y.
+    p = mapping.camera_projection(kind="PERSP", width=400, height=200, shift_x=0.1, shift_y=-0.05)
+    assert p[0, 2] == pytest.approx(0.2, rel=1e-12)
+    assert p[1, 2] == pytest.approx(-0.05 * 2 * 400 / 200, rel=1e-12)
+
+
+def test_orthographic_scale_spans_the_fitted_side() -> None:
+    o = mapping.camera_projection(
+        kind="ORTHO", width=200, height=100, ortho_scale=8.0, shift_x=0.25, clip_start=0.5, clip_end=20.0
+    )
+    # x from -4 + 2 to 4 + 2 (shift 0.25 of the 8-unit width), y from -2 to 2.
+    for eye, ndc_xy in (((-2.0, -2.0, -1.0), (-1, -1)), ((6.0, 2.0, -3.0), (1, 1))):
+        clip = o @ np.array([*eye, 1.0])
+        np.testing.assert_allclose(clip[:2] / clip[3], ndc_xy, atol=1e-12)
+    assert (o @ np.array([0, 0, -0.5, 1]))[2] == pytest.approx(-1.0)
+    assert (o @ np.array([0, 0, -20.0, 1]))[2] == pytest.approx(1.0)
+
+
+def test_camera_rejects_panoramic_and_bad_clip() -> None:
+    with pytest.raises(ValueError, match="kind"):
+        mapping.camera_projection(kind="PANO", width=4, height=4)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="clip_end"):
+        mapping.camera_projection(kind="PERSP", width=4, height=4, clip_start=1.0, clip_end=0.5)
+
+
+# --------------------------------------------------------------------------- lights
+
+
+def test_lambertian_emitter_intensity_integrates_to_its_power() -> None:
+    # Radiant intensity I0·cos θ over the hemisphere must integrate to the power P.
+    power = 75.0
+    i0 = mapping.area_light_intensity(power) * math.pi  # radiant intensity along the normal (W/sr)
+    theta = np.linspace(0.0, math.pi / 2, 20001)
+    flux = np.trapz(i0 * np.cos(theta) * np.sin(theta), theta) * 2 * math.pi
+    assert flux == pytest.approx(power, rel=1e-6)
+
+
+def test_point_light_irradiance_matches_isotropic_emitter() -> None:
+    # Isotropic P watts: irradiance P/(4π d²); radiance from albedo ρ is ρ/π of that.
+    power, d, albedo = 1000.0, 3.0, 0.8
+    radiance_blender = albedo / math.pi * power / (4 * math.pi * d * d)
+    kc, kl, kq = mapping.point_light_attenuation(0.0)
+    radiance_bp = albedo * mapping.point_light_intensity(power) / (kc + kl * d + kq * d * d)
+    assert radiance_bp == pytest.approx(radiance_blender, rel=1e-6)
+
+
+def test_sun_on_white_lambertian_gives_strength_over_pi() -> None:
+    assert mapping.sun_light_intensity(math.pi) == pytest.approx(1.0)
+
+
+def test_disc_attenuation_equals_disc_form_factor_profile() -> None:
+    # On-axis irradiance of a Lambertian disc (radius r, radiance L) at distance d: π L r²/(r² + d²).
+    r = 0.5
+    kc, kl, kq = mapping.point_light_attenuation(r)
+    for d in (0.0, 0.3, 1.0, 4.0):
+        exact = r * r / (r * r + d * d)
+        assert r * r / (kc + kl * d + kq * d * d) == pytest.approx(exact, rel=1e-12)
+
+
+@pytest.mark.parametrize("blend", [0.0, 0.15, 0.5, 1.0])
+def test_blender_spot_mean_by_quadrature(blend: float) -> None:
+    size = math.radians(70.0)
+    c = math.cos(size / 2)
+    t = np.linspace(c, 1.0, 200001)
+    mask = np.ones_like(t) if blend == 0 else _smoothstep((t - c) / ((1 - c) * blend))
+    assert mapping.spot_mean_blender(blend) == pytest.approx(_mean_over(t, mask), abs=1e-6)
+
+
+@pytest.mark.parametrize(("size_deg", "blend"), [(30.0, 0.2), (75.0, 0.15), (120.0, 1.0), (179.0, 0.5)])
+def test_spot_exponent_preserves_the_light_in_the_cone(size_deg: float, blend: float) -> None:
+    size = math.radians(size_deg)
+    c = math.cos(size / 2)
+    e = mapping.spot_exponent(size, blend)
+    t = np.linspace(c, 1.0, 400001)
+    gl_mean = _mean_over(t, t**e)
+    blender_mean = _mean_over(t, _smoothstep((t - c) / ((1 - c) * blend)))
+    assert gl_mean == pytest.approx(blender_mean, abs=2e-5)
+    assert mapping.spot_cutoff_degrees(size) == pytest.approx(size_deg / 2)
+
+
+def test_hard_spot_edge_has_zero_exponent_and_more_blend_more_falloff() -> None:
+    size = math.radians(60.0)
+    assert mapping.spot_exponent(size, 0.0) == 0.0
+    exps = [mapping.spot_exponent(size, b) for b in (0.1, 0.4, 0.8)]
+    assert exps == sorted(exps) and exps[0] > 0
+
+
+# --------------------------------------------------------------------------- materials
+
+
+@pytest.mark.parametrize("roughness", [0.2, 0.35, 0.5, 0.8, 1.0])
+def test_shininess_matches_beckmann_peak(roughness: float) -> None:
+    # Walter et al. 2007: normalised Blinn-Phong D = (s+2)/(2π) cos^s θ has the Beckmann peak 1/(π α²).
+    alpha = roughness**2
+    s = mapping.roughness_to_shininess(roughness)
+    assert (s + 2) / (2 * math.pi) == pytest.approx(1 / (math.pi * alpha**2), rel=1e-12)
+
+
+def test_shininess_is_capped_for_mirrors() -> None:
+    assert mapping.roughness_to_shininess(0.0) == mapping.MAX_SHININESS
+    assert mapping.roughness_to_shininess(0.05) == mapping.MAX_SHININESS
+
+
+def test_principled_dielectric_f0_is_four_percent_for_glass_ior() -> None:
+    # Fresnel at normal incidence for n = 1.5: ((n-1)/(n+1))² = 0.04.
+    m = mapping.blinn_phong_from_principled(base_color=(0.8, 0.2, 0.1), roughness=0.5, ior=1.5)
+    s = mapping.roughness_to_shininess(0.5)
+    np.testing.assert_allclose(m["specular"], [0.04 * (s + 8) / 8] * 3, rtol=1e-12)
+    np.testing.assert_allclose(m["diffuse"], (0.8, 0.2, 0.1))
+    assert m["opacity"] == 1.0
+
+
+def test_principled_metal_has_no_diffuse_and_tinted_specular() -> None:
+    m = mapping.blinn_phong_from_principled(
+        base_color=(1.0, 0.5, 0.25),
+        metallic=1.0,
+        roughness=0.5,
+        emission_color=(1.0, 1.0, 0.0),
+        emission_strength=2.0,
+        alpha=0.5,
+    )
+    s = mapping.roughness_to_shininess(0.5)
+    np.testing.assert_allclose(m["diffuse"], (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(m["specular"], np.array([1.0, 0.5, 0.25]) * (s + 8) / 8)
+    np.testing.assert_allclose(m["emission"], (2.0, 2.0, 0.0))
+    assert m["opacity"] == 0.5
+
+
+def test_principled_rejects_negative_colour() -> None:
+    with pytest.raises(ValueError, match="base_color"):
+        mapping.blinn_phong_from_principled(base_color=(-0.1, 0.0, 0.0))

@@ -1,0 +1,123 @@
+"""The extension zip: built, checked by Blender's own validator, installed into bpy as a user would."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import shutil
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+from addon_testing import REPO, run_bpy
+
+sys.path.insert(0, str(REPO / "tools"))
+build_extension = importlib.import_module("build_extension")
+
+
+@pytest.fixture(scope="module")
+def built_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The extension zip, built once per module into a temporary directory."""
+    root = tmp_path_factory.mktemp("extension")
+    return build_extension.build(root / "dist", build_dir=root / "stage")
+
+
+def test_relativize_rewrites_every_absolute_core_import() -> None:
+    source = (
+        "import numpy as np\n"
+        "import compositing\n"
+        "import compositing.factors as cf\n"
+        "from blinn_phong._checks import number\n"
+        "from compositing.factors import (\n    FACTORS,\n)\n"
+        "def f():\n    from blinn_phong import scene\n    return scene\n"
+    )
+    got = build_extension.relativize_imports(source, depth=1)
+    assert got == (
+        "import numpy as np\n"
+        "from .. import compositing\n"
+        "from ..compositing import factors as cf\n"
+        "from ..blinn_phong._checks import number\n"
+        "from ..compositing.factors import (\n    FACTORS,\n)\n"
+        "def f():\n    from ..blinn_phong import scene\n    return scene\n"
+    )
+    ast.parse(got)
+
+
+def test_relativize_refuses_a_form_without_relative_equivalent() -> None:
+    with pytest.raises(build_extension.BuildError, match=r"import compositing\.factors"):
+        build_extension.relativize_imports("import compositing.factors\n", depth=1)
+
+
+def test_zip_layout_and_no_absolute_core_imports(built_zip: Path) -> None:
+    with zipfile.ZipFile(built_zip) as zf:
+        names = set(zf.namelist())
+        assert {
+            "blender_manifest.toml",
+            "__init__.py",
+            "mapping.py",
+            "blinn_phong/__init__.py",
+            "compositing/__init__.py",
+        } <= names
+        assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
+        for name in (n for n in names if n.endswith(".py")):
+            tree = ast.parse(zf.read(name).decode("utf-8"))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.level == 0:
+                    assert node.module.split(".")[0] not in ("blinn_phong", "compositing", "addon"), (
+                        name,
+                        node.module,
+                    )
+                if isinstance(node, ast.Import):
+                    tops = {a.name.split(".")[0] for a in node.names}
+                    assert not tops & {"blinn_phong", "compositing", "addon"}, (name, tops)
+
+
+def test_blender_validator_rejects_a_bad_manifest(tmp_path: Path) -> None:
+    # The validator is really consulted: an unknown tag must fail the build.
+    stage = tmp_path / "bad"
+    shutil.copytree(REPO / "addon", stage, ignore=shutil.ignore_patterns("__pycache__"))
+    manifest = stage / "blender_manifest.toml"
+    manifest.write_text(manifest.read_text().replace('"Compositing"]', '"Not A Real Tag"]'))
+    with pytest.raises(build_extension.BuildError, match="Not A Real Tag"):
+        build_extension.run_blender_ext(build_extension.find_bpy_root(), "validate", str(stage))
+
+
+@pytest.mark.blender
+@pytest.mark.timeout(300)
+def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None:
+    got = run_bpy(
+        """
+        import importlib, pathlib, sys
+        import bpy
+        zip_path, repo_dir = sys.argv[1], sys.argv[2]
+        prefs = bpy.context.preferences
+        prefs.extensions.repos.new(name="Test", module="test_repo", custom_directory=repo_dir, source="USER")
+        result = bpy.ops.extensions.package_install_files(repo="test_repo", filepath=zip_path,
+                                                          enable_on_install=False)
+        pkg = "bl_ext.test_repo.blinn_phong_render"
+        installed = pathlib.Path(repo_dir) / "blinn_phong_render"
+        imported = []
+        for path in sorted(installed.rglob("*.py")):
+            parts = path.relative_to(installed).with_suffix("").parts
+            name = ".".join((pkg, *parts[:-1])) if parts[-1] == "__init__" else ".".join((pkg, *parts))
+            importlib.import_module(name)
+            imported.append(name)
+        mapping = importlib.import_module(pkg + ".mapping")
+        emit({
+            "result": sorted(result),
+            "imported": imported,
+            "ortho_module": mapping.orthographic_matrix.__module__,
+            "top_level_loaded": sorted({"blinn_phong", "compositing", "addon"} & set(sys.modules)),
+        })
+        """,
+        tmp_path,
+        args=(str(built_zip), str(tmp_path / "repo")),
+    )
+    assert got["result"] == ["FINISHED"]
+    pkg = "bl_ext.test_repo.blinn_phong_render"
+    assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.scene", pkg + ".compositing.factors"} <= set(
+        got["imported"]
+    )
+    assert got["ortho_module"] == pkg + ".blinn_phong.scene"
+    assert got["top_level_loaded"] == []
