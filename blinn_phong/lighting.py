@@ -1,0 +1,268 @@
+"""The lighting equation — the one place it is written.
+
+OpenGL 2.1 specification §2.14.1 ("Lighting"), evaluated in eye space at any set
+of points (vertices for Gouraud/flat shading, fragments for Phong shading)::
+
+    c = e_cm + a_cm·a_cs + a_cm·Σ_amb I_amb
+        + Σ_i att_i·spot_i·[ a_cm·a_cli
+                             + vis_i·(n ⊙ l_i)·d_cm·d_cli
+                             + vis_i·f_i·spec_i^s_rm·s_cm·s_cli ]
+
+with ``u ⊙ v = max(u·v, 0)``,
+
+* ``l_i`` the unit vector from the point to light i (``-direction`` for a directional light);
+* ``f_i = 1`` if ``n·l_i > 0`` else 0 — a light behind the surface gives no highlight;
+* ``spec_i = n ⊙ h_i`` with ``h_i = normalize(l_i + v)`` (Blinn 1977, the OpenGL form) or
+  ``spec_i = r_i ⊙ v`` with ``r_i = 2(n·l_i)n - l_i`` (Phong 1975);
+* ``v = -normalize(p)`` for a local viewer, ``(0, 0, 1)`` for a viewer at infinity;
+* ``att_i = 1/(k_c + k_l·d + k_q·d²)`` for positional lights (d = distance), 1 for directional;
+* ``spot_i = (-l_i ⊙ s_i)^exponent`` if ``-l_i·s_i >= cos(cutoff)``, else 0; 1 for non-spots;
+* ``vis_i`` an optional per-point, per-light visibility in [0, 1] (shadows), 1 by default;
+* ``I_amb`` the :class:`~blinn_phong.scene.AmbientLight` radiances, ``a_cs`` the scene's global ambient.
+
+Alpha is the material opacity (the alpha of ``d_cm``). Colours are linear and
+not clamped here; the GL-compatibility clamp is the separate, explicit
+:func:`gl_clamp`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from blinn_phong.normals import normalize
+from blinn_phong.scene import (
+    AmbientLight,
+    DirectionalLight,
+    Light,
+    LightModel,
+    Material,
+    PointLight,
+    SpotLight,
+)
+
+__all__ = ["EyeLights", "ShadingTerms", "gl_clamp", "lights_in_eye_space", "shade"]
+
+
+@dataclass(frozen=True, eq=False)
+class EyeLights:
+    """Directional, point and spot lights moved to eye space, as arrays over the L lights.
+
+    Attributes:
+        position: (L, 4) homogeneous eye-space position; w = 0 for directional lights,
+            whose xyz is then the unit direction *towards* the light (OpenGL's GL_POSITION).
+        spot_direction: (L, 3) unit eye-space spot axis (zeros for non-spots).
+        cos_cutoff: (L,) cosine of the spot cut-off; -inf for non-spots (no cone).
+        spot_exponent: (L,) spot exponent (0 for non-spots).
+        attenuation: (L, 3) (k_c, k_l, k_q); (1, 0, 0) for directional lights.
+        ambient, diffuse, specular: (L, 3) light colours a_cli, d_cli, s_cli.
+        ambient_lights: (3,) sum of the AmbientLight radiances.
+        source: (L,) index of each light in the scene's ``lights`` tuple.
+    """
+
+    position: np.ndarray
+    spot_direction: np.ndarray
+    cos_cutoff: np.ndarray
+    spot_exponent: np.ndarray
+    attenuation: np.ndarray
+    ambient: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    ambient_lights: np.ndarray
+    source: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.position)
+
+
+def lights_in_eye_space(lights: Sequence[Light], view: np.ndarray) -> EyeLights:
+    """Move world-space lights to eye space with the 4×4 ``view`` matrix (as ``glLight`` does).
+
+    Positions transform as points, directions with the upper 3×3 (then renormalised).
+    AmbientLights are summed into ``ambient_lights``.
+    """
+    view = np.asarray(view, dtype=np.float64)
+    rot = view[:3, :3]
+    rows = []
+    ambient_sum = np.zeros(3)
+    for index, light in enumerate(lights):
+        if isinstance(light, AmbientLight):
+            ambient_sum += np.asarray(light.radiance)
+            continue
+        spot_dir = np.zeros(3)
+        cos_cut, exponent = -np.inf, 0.0
+        if isinstance(light, DirectionalLight):
+            towards = normalize(rot @ -np.asarray(light.direction))
+            pos = np.r_[towards, 0.0]
+            att = (1.0, 0.0, 0.0)
+        elif isinstance(light, PointLight | SpotLight):
+            pos = view @ np.r_[light.position, 1.0]
+            att = (light.constant, light.linear, light.quadratic)
+            if isinstance(light, SpotLight):
+                spot_dir = normalize(rot @ np.asarray(light.direction))
+                cos_cut, exponent = np.cos(np.radians(light.cutoff)), light.exponent
+        else:
+            raise TypeError(f"lights[{index}]: unsupported light type {type(light).__name__}")
+        rows.append(
+            (pos, spot_dir, cos_cut, exponent, att, light.ambient, light.diffuse, light.specular, index)
+        )
+    n = len(rows)
+
+    def col(i: int, shape: tuple[int, ...]) -> np.ndarray:
+        return np.array([r[i] for r in rows], dtype=np.float64).reshape((n, *shape))
+
+    return EyeLights(
+        position=col(0, (4,)),
+        spot_direction=col(1, (3,)),
+        cos_cutoff=col(2, ()),
+        spot_exponent=col(3, ()),
+        attenuation=col(4, (3,)),
+        ambient=col(5, (3,)),
+        diffuse=col(6, (3,)),
+        specular=col(7, (3,)),
+        ambient_lights=ambient_sum,
+        source=np.array([r[8] for r in rows], dtype=np.int64),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ShadingTerms:
+    """The lighting equation's terms at N points (linear RGB, unclamped).
+
+    Attributes:
+        ambient: (N, 3) emission + all ambient terms (global, AmbientLights, per-light ambient).
+        diffuse: (N, 3) Σ Lambert terms.
+        specular: (N, 3) Σ specular terms.
+        alpha: (N,) material opacity.
+        diffuse_per_light, specular_per_light: (N, L, 3) per-light terms (before
+            visibility) when requested with ``per_light=True``, else None.
+    """
+
+    ambient: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    alpha: np.ndarray
+    diffuse_per_light: np.ndarray | None = None
+    specular_per_light: np.ndarray | None = None
+
+    @property
+    def color(self) -> np.ndarray:
+        """(N, 3) total ``ambient + diffuse + specular``."""
+        return self.ambient + self.diffuse + self.specular
+
+
+def shade(
+    points: np.ndarray,
+    normals: np.ndarray,
+    material: Material,
+    lights: EyeLights,
+    *,
+    global_ambient: Sequence[float] | np.ndarray = (0.2, 0.2, 0.2),
+    model: LightModel | None = None,
+    visibility: np.ndarray | None = None,
+    per_light: bool = False,
+) -> ShadingTerms:
+    """Evaluate the lighting equation (module docstring) at eye-space points.
+
+    Args:
+        points: (N, 3) eye-space positions (eye at the origin looking down -Z).
+        normals: (N, 3) eye-space unit normals (zero vectors receive only ambient and
+            emission). For back faces under two-sided lighting pass the flipped normal.
+        material: the surface material (use the back material for back faces).
+        lights: from :func:`lights_in_eye_space`.
+        global_ambient: ``a_cs`` (linear RGB).
+        model: the specular form and viewer model (``specular``, ``local_viewer``);
+            defaults to :class:`~blinn_phong.scene.LightModel` ().
+        visibility: optional (N, L) factors in [0, 1] multiplying each light's diffuse
+            and specular terms (1 = lit; e.g. from a shadow test). L = ``len(lights)``.
+        per_light: also return the (N, L, 3) per-light diffuse and specular terms.
+
+    Returns:
+        :class:`ShadingTerms` in float64.
+    """
+    model = LightModel() if model is None else model
+    p = np.asarray(points, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    count = len(p)
+    if p.shape != (count, 3) or n.shape != (count, 3):
+        raise ValueError(f"points and normals: expected two (N, 3) arrays, got {p.shape} and {n.shape}")
+    n_lights = len(lights)
+    if visibility is not None:
+        vis = np.asarray(visibility, dtype=np.float64)
+        if vis.shape != (count, n_lights):
+            raise ValueError(
+                f"visibility: expected shape (n_points, n_lights) = ({count}, {n_lights}), got {vis.shape}"
+            )
+        if not np.isfinite(vis).all() or (vis < 0).any() or (vis > 1).any():
+            raise ValueError("visibility: expected finite values in [0, 1]")
+    a_cm = np.asarray(material.ambient)
+    d_cm = np.asarray(material.diffuse)
+    s_cm = np.asarray(material.specular)
+    ambient = np.broadcast_to(
+        np.asarray(material.emission)
+        + a_cm * (np.asarray(global_ambient, dtype=np.float64) + lights.ambient_lights),
+        (count, 3),
+    ).copy()
+    diffuse = np.zeros((count, 3))
+    specular = np.zeros((count, 3))
+    alpha = np.full(count, material.opacity)
+    dpl = np.zeros((count, n_lights, 3)) if per_light else None
+    spl = np.zeros((count, n_lights, 3)) if per_light else None
+    if model.local_viewer:
+        v = normalize(-p)
+        v[~v.any(axis=1)] = (0.0, 0.0, 1.0)  # a point at the eye: any direction; use the axis
+    else:
+        v = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (count, 3))
+    for i in range(n_lights):
+        pos = lights.position[i]
+        if pos[3] == 0.0:
+            l = np.broadcast_to(pos[:3], (count, 3))
+            att = np.ones(count)
+        else:
+            to_light = pos[:3] / pos[3] - p
+            dist = np.sqrt(np.einsum("ij,ij->i", to_light, to_light))
+            l = normalize(to_light)
+            kc, kl, kq = lights.attenuation[i]
+            att = 1.0 / (kc + kl * dist + kq * dist * dist)
+        if np.isfinite(lights.cos_cutoff[i]):
+            cos_angle = -np.einsum("ij,j->i", l, lights.spot_direction[i])
+            inside = cos_angle >= lights.cos_cutoff[i]
+            spot = np.where(inside, np.maximum(cos_angle, 0.0) ** lights.spot_exponent[i], 0.0)
+            att = att * spot
+        n_dot_l = np.einsum("ij,ij->i", n, l)
+        lambert = np.maximum(n_dot_l, 0.0)
+        if model.specular == "blinn":
+            base = np.einsum("ij,ij->i", n, normalize(l + v))
+        else:
+            r = 2.0 * n_dot_l[:, None] * n - l
+            base = np.einsum("ij,ij->i", r, v)
+        highlight = np.where(n_dot_l > 0, np.maximum(base, 0.0) ** material.shininess, 0.0)
+        ambient += att[:, None] * (a_cm * lights.ambient[i])
+        d_i = (att * lambert)[:, None] * (d_cm * lights.diffuse[i])
+        s_i = (att * highlight)[:, None] * (s_cm * lights.specular[i])
+        if per_light:
+            dpl[:, i] = d_i
+            spl[:, i] = s_i
+        if visibility is not None:
+            d_i = d_i * vis[:, i : i + 1]
+            s_i = s_i * vis[:, i : i + 1]
+        diffuse += d_i
+        specular += s_i
+    return ShadingTerms(ambient, diffuse, specular, alpha, dpl, spl)
+
+
+def gl_clamp(terms: ShadingTerms, *, separate_specular: bool) -> tuple[np.ndarray, np.ndarray]:
+    """OpenGL's per-vertex colour clamp (2.1 §2.14.6, ``GL_CLAMP_VERTEX_COLOR``), primary and secondary.
+
+    ``GL_SINGLE_COLOR``: primary = clamp(ambient + diffuse + specular, 0, 1), secondary = 0.
+    ``GL_SEPARATE_SPECULAR_COLOR``: primary = clamp(ambient + diffuse), secondary = clamp(specular);
+    the fragment colour is their sum (colour sum, §3.9), clamped again by a fixed-point framebuffer.
+
+    Returns:
+        (primary (N, 3), secondary (N, 3)).
+    """
+    if separate_specular:
+        return np.clip(terms.ambient + terms.diffuse, 0.0, 1.0), np.clip(terms.specular, 0.0, 1.0)
+    return np.clip(terms.color, 0.0, 1.0), np.zeros_like(terms.specular)

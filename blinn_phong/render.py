@@ -1,0 +1,513 @@
+"""The render pipeline: prepare -> rasterize -> resolve visibility -> shade -> resolve samples.
+
+Each stage is a public function so other passes (transparency, shadows, fog) can
+reuse or replace one of them:
+
+* :func:`prepare_scene` — every mesh to eye and clip space, normals, lights in eye space;
+* :func:`blinn_phong.raster.rasterize` — all fragments;
+* :func:`blinn_phong.raster.resolve_nearest` — the z-buffer test (visibility before shading);
+* :func:`shade_fragments` — the lighting equation at any set of fragments, at the
+  mesh's shading frequency (flat / Gouraud / Phong);
+* :func:`resolve_samples` — the box filter over the k×k samples of each pixel, giving
+  coverage alpha.
+
+Shading frequencies (Gouraud 1971; Phong 1975):
+
+* ``flat`` — one evaluation per face with the face normal at the face centroid;
+* ``gouraud`` — evaluation per vertex (vertex normals), colours interpolated;
+* ``phong`` — position and normal interpolated, evaluation per fragment.
+
+The **GL-compatibility preset** (``gl_compat=True``) reproduces OpenGL 2.1
+fixed-function lighting (§2.14.1) bit-for-bit up to rounding: per-vertex evaluation
+with vertex colours clamped to [0, 1] before interpolation (primary and secondary
+separately under ``separate_specular``), flat shading taking the colour of the
+provoking (last) vertex, and the final colour clamped to [0, 1] as an 8-bit
+framebuffer does. In ``phong`` mode it models the per-pixel version of the same
+equation (a GLSL fragment shader) followed by the framebuffer clamp.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
+from blinn_phong.normals import face_normals, normalize, transform_normals, vertex_normals
+from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
+from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
+
+__all__ = [
+    "FragmentShading",
+    "PreparedScene",
+    "RenderResult",
+    "RenderStats",
+    "prepare_scene",
+    "render",
+    "resolve_samples",
+    "shade_fragments",
+]
+
+ProgressCallback = Callable[[str, float], None]
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedScene:
+    """A scene flattened into concatenated arrays in eye and clip space.
+
+    Attributes:
+        scene: the source scene.
+        clip: (V, 4) clip-space positions of all meshes' vertices.
+        eye_position: (V, 3) eye-space positions.
+        eye_normal: (V, 3) eye-space unit vertex normals (given, or averaged from faces).
+        world_normal: (V, 3) world-space unit vertex normals.
+        triangles: (T, 3) vertex indices into the concatenated arrays, meshes in scene order.
+        triangle_mesh: (T,) index of each triangle's mesh.
+        face_eye_normal, face_world_normal: (T, 3) unit face normals (inverse-transpose transformed).
+        face_eye_centroid: (T, 3) eye-space centroids.
+        vertex_offset: (M + 1,) first vertex of each mesh (and the total).
+        lights: lights in eye space.
+    """
+
+    scene: Scene
+    clip: np.ndarray
+    eye_position: np.ndarray
+    eye_normal: np.ndarray
+    world_normal: np.ndarray
+    triangles: np.ndarray
+    triangle_mesh: np.ndarray
+    face_eye_normal: np.ndarray
+    face_world_normal: np.ndarray
+    face_eye_centroid: np.ndarray
+    vertex_offset: np.ndarray
+    lights: EyeLights
+
+
+def prepare_scene(scene: Scene) -> PreparedScene:
+    """Transform every mesh of ``scene`` to eye and clip space and move the lights to eye space.
+
+    Normals use the inverse-transpose of the model(-view) matrix (OpenGL 2.1 §2.11.3);
+    meshes without normals get :func:`~blinn_phong.normals.vertex_normals` with the
+    mesh's ``normal_weighting``.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    view, proj = scene.camera.view, scene.camera.projection
+    clips, eyes, eye_ns, world_ns, tris, owner = [], [], [], [], [], []
+    f_eye, f_world, f_centroid = [], [], []
+    offsets = [0]
+    for m, mesh in enumerate(scene.meshes):
+        model_view = view @ mesh.transform
+        hom = np.c_[mesh.positions, np.ones(len(mesh.positions))]
+        eye = hom @ model_view.T
+        clips.append(eye @ proj.T)
+        eyes.append(eye[:, :3])
+        obj_n = mesh.normals
+        if obj_n is None:
+            obj_n = vertex_normals(mesh.positions, mesh.triangles, mesh.normal_weighting)
+        eye_ns.append(transform_normals(obj_n, model_view))
+        world_ns.append(transform_normals(obj_n, mesh.transform))
+        face_obj = face_normals(mesh.positions, mesh.triangles)
+        f_eye.append(transform_normals(face_obj, model_view))
+        f_world.append(transform_normals(face_obj, mesh.transform))
+        f_centroid.append(eye[:, :3][mesh.triangles].mean(axis=1))
+        tris.append(mesh.triangles + offsets[-1])
+        owner.append(np.full(len(mesh.triangles), m, np.int64))
+        offsets.append(offsets[-1] + len(mesh.positions))
+
+    def cat(parts: list[np.ndarray], shape: tuple[int, ...], dtype: type = np.float64) -> np.ndarray:
+        return np.concatenate(parts) if parts else np.zeros((0, *shape), dtype)
+
+    return PreparedScene(
+        scene=scene,
+        clip=cat(clips, (4,)),
+        eye_position=cat(eyes, (3,)),
+        eye_normal=cat(eye_ns, (3,)),
+        world_normal=cat(world_ns, (3,)),
+        triangles=cat(tris, (3,), np.int64),
+        triangle_mesh=cat(owner, (), np.int64),
+        face_eye_normal=cat(f_eye, (3,)),
+        face_world_normal=cat(f_world, (3,)),
+        face_eye_centroid=cat(f_centroid, (3,)),
+        vertex_offset=np.asarray(offsets, np.int64),
+        lights=lights_in_eye_space(scene.lights, view),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class FragmentShading:
+    """Shaded fragments (linear RGB, straight — not premultiplied — colour).
+
+    Attributes:
+        rgb: (N, 3) final colour (clamped to [0, 1] only under ``gl_compat``).
+        alpha: (N,) material opacity.
+        ambient, diffuse, specular: (N, 3) the equation's terms (emission included in
+            ambient), unclamped; the passes a compositor or Blender writes.
+        normal: (N, 3) world-space unit shading normal (face normal for flat shading).
+    """
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    ambient: np.ndarray
+    diffuse: np.ndarray
+    specular: np.ndarray
+    normal: np.ndarray
+
+
+def _check_shading(shading: object) -> str:
+    if shading not in SHADINGS:
+        raise ValueError(f"shading: expected one of {SHADINGS}, got {shading!r}")
+    return str(shading)
+
+
+def shade_fragments(
+    prepared: PreparedScene,
+    fragments: Fragments,
+    *,
+    shading: str = "phong",
+    gl_compat: bool = False,
+    visibility: np.ndarray | None = None,
+) -> FragmentShading:
+    """Shade any set of fragments of ``prepared`` (e.g. the nearest ones, or all of them).
+
+    Args:
+        prepared: from :func:`prepare_scene`.
+        fragments: fragments of ``prepared.triangles`` (from :func:`~blinn_phong.raster.rasterize`).
+        shading: ``"flat"``, ``"gouraud"`` or ``"phong"``; a mesh's own ``shading`` overrides it.
+        gl_compat: the OpenGL 2.1 fixed-function preset (module docstring).
+        visibility: optional (N, L) per-fragment, per-light factors in [0, 1] multiplying
+            diffuse and specular (L = ``len(prepared.lights)``, light order as in the
+            scene without AmbientLights). With Gouraud/flat shading the per-light terms
+            are interpolated and then multiplied, which has no per-vertex clamp, so it
+            cannot be combined with ``gl_compat``.
+    """
+    shading = _check_shading(shading)
+    count = len(fragments)
+    n_lights = len(prepared.lights)
+    if visibility is not None:
+        visibility = np.asarray(visibility, dtype=np.float64)
+        if visibility.shape != (count, n_lights):
+            raise ValueError(
+                f"visibility: expected shape (n_fragments, n_lights) = ({count}, {n_lights}), "
+                f"got {visibility.shape}"
+            )
+    scene = prepared.scene
+    model = scene.light_model
+    out = {k: np.zeros((count, 3)) for k in ("rgb", "ambient", "diffuse", "specular", "normal")}
+    alpha = np.zeros(count)
+    mesh_of = prepared.triangle_mesh[fragments.triangle]
+    for m, mesh in enumerate(scene.meshes):
+        in_mesh = np.flatnonzero(mesh_of == m)
+        if len(in_mesh) == 0:
+            continue
+        mode = mesh.shading or shading
+        if visibility is not None and gl_compat and mode != "phong":
+            raise ValueError(
+                f"visibility: cannot be combined with gl_compat and {mode!r} shading "
+                "(OpenGL clamps per vertex before any per-fragment factor); use phong shading"
+            )
+        sides: list[tuple[bool, Material, np.ndarray]]
+        if model.two_sided:
+            facing = fragments.front_facing[in_mesh]
+            sides = [
+                (True, mesh.material, in_mesh[facing]),
+                (False, mesh.back_material or mesh.material, in_mesh[~facing]),
+            ]
+        else:
+            sides = [(True, mesh.material, in_mesh)]
+        for front, material, idx in sides:
+            if len(idx) == 0:
+                continue
+            f = fragments.subset(idx)
+            vis = None if visibility is None else visibility[idx]
+            result = _shade_side(prepared, m, mesh, f, mode, front, material, gl_compat, vis)
+            for k, v in result.items():
+                if k == "alpha":
+                    alpha[idx] = v
+                else:
+                    out[k][idx] = v
+    return FragmentShading(out["rgb"], alpha, out["ambient"], out["diffuse"], out["specular"], out["normal"])
+
+
+def _terms_at_fragments(
+    terms: ShadingTerms, f: Fragments, triangles: np.ndarray, vis: np.ndarray | None, per_triangle: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Carry per-vertex (interpolated) or per-triangle terms to fragments, applying visibility."""
+
+    def at(values: np.ndarray) -> np.ndarray:
+        flat = values.reshape(len(values), -1)
+        got = flat[f.triangle] if per_triangle else interpolate(f, triangles, flat)
+        return got.reshape((len(f), *values.shape[1:]))
+
+    ambient = at(terms.ambient)
+    if vis is None:
+        return ambient, at(terms.diffuse), at(terms.specular)
+    d = np.einsum("nlc,nl->nc", at(terms.diffuse_per_light), vis)
+    s = np.einsum("nlc,nl->nc", at(terms.specular_per_light), vis)
+    return ambient, d, s
+
+
+def _shade_side(
+    prepared: PreparedScene,
+    m: int,
+    mesh: Mesh,
+    f: Fragments,
+    mode: str,
+    front: bool,
+    material: Material,
+    gl_compat: bool,
+    vis: np.ndarray | None,
+) -> dict[str, np.ndarray]:
+    scene = prepared.scene
+    model = scene.light_model
+    sign = 1.0 if front else -1.0
+    tris = prepared.triangles
+    world_n = normalize(interpolate(f, tris, prepared.world_normal))
+    common = {"global_ambient": scene.ambient, "model": model}
+
+    if mode == "phong":
+        points = interpolate(f, tris, prepared.eye_position)
+        normals = sign * normalize(interpolate(f, tris, prepared.eye_normal))
+        terms = shade(points, normals, material, prepared.lights, visibility=vis, **common)
+        if gl_compat:
+            primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
+            rgb = np.clip(primary + secondary, 0.0, 1.0)
+        else:
+            rgb = terms.color
+        return _pack(rgb, terms.ambient, terms.diffuse, terms.specular, terms.alpha, world_n)
+
+    if mode == "flat" and not gl_compat:
+        # One evaluation per face: face normal at the centroid, carried to every fragment of the face.
+        used, inverse = np.unique(f.triangle, return_inverse=True)
+        terms = shade(
+            prepared.face_eye_centroid[used],
+            sign * prepared.face_eye_normal[used],
+            material,
+            prepared.lights,
+            per_light=vis is not None,
+            **common,
+        )
+        local = Fragments(
+            f.width, f.height, f.samples, f.pixel, f.sample, f.depth, inverse, f.bary, f.front_facing
+        )
+        ambient, diffuse, specular = _terms_at_fragments(terms, local, tris, vis, per_triangle=True)
+        rgb = ambient + diffuse + specular
+        return _pack(
+            rgb,
+            ambient,
+            diffuse,
+            specular,
+            np.full(len(f), material.opacity),
+            prepared.face_world_normal[f.triangle],
+        )
+
+    # Per-vertex evaluation over this mesh's vertices (Gouraud, or GL flat = provoking vertex).
+    v0, v1 = prepared.vertex_offset[m], prepared.vertex_offset[m + 1]
+    terms = shade(
+        prepared.eye_position[v0:v1],
+        sign * prepared.eye_normal[v0:v1],
+        material,
+        prepared.lights,
+        per_light=vis is not None,
+        **common,
+    )
+    local_tris = tris - v0  # valid for this mesh's triangles
+    if mode == "gouraud":
+        ambient, diffuse, specular = _terms_at_fragments(terms, f, local_tris, vis, per_triangle=False)
+        if gl_compat:
+            primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
+            rgb = np.clip(
+                interpolate(f, local_tris, primary) + interpolate(f, local_tris, secondary), 0.0, 1.0
+            )
+        else:
+            rgb = ambient + diffuse + specular
+        return _pack(rgb, ambient, diffuse, specular, np.full(len(f), material.opacity), world_n)
+
+    # gl_compat flat: the provoking (last) vertex's clamped colour for the whole triangle.
+    provoking = local_tris[f.triangle, 2]
+    primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
+    rgb = np.clip(primary[provoking] + secondary[provoking], 0.0, 1.0)
+    return _pack(
+        rgb,
+        terms.ambient[provoking],
+        terms.diffuse[provoking],
+        terms.specular[provoking],
+        np.full(len(f), material.opacity),
+        prepared.face_world_normal[f.triangle],
+    )
+
+
+def _pack(
+    rgb: np.ndarray,
+    ambient: np.ndarray,
+    diffuse: np.ndarray,
+    specular: np.ndarray,
+    alpha: np.ndarray,
+    normal: np.ndarray,
+) -> dict[str, np.ndarray]:
+    return {
+        "rgb": rgb,
+        "ambient": ambient,
+        "diffuse": diffuse,
+        "specular": specular,
+        "alpha": alpha,
+        "normal": normal,
+    }
+
+
+def resolve_samples(values: np.ndarray, width: int, height: int, samples: int) -> np.ndarray:
+    """Box-filter per-sample values to pixels: the mean over each pixel's samples.
+
+    Args:
+        values: (height·width·samples, C) values ordered by ``Fragments.sample_key``
+            (uncovered samples hold zeros, so premultiplied colour and coverage average correctly).
+        width: image width in pixels.
+        height: image height in pixels.
+        samples: samples per pixel.
+
+    Returns:
+        (height, width, C) float64 means (row 0 at the top).
+    """
+    values = np.asarray(values)
+    if values.ndim != 2 or values.shape[0] != width * height * samples:
+        raise ValueError(
+            f"values: expected shape ({width * height * samples}, C) for {height}×{width}×{samples} samples, "
+            f"got {values.shape}"
+        )
+    return values.reshape(height, width, samples, -1).mean(axis=2)
+
+
+@dataclass(frozen=True)
+class RenderStats:
+    """Timing and counts of one render.
+
+    Attributes:
+        seconds: wall time per stage (``prepare``, ``rasterize``, ``resolve``, ``shade``,
+            ``resolve_samples``) in seconds.
+        triangles: input triangles; fragments: rasterized fragments (all depths);
+        shaded: fragments shaded (visible samples).
+    """
+
+    seconds: dict[str, float] = field(default_factory=dict)
+    triangles: int = 0
+    fragments: int = 0
+    shaded: int = 0
+
+    @property
+    def total_seconds(self) -> float:
+        """Sum of the stage times."""
+        return float(sum(self.seconds.values()))
+
+
+@dataclass(frozen=True, eq=False)
+class RenderResult:
+    """A rendered image and its auxiliary buffers (row 0 at the top).
+
+    Attributes:
+        rgba: (H, W, 4) float32 premultiplied linear RGBA; alpha = coverage × opacity.
+        depth: (H, W) float32 nearest window depth over the pixel's samples; 1.0 where empty
+            (the OpenGL clear value).
+        normal: (H, W, 3) float32 world-space unit normal (mean over covered samples,
+            renormalised); zero where empty.
+        passes: ``"ambient"`` (with emission), ``"diffuse"``, ``"specular"``: (H, W, 3)
+            float32 premultiplied light passes; they sum to ``rgba[..., :3]`` outside the GL preset.
+        stats: :class:`RenderStats`.
+    """
+
+    rgba: np.ndarray
+    depth: np.ndarray
+    normal: np.ndarray
+    passes: dict[str, np.ndarray]
+    stats: RenderStats
+
+
+def render(
+    scene: Scene,
+    width: int,
+    height: int,
+    *,
+    shading: str = "phong",
+    samples: int = 1,
+    gl_compat: bool = False,
+    cull_backfaces: bool = False,
+    progress: ProgressCallback | None = None,
+) -> RenderResult:
+    """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting.
+
+    Args:
+        scene: the :class:`~blinn_phong.scene.Scene` (camera required).
+        width: image width in pixels.
+        height: image height in pixels.
+        shading: ``"flat"``, ``"gouraud"`` or ``"phong"`` (a mesh's ``shading`` overrides it).
+        samples: supersampling: k² samples per pixel on an ordered k×k grid; the result's
+            alpha is the covered fraction.
+        gl_compat: the OpenGL 2.1 fixed-function preset (see the module docstring).
+        cull_backfaces: discard clockwise (back-facing) triangles.
+        progress: optional ``callback(stage, fraction_done)`` called as stages finish.
+
+    Returns:
+        :class:`RenderResult`.
+    """
+    shading = _check_shading(shading)
+    seconds: dict[str, float] = {}
+
+    def report(stage: str, fraction: float) -> None:
+        if progress is not None:
+            progress(stage, fraction)
+
+    t = time.perf_counter()
+    prepared = prepare_scene(scene)
+    seconds["prepare"] = time.perf_counter() - t
+    report("prepare", 0.05)
+
+    t = time.perf_counter()
+    fragments = rasterize(
+        prepared.clip, prepared.triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
+    )
+    seconds["rasterize"] = time.perf_counter() - t
+    report("rasterize", 0.5)
+
+    t = time.perf_counter()
+    winner = resolve_nearest(fragments)
+    covered = np.flatnonzero(winner >= 0)
+    visible = fragments.subset(winner[covered])
+    seconds["resolve"] = time.perf_counter() - t
+    report("resolve", 0.6)
+
+    t = time.perf_counter()
+    shaded = shade_fragments(prepared, visible, shading=shading, gl_compat=gl_compat)
+    seconds["shade"] = time.perf_counter() - t
+    report("shade", 0.9)
+
+    t = time.perf_counter()
+    n_keys = len(winner)
+    k = fragments.samples
+
+    def per_sample(values: np.ndarray) -> np.ndarray:
+        buf = np.zeros((n_keys, values.shape[1]))
+        buf[covered] = values
+        return buf
+
+    a = shaded.alpha[:, None]
+    rgba = resolve_samples(per_sample(np.c_[shaded.rgb * a, a]), width, height, k)
+    passes = {
+        name: resolve_samples(per_sample(getattr(shaded, name) * a), width, height, k).astype(np.float32)
+        for name in ("ambient", "diffuse", "specular")
+    }
+    depth_buf = np.ones(n_keys)
+    depth_buf[covered] = visible.depth
+    depth = depth_buf.reshape(height, width, k).min(axis=2)
+    normal = normalize(resolve_samples(per_sample(shaded.normal), width, height, k))
+    seconds["resolve_samples"] = time.perf_counter() - t
+    report("done", 1.0)
+
+    stats = RenderStats(seconds, len(prepared.triangles), len(fragments), len(visible))
+    return RenderResult(
+        rgba=rgba.astype(np.float32),
+        depth=depth.astype(np.float32),
+        normal=normal.astype(np.float32),
+        passes=passes,
+        stats=stats,
+    )
