@@ -1,0 +1,34 @@
+"""The Porter-Duff submenu in the compositor's Add menu."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import node_groups
+
+__all__ = ["NODE_MT_porter_duff", "classes", "draw_add_menu"]
+
+
+class NODE_MT_porter_duff(bpy.types.Menu):  # noqa: N801 (Blender naming rule)
+    """Porter-Duff compositing operators as node groups"""
+
+    bl_idname = "NODE_MT_porter_duff"
+    bl_label = "Porter-Duff"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        for name in node_groups.ARTIST_OPERATORS:
+            props = layout.operator("node.porter_duff_add", text=node_groups.group_name(name))
+            props.operator = name
+        layout.separator()
+        layout.operator("node.porter_duff_add_groups")
+
+
+def draw_add_menu(self: bpy.types.Menu, context: bpy.types.Context) -> None:
+    """Append the Porter-Duff submenu to the Add menu of the compositor (not of other node editors)."""
+    space = context.space_data
+    if space is not None and getattr(space, "tree_type", None) == "CompositorNodeTree":
+        self.layout.menu(NODE_MT_porter_duff.bl_idname)
+
+
+classes = (NODE_MT_porter_duff,)
