@@ -9,14 +9,19 @@ multiply-add), and writes the four outputs. The results are therefore bitwise
 equal to :func:`compositing.operators.composite` with ``engine="numpy"``; the
 tests check that.
 
-The same pass flags suspicious input (non-finite values, alpha outside [0, 1] or
-NaN) so the caller need not read the images again; the exact checks of
-:mod:`compositing.validate` then run only when the flag is raised.
+Each call splits the pixels into one range per core and runs the compiled loop
+on a small thread pool (the loop releases the GIL). The same pass flags
+suspicious input (non-finite values, alpha outside [0, 1] or NaN) so the caller
+need not read the images again; the exact checks of :mod:`compositing.validate`
+then run only when the flag is raised.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -25,8 +30,11 @@ from .factors import Expr, OperatorSpec
 
 __all__ = ["composite_fused", "factor_source", "kernel_source"]
 
-#: Pixel ranges handed to the threads; more chunks than threads keeps them balanced.
-CHUNKS = 64
+#: Threads for one call (the kernel releases the GIL); one per core.
+THREADS = max(1, min(8, os.cpu_count() or 1))
+
+#: Below this many pixels a call runs on the calling thread only.
+MIN_PIXELS_PER_THREAD = 1 << 15
 
 
 def _const_name(value: float) -> str:
@@ -79,38 +87,32 @@ def kernel_source(spec: OperatorSpec) -> tuple[str, set[float]]:
     for c in range(4):
         terms = [t for t in (_term(f"s{c}", spec.fa_expr, "fa"), _term(f"d{c}", spec.fb_expr, "fb")) if t]
         value = " + ".join(f"({t})" for t in terms) if terms else _const_name(0.0)
-        lines.append(f"            m{c} = {value}")
+        lines.append(f"        m{c} = {value}")
     body = "\n".join(lines)
+    k0, k1 = _const_name(0.0), _const_name(1.0)
     src = f"""
-def kernel(s, d, o, keep, mix, lerp, nchunks):
-    n = s.shape[0] // 4
-    flags = np.zeros(nchunks, np.int64)
-    step = (n + nchunks - 1) // nchunks
-    for chunk in numba.prange(nchunks):
-        lo = chunk * step
-        hi = min(n, lo + step)
-        bad = False
-        for p in range(lo, hi):
-            i = 4 * p
-            s0 = s[i]; s1 = s[i + 1]; s2 = s[i + 2]; s3 = s[i + 3]
-            d0 = d[i]; d1 = d[i + 1]; d2 = d[i + 2]; d3 = d[i + 3]
-            sa = s3
-            da = d3
-            fa = {fa_code}
-            fb = {fb_code}
+def kernel(s, d, o, keep, mix, lerp, lo, hi):
+    bad = np.int32(0)
+    for p in range(lo, hi):
+        i = 4 * p
+        s0 = s[i]; s1 = s[i + 1]; s2 = s[i + 2]; s3 = s[i + 3]
+        d0 = d[i]; d1 = d[i + 1]; d2 = d[i + 2]; d3 = d[i + 3]
+        sa = s3
+        da = d3
+        fa = {fa_code}
+        fb = {fb_code}
 {body}
-            if lerp:
-                m0 = d0 * keep + m0 * mix
-                m1 = d1 * keep + m1 * mix
-                m2 = d2 * keep + m2 * mix
-                m3 = d3 * keep + m3 * mix
-            o[i] = m0; o[i + 1] = m1; o[i + 2] = m2; o[i + 3] = m3
-            z = ((s0 * {_const_name(0.0)} + s1 * {_const_name(0.0)}) + (s2 * {_const_name(0.0)}
-                 + d0 * {_const_name(0.0)})) + (d1 * {_const_name(0.0)} + d2 * {_const_name(0.0)})
-            bad |= ((z != {_const_name(0.0)}) | (sa < {_const_name(0.0)}) | (sa > {_const_name(1.0)})
-                    | (da < {_const_name(0.0)}) | (da > {_const_name(1.0)}) | (sa != sa) | (da != da))
-        flags[chunk] = bad
-    return flags.any()
+        if lerp:
+            m0 = d0 * keep + m0 * mix
+            m1 = d1 * keep + m1 * mix
+            m2 = d2 * keep + m2 * mix
+            m3 = d3 * keep + m3 * mix
+        o[i] = m0; o[i + 1] = m1; o[i + 2] = m2; o[i + 3] = m3
+        # Flag, without a branch: z is non-finite iff some input is non-finite (or the sum
+        # overflows, a false alarm the exact checks clear); alpha outside [0, 1].
+        z = ((s0 + s1) + (s2 + s3)) + ((d0 + d1) + (d2 + d3))
+        bad |= np.int32((z - z != {k0}) | (min(sa, da) < {k0}) | (max(sa, da) > {k1}))
+    return bad != 0
 """
     return src, consts
 
@@ -121,7 +123,12 @@ def _compiled(name: str, spec: OperatorSpec, dtype_name: str):
     t = np.dtype(dtype_name).type
     namespace = {"np": np, "numba": numba, **{_const_name(v): t(v) for v in consts}}
     exec(compile(src, f"<fused kernel {name} {dtype_name}>", "exec"), namespace)
-    return numba.njit(parallel=True, error_model="numpy", nogil=True)(namespace["kernel"])
+    return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
+
+
+@functools.cache
+def _pool() -> ThreadPoolExecutor:
+    return ThreadPoolExecutor(max_workers=THREADS, thread_name_prefix="compositing")
 
 
 def composite_fused(
@@ -137,7 +144,11 @@ def composite_fused(
     kernel = _compiled(spec.name, spec, src.dtype.name)
     out = np.empty_like(src)
     t = src.dtype.type
-    suspicious = kernel(
-        src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor), factor != 1.0, CHUNKS
-    )
-    return out, bool(suspicious)
+    args = (src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor), factor != 1.0)
+    n = src.size // 4
+    parts = max(1, min(THREADS, n // MIN_PIXELS_PER_THREAD))
+    if parts == 1:
+        return out, bool(kernel(*args, 0, n))
+    bounds = np.linspace(0, n, parts + 1).astype(np.int64)
+    futures = [_pool().submit(kernel, *args, int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
+    return out, any(f.result() for f in futures)
