@@ -63,3 +63,29 @@ def quad_triangles(corner: np.ndarray, edge_u: np.ndarray, edge_v: np.ndarray) -
     u = np.asarray(edge_u, dtype=np.float64)
     v = np.asarray(edge_v, dtype=np.float64)
     return np.array([[a, a + u, a + u + v], [a, a + u + v, a + v]])
+
+
+def ray_box_distance(points, direction, lo, hi):
+    """Signed slab-test margin: > 0 where the ray p + t·dir (t > 0) passes through the box
+    interior by at least that much in every slab, < 0 where it misses (Kay & Kajiya 1986)."""
+    d = np.where(direction == 0, 1e-300, direction)
+    t0 = (np.asarray(lo) - points) / d
+    t1 = (np.asarray(hi) - points) / d
+    tmin = np.max(np.minimum(t0, t1), axis=1)
+    tmax = np.min(np.maximum(t0, t1), axis=1)
+    return np.minimum(tmax - np.maximum(tmin, 0.0), tmax)
+
+
+def ray_sphere_distance(points, direction, centre):
+    """Distance from the sphere centre to the ray p + t·dir, t ≥ 0 (closed form)."""
+    d = direction / np.linalg.norm(direction)
+    w = np.asarray(centre) - points
+    t = np.maximum(w @ d, 0.0)
+    return np.linalg.norm(w - t[:, None] * d, axis=1)
+
+
+def ground_points(n: int, extent: float = 4.0, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random points on the plane z = 0 in [−extent, extent]² and their normals (0, 0, 1)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-extent, extent, size=(n, 2))
+    return np.column_stack([xy, np.zeros(n)]), np.tile([0.0, 0.0, 1.0], (n, 1))

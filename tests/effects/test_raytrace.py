@@ -10,34 +10,16 @@ from blinn_phong.raytrace import (
     point_light_visibility,
 )
 
-from .geometry import box_triangles, quad_triangles, uv_sphere_triangles
+from .geometry import (
+    box_triangles,
+    ground_points,
+    quad_triangles,
+    ray_box_distance,
+    ray_sphere_distance,
+    uv_sphere_triangles,
+)
 
 GROUND = quad_triangles(np.array([-10.0, -10.0, 0.0]), np.array([20.0, 0, 0]), np.array([0, 20.0, 0]))
-
-
-def ray_box_distance(points, direction, lo, hi):
-    """Signed slab-test margin: > 0 where the ray p + t·dir (t > 0) passes through the box
-    interior by at least that much in every slab, < 0 where it misses (Kay & Kajiya 1986)."""
-    d = np.where(direction == 0, 1e-300, direction)
-    t0 = (np.asarray(lo) - points) / d
-    t1 = (np.asarray(hi) - points) / d
-    tmin = np.max(np.minimum(t0, t1), axis=1)
-    tmax = np.min(np.maximum(t0, t1), axis=1)
-    return np.minimum(tmax - np.maximum(tmin, 0.0), tmax)
-
-
-def ray_sphere_distance(points, direction, centre):
-    """Distance from the sphere centre to the ray p + t·dir, t ≥ 0 (closed form)."""
-    d = direction / np.linalg.norm(direction)
-    w = np.asarray(centre) - points
-    t = np.maximum(w @ d, 0.0)
-    return np.linalg.norm(w - t[:, None] * d, axis=1)
-
-
-def ground_points(n, extent=4.0, seed=1):
-    rng = np.random.default_rng(seed)
-    xy = rng.uniform(-extent, extent, size=(n, 2))
-    return np.column_stack([xy, np.zeros(n)]), np.tile([0.0, 0.0, 1.0], (n, 1))
 
 
 def test_hard_shadow_of_a_box_matches_the_analytic_slab_test():

@@ -1,0 +1,419 @@
+"""Shadow maps for directional, spot and point lights; planar projected ("fake") shadows.
+
+Shadow mapping (Williams, "Casting curved shadows on curved surfaces", SIGGRAPH '78):
+render the scene's depth from the light with :func:`blinn_phong.raster.rasterize`, then a
+surface point is lit when its own light-space depth is not behind the stored depth.
+
+* Lights: a directional light uses an orthographic light camera fitted around the scene
+  bounds; a spot light a perspective one with a field of view of twice its cut-off; a point
+  light a cube of six 90° perspective faces, the face chosen by the major axis of the
+  light-to-point vector (the cube-map face rule of OpenGL 4.6 §8.13 table 8.19).
+* Bias, as ``glPolygonOffset(factor, units)`` applies it while the map is rendered (OpenGL
+  2.1 §3.5.5): each caster fragment is pushed back by ``constant + slope·m`` window-depth
+  units, ``m = max(|∂z/∂x|, |∂z/∂y|)`` the triangle's depth slope per texel. Too little
+  bias leaves self-shadowing stripes ("acne"); too much detaches shadows from their
+  casters ("peter-panning").
+* Normal offset (Holbert, "Normal Offset Shadows", GDC 2011): the receiver is moved along
+  its surface normal by ``normal_offset`` world units before it is projected.
+* Percentage-closer filtering (Reeves, Salesin & Cook, SIGGRAPH '87): the depth comparison
+  is made at several texels and the results (not the depths) are averaged. Kernels:
+  ``nearest`` (1 tap), ``bilinear`` (the 2×2 taps around the point weighted bilinearly, as
+  hardware PCF does), ``box3``/``box5``/``box7`` (k×k taps, equal weights). A tap h texels
+  away in x and y meets the receiver's own depth up to ``2·h·m`` away, so wider kernels need
+  ``slope_bias ≳ 1 + 2h`` (h = 1 for bilinear, (k − 1)/2 for box k) to stay free of acne.
+
+Planar projected shadows (Blinn, "Me and my (fake) shadow", IEEE CG&A 8(1) 1988): the
+matrix ``M = (π·l) I − l πᵀ`` flattens geometry onto the plane ``π = (a, b, c, d)`` from
+the homogeneous light ``l`` (w = 0 directional, w = 1 positional). Cheap, exact on that
+one plane, and only there: no shadows on other receivers, and casters on the far side of
+the plane or behind the light still cast.
+
+Image conventions: shadow maps are (height, width) arrays of window depth in [0, 1],
+row 0 at the top (as :func:`~blinn_phong.raster.rasterize` returns them), 1 where no
+caster was drawn.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .raster import rasterize
+from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographic_matrix, perspective_matrix
+
+__all__ = [
+    "PCF_KERNELS",
+    "ShadowMap",
+    "light_shadow_maps",
+    "planar_shadow_mask",
+    "planar_shadow_matrix",
+    "render_shadow_map",
+    "shadow_map_visibility",
+    "shadow_visibility",
+]
+
+#: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
+PCF_KERNELS: tuple[str, ...] = ("nearest", "bilinear", "box3", "box5", "box7")
+
+
+@dataclass(frozen=True, eq=False)
+class ShadowMap:
+    """Depth seen from a light.
+
+    ``depth``: (height, width) window depth in [0, 1], row 0 at the top, biased as rendered.
+    ``view``/``projection``: the light camera's 4×4 matrices (world → eye → clip).
+    """
+
+    depth: np.ndarray
+    view: np.ndarray
+    projection: np.ndarray
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(height, width) in texels."""
+        return self.depth.shape  # type: ignore[return-value]
+
+
+def _triangles(name: str, value: np.ndarray) -> np.ndarray:
+    tris = np.asarray(value)
+    if tris.dtype.kind not in "fiu" or tris.ndim != 3 or tris.shape[1:] != (3, 3):
+        raise ValueError(f"{name} must be a real array of shape (n, 3, 3), got {tris.dtype} {tris.shape}")
+    if not np.all(np.isfinite(tris)):
+        raise ValueError(f"{name} must be finite, got NaN or Inf")
+    return tris.astype(np.float64, copy=False)
+
+
+def _points(name: str, value: np.ndarray) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name} must be a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got NaN or Inf")
+    return arr.astype(np.float64, copy=False)
+
+
+def _homogeneous(points: np.ndarray) -> np.ndarray:
+    return np.concatenate([points, np.ones((len(points), 1))], axis=1)
+
+
+def render_shadow_map(
+    world_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+    resolution: int,
+    *,
+    constant_bias: float = 0.0,
+    slope_bias: float = 0.0,
+) -> ShadowMap:
+    """Render a light-space depth map of world-space triangles (both faces, nearest depth).
+
+    Args:
+        world_triangles: (n, 3, 3) world-space caster triangles.
+        view: 4×4 world → light-eye matrix.
+        projection: 4×4 light-eye → clip matrix.
+        resolution: map size in texels (square), ≥ 1.
+        constant_bias: window-depth units added to every caster fragment (≥ 0).
+        slope_bias: multiple of the triangle's depth slope per texel added (≥ 0).
+
+    Returns:
+        :class:`ShadowMap` with the biased nearest depth per texel (1 where empty).
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    if not isinstance(resolution, int | np.integer) or resolution < 1:
+        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
+    if constant_bias < 0 or slope_bias < 0:
+        raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
+    res = int(resolution)
+    vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    clip = _homogeneous(tris.reshape(-1, 3)) @ vp.T
+    index = np.arange(len(clip)).reshape(-1, 3)
+    frags = rasterize(clip, index, res, res)
+    depth = np.ones(res * res)
+    if len(frags):
+        # depth slope of each triangle in window coordinates (texel units), GL 2.1 §3.5.5
+        cw = clip.reshape(-1, 3, 4)
+        w = cw[:, :, 3]
+        ok = np.all(w > 0, axis=1)
+        ndc = cw[:, :, :3] / np.where(ok[:, None], w, 1.0)[:, :, None]
+        xw = (ndc[:, :, 0] + 1) * 0.5 * res
+        yw = (ndc[:, :, 1] + 1) * 0.5 * res
+        zw = (ndc[:, :, 2] + 1) * 0.5
+        e1x, e1y, e1z = xw[:, 1] - xw[:, 0], yw[:, 1] - yw[:, 0], zw[:, 1] - zw[:, 0]
+        e2x, e2y, e2z = xw[:, 2] - xw[:, 0], yw[:, 2] - yw[:, 0], zw[:, 2] - zw[:, 0]
+        det = e1x * e2y - e2x * e1y
+        safe = np.where(det != 0, det, 1.0)
+        dzdx = (e1z * e2y - e2z * e1y) / safe
+        dzdy = (e1x * e2z - e2x * e1z) / safe
+        slope = np.where(ok & (det != 0), np.maximum(np.abs(dzdx), np.abs(dzdy)), 0.0)
+        biased = frags.depth + constant_bias + slope_bias * slope[frags.triangle]
+        np.minimum.at(depth, frags.pixel, biased)
+    return ShadowMap(depth.reshape(res, res), np.asarray(view, float), np.asarray(projection, float))
+
+
+def _tap_offsets(kernel: str) -> np.ndarray:
+    k = int(kernel[3:])
+    r = np.arange(k) - (k - 1) / 2
+    oy, ox = np.meshgrid(r, r, indexing="ij")
+    return np.stack([ox.ravel(), oy.ravel()], axis=1)
+
+
+def shadow_visibility(
+    shadow_map: ShadowMap,
+    points: np.ndarray,
+    normals: np.ndarray | None = None,
+    *,
+    normal_offset: float = 0.0,
+    kernel: str = "nearest",
+) -> np.ndarray:
+    """Fraction of the depth comparisons that find each point lit (1 = lit, 0 = shadowed).
+
+    Points outside the light's frustum are lit (the map says nothing about them).
+
+    Args:
+        shadow_map: from :func:`render_shadow_map`.
+        points: (n, 3) world-space receiver points.
+        normals: (n, 3) their normals (needed when ``normal_offset`` ≠ 0).
+        normal_offset: world units each point moves along its unit normal (towards the
+            side facing the light) before projection.
+        kernel: one of :data:`PCF_KERNELS`.
+
+    Returns:
+        (n,) float64 visibility in [0, 1].
+    """
+    p = _points("points", points)
+    if kernel not in PCF_KERNELS:
+        raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    if normal_offset != 0.0:
+        if normals is None:
+            raise ValueError("normals are required when normal_offset != 0")
+        n = _points("normals", normals)
+        if n.shape != p.shape:
+            raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        # face the normal towards the light: the side whose light-eye z is larger (nearer the light)
+        towards = (n @ shadow_map.view[:3, :3].T)[:, 2]
+        n = np.where((towards < 0)[:, None], -n, n)
+        p = p + normal_offset * n
+    res_y, res_x = shadow_map.depth.shape
+    clip = _homogeneous(p) @ (shadow_map.projection @ shadow_map.view).T
+    w = clip[:, 3]
+    front = w > 0
+    ndc = clip[:, :3] / np.where(front, w, 1.0)[:, None]
+    x = (ndc[:, 0] + 1) * 0.5 * res_x
+    y = res_y - (ndc[:, 1] + 1) * 0.5 * res_y  # rows from the top
+    z = (ndc[:, 2] + 1) * 0.5
+    inside = front & (ndc[:, 0] >= -1) & (ndc[:, 0] <= 1) & (ndc[:, 1] >= -1) & (ndc[:, 1] <= 1) & (z <= 1)
+    flat = shadow_map.depth.ravel()
+
+    def lit_at(col: np.ndarray, row: np.ndarray) -> np.ndarray:
+        c = np.clip(col, 0, res_x - 1).astype(np.int64)
+        r = np.clip(row, 0, res_y - 1).astype(np.int64)
+        return (z <= flat[r * res_x + c]).astype(np.float64)
+
+    if kernel == "nearest":
+        vis = lit_at(np.floor(x), np.floor(y))
+    elif kernel == "bilinear":
+        fx, fy = x - 0.5, y - 0.5
+        x0, y0 = np.floor(fx), np.floor(fy)
+        tx, ty = fx - x0, fy - y0
+        top = lit_at(x0, y0) + tx * (lit_at(x0 + 1, y0) - lit_at(x0, y0))
+        bottom = lit_at(x0, y0 + 1) + tx * (lit_at(x0 + 1, y0 + 1) - lit_at(x0, y0 + 1))
+        vis = top + ty * (bottom - top)  # lerp form: exactly 1 when all taps are lit
+    else:
+        offsets = _tap_offsets(kernel)
+        col, row = np.floor(x), np.floor(y)
+        vis = np.mean([lit_at(col + ox, row + oy) for ox, oy in offsets], axis=0)
+    return np.where(inside, vis, 1.0)
+
+
+def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
+    pts = world_triangles.reshape(-1, 3)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-9)
+    return centre, radius
+
+
+def _up_for(direction: np.ndarray) -> np.ndarray:
+    return np.array([0.0, 1.0, 0.0]) if abs(direction[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+
+
+#: Cube-map faces: (axis, sign) of the major axis, and the look-at up vector per face.
+_CUBE_FACES = (
+    (0, 1.0, (0.0, -1.0, 0.0)),
+    (0, -1.0, (0.0, -1.0, 0.0)),
+    (1, 1.0, (0.0, 0.0, 1.0)),
+    (1, -1.0, (0.0, 0.0, -1.0)),
+    (2, 1.0, (0.0, -1.0, 0.0)),
+    (2, -1.0, (0.0, -1.0, 0.0)),
+)
+
+
+def light_shadow_maps(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    resolution: int,
+    *,
+    constant_bias: float = 0.0,
+    slope_bias: float = 0.0,
+) -> list[ShadowMap]:
+    """The shadow map(s) of one light over the given casters.
+
+    Directional: one orthographic map fitted to the casters' bounding sphere. Spot: one
+    perspective map, field of view ``2·cutoff`` (a cube when the cut-off exceeds 80°).
+    Point: six cube faces.
+
+    Args:
+        light: a light of the scene model.
+        world_triangles: (n, 3, 3) world-space casters (and receivers, for self-shadowing).
+        resolution: texels per map side.
+        constant_bias: see :func:`render_shadow_map`.
+        slope_bias: see :func:`render_shadow_map`.
+
+    Returns:
+        A list with one :class:`ShadowMap` (directional, spot) or six (point).
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    centre, radius = _bounds(tris)
+    kw = {"constant_bias": constant_bias, "slope_bias": slope_bias}
+    if isinstance(light, DirectionalLight):
+        d = np.asarray(light.direction, dtype=np.float64)
+        eye = centre - d * 2 * radius
+        view = look_at(eye, centre, _up_for(d))
+        proj = orthographic_matrix(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5)
+        return [render_shadow_map(tris, view, proj, resolution, **kw)]
+    pos = np.asarray(light.position, dtype=np.float64)
+    far = float(np.linalg.norm(centre - pos)) + radius
+    near = max(far * 1e-3, 1e-6)
+    if isinstance(light, SpotLight) and light.cutoff <= 80.0:
+        d = np.asarray(light.direction, dtype=np.float64)
+        view = look_at(pos, pos + d, _up_for(d))
+        proj = perspective_matrix(2 * light.cutoff, 1.0, near, far)
+        return [render_shadow_map(tris, view, proj, resolution, **kw)]
+    if isinstance(light, PointLight | SpotLight):
+        maps = []
+        for axis, sign, up in _CUBE_FACES:
+            d = np.zeros(3)
+            d[axis] = sign
+            view = look_at(pos, pos + d, up)
+            maps.append(
+                render_shadow_map(tris, view, perspective_matrix(90.0, 1.0, near, far), resolution, **kw)
+            )
+        return maps
+    raise TypeError(f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}")
+
+
+def shadow_map_visibility(
+    light: DirectionalLight | PointLight | SpotLight,
+    maps: list[ShadowMap],
+    points: np.ndarray,
+    normals: np.ndarray | None = None,
+    *,
+    normal_offset: float = 0.0,
+    kernel: str = "nearest",
+) -> np.ndarray:
+    """Visibility of points for one light from its maps (:func:`light_shadow_maps`).
+
+    For a cube (six maps) each point is looked up in the face of its major axis; PCF
+    taps do not cross face edges (they clamp to the face).
+
+    Args:
+        light: the light the maps were made for.
+        maps: its shadow maps.
+        points: (n, 3) world-space receiver points.
+        normals: (n, 3) normals, for ``normal_offset``.
+        normal_offset: see :func:`shadow_visibility`.
+        kernel: see :func:`shadow_visibility`.
+
+    Returns:
+        (n,) float64 visibility in [0, 1].
+    """
+    p = _points("points", points)
+    if len(maps) == 1:
+        return shadow_visibility(maps[0], p, normals, normal_offset=normal_offset, kernel=kernel)
+    if len(maps) != 6 or isinstance(light, DirectionalLight):
+        raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
+    rel = p - np.asarray(light.position, dtype=np.float64)
+    axis = np.argmax(np.abs(rel), axis=1)
+    sign = np.sign(rel[np.arange(len(p)), axis])
+    vis = np.ones(len(p))
+    for face, (ax, sg, _) in enumerate(_CUBE_FACES):
+        sel = (axis == ax) & (sign == sg)
+        if np.any(sel):
+            nrm = None if normals is None else np.asarray(normals)[sel]
+            vis[sel] = shadow_visibility(maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel)
+    return vis
+
+
+def planar_shadow_matrix(
+    plane: np.ndarray | tuple[float, ...], light: np.ndarray | tuple[float, ...]
+) -> np.ndarray:
+    """Blinn's projection onto a plane from a light: ``M = (π·l) I − l πᵀ``.
+
+    Args:
+        plane: ``(a, b, c, d)`` with the plane ``a·x + b·y + c·z + d = 0`` (world space).
+        light: homogeneous light ``(x, y, z, w)``: w = 1 for a point light at (x, y, z),
+            w = 0 for a directional light whose light lies towards (x, y, z).
+
+    Returns:
+        4×4 matrix acting on homogeneous column vectors; divide by w after applying it.
+    """
+    pl = np.asarray(plane, dtype=np.float64)
+    lt = np.asarray(light, dtype=np.float64)
+    if pl.shape != (4,) or lt.shape != (4,) or not (np.all(np.isfinite(pl)) and np.all(np.isfinite(lt))):
+        raise ValueError(f"plane and light must each be 4 finite numbers, got {plane!r} and {light!r}")
+    if np.linalg.norm(pl[:3]) == 0:
+        raise ValueError(f"plane normal (a, b, c) must not be zero, got {plane!r}")
+    dot = float(pl @ lt)
+    if dot == 0:
+        raise ValueError("the light lies in the plane (or is parallel to it): no projection exists")
+    return dot * np.eye(4) - np.outer(lt, pl)
+
+
+def planar_shadow_mask(
+    occluder_triangles: np.ndarray,
+    plane: np.ndarray | tuple[float, ...],
+    light: np.ndarray | tuple[float, ...],
+    points: np.ndarray,
+) -> np.ndarray:
+    """Fake shadows: which points of the plane fall inside the flattened occluders.
+
+    Args:
+        occluder_triangles: (n, 3, 3) world-space triangles of the shadow casters.
+        plane: ``(a, b, c, d)``, see :func:`planar_shadow_matrix`.
+        light: homogeneous light, see :func:`planar_shadow_matrix`.
+        points: (m, 3) points on the plane.
+
+    Returns:
+        (m,) float64 visibility: 0 inside a projected occluder, 1 elsewhere.
+    """
+    tris = _triangles("occluder_triangles", occluder_triangles)
+    p = _points("points", points)
+    m = planar_shadow_matrix(plane, light)
+    proj = _homogeneous(tris.reshape(-1, 3)) @ m.T
+    flat = (proj[:, :3] / proj[:, 3:4]).reshape(-1, 3, 3)
+    # 2-D point-in-triangle in the plane's own frame
+    nrm = np.asarray(plane, dtype=np.float64)[:3]
+    nrm = nrm / np.linalg.norm(nrm)
+    u = np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(nrm, u)
+    t2 = np.stack([flat @ u, flat @ v], axis=-1)  # (n, 3, 2)
+    p2 = np.stack([p @ u, p @ v], axis=-1)  # (m, 2)
+    shadowed = np.zeros(len(p), dtype=bool)
+    chunk = max(1, 2_000_000 // max(len(t2), 1))
+    for s in range(0, len(p2), chunk):
+        q = p2[s : s + chunk, None, :]  # (c, 1, 2)
+        e = []
+        for i in range(3):
+            a, b = t2[None, :, i], t2[None, :, (i + 1) % 3]
+            e.append(
+                (b[..., 0] - a[..., 0]) * (q[..., 1] - a[..., 1])
+                - (b[..., 1] - a[..., 1]) * (q[..., 0] - a[..., 0])
+            )
+        e0, e1, e2 = e
+        inside = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
+        degenerate = np.abs(e0 + e1 + e2) == 0
+        shadowed[s : s + chunk] = np.any(inside & ~degenerate, axis=1)
+    return 1.0 - shadowed.astype(np.float64)
