@@ -31,6 +31,7 @@ __all__ = [
     "blinn_phong_from_principled",
     "border_rectangle",
     "camera_projection",
+    "crop_projection",
     "frustum_matrix",
     "point_light_attenuation",
     "point_light_intensity",
@@ -223,6 +224,39 @@ def camera_projection(
     if kind == "PERSP":
         return frustum_matrix(xmin, xmax, ymin, ymax, near, far)
     return orthographic_matrix(xmin, xmax, ymin, ymax, near, far)
+
+
+def crop_projection(
+    projection: np.ndarray, width: int, height: int, region: tuple[int, int, int, int]
+) -> np.ndarray:
+    """Projection that renders only ``region`` of a ``width × height`` frame into its own image.
+
+    Window coordinates of the cropped image are those of the full frame minus the region's corner
+    (``x' = x − x0``; in OpenGL's bottom-up window y, ``y' = y − (height − y1)``), so every pixel
+    centre and sample lands where it was: rendering the crop equals cropping the full render. With
+    ``x_w = (x_ndc + 1)·W/2`` this is ``x_ndc' = x_ndc·W/w' + (W − 2·x0)/w' − 1`` (and likewise for y),
+    applied in clip space by multiplying with ``w_c``.
+
+    Args:
+        projection: (4, 4) eye -> clip matrix of the full frame.
+        width: full frame width in pixels.
+        height: full frame height in pixels.
+        region: ``(x0, y0, x1, y1)`` pixel rectangle, y from the top row (as :func:`border_rectangle`).
+    """
+    p = np.asarray(projection, dtype=np.float64)
+    if p.shape != (4, 4) or not np.isfinite(p).all():
+        raise ValueError(f"projection: expected a finite (4, 4) matrix, got shape {p.shape}")
+    x0, y0, x1, y1 = (int(v) for v in region)
+    if not (0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height):
+        raise ValueError(
+            f"region: expected 0 <= x0 < x1 <= {width} and 0 <= y0 < y1 <= {height}, got {region}"
+        )
+    w, h = x1 - x0, y1 - y0
+    gl_y0 = height - y1
+    crop = np.eye(4)
+    crop[0, 0], crop[0, 3] = width / w, (width - 2 * x0) / w - 1.0
+    crop[1, 1], crop[1, 3] = height / h, (height - 2 * gl_y0) / h - 1.0
+    return crop @ p
 
 
 # --------------------------------------------------------------------------- lights

@@ -237,3 +237,31 @@ def test_principled_metal_has_no_diffuse_and_tinted_specular() -> None:
 def test_principled_rejects_negative_colour() -> None:
     with pytest.raises(ValueError, match="base_color"):
         mapping.blinn_phong_from_principled(base_color=(-0.1, 0.0, 0.0))
+
+
+def test_rendering_a_crop_equals_cropping_the_render() -> None:
+    # Rasterize the same triangles into the full frame and into a cropped frame: identical
+    # coverage and depth in the overlap (the OpenGL viewport transform is an exact pixel shift).
+    from blinn_phong.raster import rasterize, resolve_nearest
+
+    rng = np.random.default_rng(7)
+    width, height, region = 48, 32, (9, 5, 37, 26)
+    projection = mapping.camera_projection(kind="PERSP", width=width, height=height, shift_x=0.05)
+    eye = np.column_stack([rng.uniform(-1.5, 1.5, (30, 2)), rng.uniform(-6.0, -3.0, 30), np.ones(30)])
+    triangles = rng.integers(0, 30, (20, 3))
+
+    def render(proj: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
+        frags = rasterize((proj @ eye.T).T, triangles, w, h, samples=4)
+        nearest = resolve_nearest(frags)
+        depth = np.full(w * h * 4, np.inf)
+        hit = nearest >= 0
+        depth[hit] = frags.depth[nearest[hit]]
+        return hit.reshape(h, w, 4), depth.reshape(h, w, 4)
+
+    full_hit, full_depth = render(projection, width, height)
+    crop = mapping.crop_projection(projection, width, height, region)
+    x0, y0, x1, y1 = region
+    crop_hit, crop_depth = render(crop, x1 - x0, y1 - y0)
+    assert full_hit[y0:y1, x0:x1].any()
+    np.testing.assert_array_equal(crop_hit, full_hit[y0:y1, x0:x1])
+    np.testing.assert_allclose(crop_depth, full_depth[y0:y1, x0:x1], atol=1e-6)

@@ -1,0 +1,464 @@
+"""Evaluated depsgraph -> ``blinn_phong.scene.Scene``.
+
+Reads what the renderer needs out of Blender and nothing else; every formula lives in
+``addon/mapping.py``. What is converted:
+
+* meshes and everything that evaluates to a mesh (modifiers applied, geometry-node and collection
+  instances, via ``depsgraph.object_instances``), as loop triangles: one vertex per face corner,
+  carrying Blender's corner normal, so custom split normals, sharp edges and flat faces all come
+  through unchanged; split per material slot;
+* object transforms (``matrix_world`` of each instance, parenting included);
+* the scene camera (perspective or orthographic, sensor fit, shift, clipping, pixel aspect), the
+  resolution percentage and the render border;
+* point, spot, sun and area lights, and the world colour as the global ambient light.
+
+Convention changes happen here: Blender's matrices are row-major ``Matrix`` objects acting on column
+vectors, which numpy reads unchanged (``np.array(matrix)``); Blender's camera looks down -Z with +Y
+up in its local frame, exactly OpenGL's eye space, so the view matrix is the inverse of the camera's
+(scale-free) world matrix.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from blinn_phong.scene import (
+    AmbientLight,
+    Camera,
+    DirectionalLight,
+    LightModel,
+    Material,
+    Mesh,
+    PointLight,
+    Scene,
+    SpotLight,
+)
+
+from . import mapping
+
+__all__ = [
+    "ConvertedScene",
+    "RenderOptions",
+    "camera_from_object",
+    "light_from_object",
+    "material_from_blender",
+    "mesh_arrays",
+    "principled_inputs",
+    "scene_from_depsgraph",
+    "world_ambient",
+]
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """Render settings read from ``Scene.blinn_phong`` (see ``addon/properties.py``)."""
+
+    shading: str = "phong"
+    samples: int = 4
+    transparency: str = "AUTO"
+    peel_layers: int = 8
+    shadows: str = "AUTO"
+    shadow_samples: int = 16
+    shadow_bias: float = 1e-3
+    fog: str = "NONE"
+    fog_color: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    fog_density: float = 0.1
+    fog_start: float = 1.0
+    fog_end: float = 50.0
+
+
+@dataclass
+class ConvertedScene:
+    """A Blender scene ready for ``blinn_phong``.
+
+    Attributes:
+        scene: the renderer's scene; its camera covers ``region`` only when a border is set.
+        width: full frame width in pixels (after the resolution percentage).
+        height: full frame height in pixels.
+        region: ``(x0, y0, x1, y1)`` pixel rectangle to render, y from the top row; the whole frame
+            without a render border.
+        options: render settings.
+        mesh_names: ``"<object>/<material>"`` for each mesh in ``scene.meshes``.
+        extras: per mesh, the material settings the core ``Material`` does not hold (transparency
+            model and Kay parameters).
+        notes: things that were skipped or approximated, for the log and the Render panel.
+    """
+
+    scene: Scene
+    width: int
+    height: int
+    region: tuple[int, int, int, int]
+    options: RenderOptions
+    mesh_names: list[str] = field(default_factory=list)
+    extras: list[dict[str, object]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def region_size(self) -> tuple[int, int]:
+        """Width and height of :attr:`region` in pixels."""
+        x0, y0, x1, y1 = self.region
+        return x1 - x0, y1 - y0
+
+
+# --------------------------------------------------------------------------- meshes
+
+
+def mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Corner-based triangle arrays of a Blender mesh (object space).
+
+    Returns:
+        ``positions`` (L, 3) and ``normals`` (L, 3) float64, one row per face corner (loop);
+        ``triangles`` (T, 3) int64 corner indices, counter-clockwise seen from the front;
+        ``material_index`` (T,) int64 material slot of each triangle.
+    """
+    mesh.calc_loop_triangles()
+    n_verts, n_loops, n_tris = len(mesh.vertices), len(mesh.loops), len(mesh.loop_triangles)
+    co = np.empty(n_verts * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    loop_vertex = np.empty(n_loops, dtype=np.int32)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+    corner_normals = np.empty(n_loops * 3, dtype=np.float32)
+    mesh.corner_normals.foreach_get("vector", corner_normals)
+    tri_loops = np.empty(n_tris * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("loops", tri_loops)
+    material_index = np.empty(n_tris, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("material_index", material_index)
+    positions = co.reshape(-1, 3).astype(np.float64)[loop_vertex]
+    return (
+        positions,
+        corner_normals.reshape(-1, 3).astype(np.float64),
+        tri_loops.reshape(-1, 3).astype(np.int64),
+        material_index.astype(np.int64),
+    )
+
+
+# --------------------------------------------------------------------------- materials
+
+_PRINCIPLED_SOCKETS = {
+    "base_color": "Base Color",
+    "metallic": "Metallic",
+    "roughness": "Roughness",
+    "ior": "IOR",
+    "specular_ior_level": "Specular IOR Level",
+    "emission_color": "Emission Color",
+    "emission_strength": "Emission Strength",
+    "alpha": "Alpha",
+}
+
+
+def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, object], list[str]]:
+    """Unlinked input values of the material's Principled BSDF, as keyword arguments of
+    ``mapping.blinn_phong_from_principled``; plus notes on what was ignored.
+
+    Without a node tree or a Principled BSDF node, the viewport display values
+    (``diffuse_color``, ``metallic``, ``roughness``) are used.
+    """
+    notes: list[str] = []
+    if material is None:
+        return {"base_color": (0.8, 0.8, 0.8)}, notes
+    tree = material.node_tree
+    node = None
+    if tree is not None:
+        node = next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if node is None:
+        return {
+            "base_color": tuple(material.diffuse_color[:3]),
+            "metallic": float(material.metallic),
+            "roughness": float(material.roughness),
+            "alpha": float(material.diffuse_color[3]),
+        }, notes
+    values: dict[str, object] = {}
+    for key, name in _PRINCIPLED_SOCKETS.items():
+        socket = node.inputs.get(name)
+        if socket is None:
+            continue
+        if socket.is_linked:
+            notes.append(f"{material.name}: '{name}' is linked; its unlinked value is used")
+        value = socket.default_value
+        values[key] = tuple(value[:3]) if key.endswith("color") else float(value)
+    return values, notes
+
+
+def material_from_blender(
+    material: bpy.types.Material | None,
+) -> tuple[Material, dict[str, object], list[str]]:
+    """The Blinn-Phong material of a Blender material, its extra settings and notes.
+
+    ``Material.blinn_phong.source == "CUSTOM"`` uses the stored coefficients; otherwise they are
+    derived from the Principled BSDF (``mapping.blinn_phong_from_principled``).
+    """
+    settings = getattr(material, "blinn_phong", None) if material is not None else None
+    notes: list[str] = []
+    if settings is not None and settings.source == "CUSTOM":
+        values: dict[str, object] = {
+            "ambient": tuple(settings.ambient),
+            "diffuse": tuple(settings.diffuse),
+            "specular": tuple(settings.specular),
+            "emission": tuple(settings.emission),
+            "shininess": float(settings.shininess),
+            "opacity": float(settings.opacity),
+        }
+    else:
+        inputs, notes = principled_inputs(material)
+        values = mapping.blinn_phong_from_principled(**inputs)
+    extras: dict[str, object] = {"shading": None, "transparency_model": "ALPHA"}
+    if settings is not None:
+        extras = {
+            "shading": None if settings.shading == "SCENE" else settings.shading.lower(),
+            "transparency_model": settings.transparency_model,
+            "kay_min_transmission": float(settings.kay_min_transmission),
+            "kay_max_transmission": float(settings.kay_max_transmission),
+            "kay_exponent": float(settings.kay_exponent),
+        }
+    return Material(**values), extras, notes
+
+
+# --------------------------------------------------------------------------- lights
+
+
+def _light_falloff(light: bpy.types.Light, radius: float) -> tuple[float, float, float, float | None]:
+    """``(kc, kl, kq, spot exponent or None)`` from the light's settings."""
+    settings = getattr(light, "blinn_phong", None)
+    if settings is not None and settings.source == "CUSTOM":
+        return settings.constant, settings.linear, settings.quadratic, settings.spot_exponent
+    kc, kl, kq = mapping.point_light_attenuation(radius)
+    return kc, kl, kq, None
+
+
+def light_from_object(
+    light: bpy.types.Light, matrix_world: np.ndarray
+) -> DirectionalLight | PointLight | SpotLight:
+    """The Blinn-Phong light of a Blender light placed by ``matrix_world`` (4×4).
+
+    Sun -> DirectionalLight (``S/π``); point -> PointLight (``P/(4π²)``, inverse square softened
+    by the radius); spot -> SpotLight (cutoff = half the cone, exponent from Spot Blend);
+    area -> SpotLight with cutoff 90° and exponent 1 (the Lambertian ``cos θ`` lobe, ``P/π²``).
+    """
+    m = np.asarray(matrix_world, dtype=np.float64)
+    position = m[:3, 3]
+    axis = -m[:3, 2]
+    settings = getattr(light, "blinn_phong", None)
+    scale = float(settings.intensity_scale) if settings is not None else 1.0
+    color = tuple(light.color)
+    if light.type == "SUN":
+        return DirectionalLight(
+            direction=axis, color=color, intensity=mapping.sun_light_intensity(light.energy) * scale
+        )
+    if light.type == "POINT":
+        kc, kl, kq, _ = _light_falloff(light, light.shadow_soft_size)
+        return PointLight(
+            position=position,
+            color=color,
+            intensity=mapping.point_light_intensity(light.energy) * scale,
+            constant=kc,
+            linear=kl,
+            quadratic=kq,
+        )
+    if light.type == "SPOT":
+        kc, kl, kq, exponent = _light_falloff(light, light.shadow_soft_size)
+        if exponent is None:
+            exponent = mapping.spot_exponent(light.spot_size, light.spot_blend)
+        return SpotLight(
+            position=position,
+            direction=axis,
+            cutoff=mapping.spot_cutoff_degrees(light.spot_size),
+            exponent=exponent,
+            color=color,
+            intensity=mapping.point_light_intensity(light.energy) * scale,
+            constant=kc,
+            linear=kl,
+            quadratic=kq,
+        )
+    if light.type == "AREA":
+        sx = light.size
+        sy = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+        area = sx * sy * (math.pi / 4.0 if light.shape in ("DISK", "ELLIPSE") else 1.0)
+        kc, kl, kq, exponent = _light_falloff(light, math.sqrt(area / math.pi))
+        return SpotLight(
+            position=position,
+            direction=axis,
+            cutoff=90.0,
+            exponent=1.0 if exponent is None else exponent,
+            color=color,
+            intensity=mapping.area_light_intensity(light.energy) * scale,
+            constant=kc,
+            linear=kl,
+            quadratic=kq,
+        )
+    raise ValueError(f"light.type: expected SUN, POINT, SPOT or AREA, got {light.type!r}")
+
+
+def world_ambient(world: bpy.types.World | None) -> tuple[float, float, float]:
+    """Global ambient colour from the world: the Background node's Color × Strength, else ``world.color``.
+
+    A uniform environment of radiance ``L`` reflects ``albedo · L`` from an unoccluded Lambertian
+    surface, so the world colour is the ambient intensity for ``ka = albedo``.
+    """
+    if world is None:
+        return (0.0, 0.0, 0.0)
+    tree = world.node_tree
+    node = None if tree is None else next((n for n in tree.nodes if n.type == "BACKGROUND"), None)
+    if node is None:
+        return tuple(float(c) for c in world.color[:3])
+    color = node.inputs["Color"].default_value
+    strength = float(node.inputs["Strength"].default_value)
+    return (color[0] * strength, color[1] * strength, color[2] * strength)
+
+
+# --------------------------------------------------------------------------- camera
+
+
+def view_matrix(matrix_world: np.ndarray) -> np.ndarray:
+    """World -> eye matrix of a Blender camera: the inverse of its world matrix with scale removed."""
+    m = np.array(matrix_world, dtype=np.float64)
+    m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=0)
+    return np.linalg.inv(m)
+
+
+def camera_from_object(camera_object: bpy.types.Object, render: bpy.types.RenderSettings) -> Camera:
+    """The Blinn-Phong camera of a Blender camera object for the full frame of ``render``."""
+    data = camera_object.data
+    if data.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera.type: panoramic cameras are not supported, got {data.type!r}")
+    width, height = mapping.render_size(
+        render.resolution_x, render.resolution_y, render.resolution_percentage
+    )
+    projection = mapping.camera_projection(
+        kind=data.type,
+        width=width,
+        height=height,
+        lens_mm=data.lens,
+        sensor_width_mm=data.sensor_width,
+        sensor_height_mm=data.sensor_height,
+        sensor_fit=data.sensor_fit,
+        ortho_scale=data.ortho_scale,
+        shift_x=data.shift_x,
+        shift_y=data.shift_y,
+        clip_start=data.clip_start,
+        clip_end=data.clip_end,
+        pixel_aspect_x=render.pixel_aspect_x,
+        pixel_aspect_y=render.pixel_aspect_y,
+    )
+    kind = "perspective" if data.type == "PERSP" else "orthographic"
+    return Camera(view_matrix(np.array(camera_object.matrix_world)), projection, kind)
+
+
+# --------------------------------------------------------------------------- scene
+
+
+def render_options(settings: object | None) -> RenderOptions:
+    """Render options from ``Scene.blinn_phong`` (defaults when the property group is missing)."""
+    if settings is None:
+        return RenderOptions()
+    return RenderOptions(
+        shading=settings.shading.lower(),
+        samples=settings.samples_per_axis**2,
+        transparency=settings.transparency,
+        peel_layers=settings.peel_layers,
+        shadows=settings.shadows,
+        shadow_samples=settings.shadow_samples,
+        shadow_bias=settings.shadow_bias,
+        fog=settings.fog,
+        fog_color=tuple(settings.fog_color),
+        fog_density=settings.fog_density,
+        fog_start=settings.fog_start,
+        fog_end=settings.fog_end,
+    )
+
+
+def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
+    """Convert the evaluated scene of ``depsgraph`` (meshes, lights, camera, world, settings).
+
+    Raises:
+        ValueError: the scene has no camera, or the camera is panoramic.
+    """
+    bl_scene = depsgraph.scene
+    render = bl_scene.render
+    if bl_scene.camera is None:
+        raise ValueError("scene.camera: the scene has no camera to render from")
+    settings = getattr(bl_scene, "blinn_phong", None)
+    options = render_options(settings)
+    camera_object = bl_scene.camera.evaluated_get(depsgraph)
+    camera = camera_from_object(camera_object, render)
+    width, height = mapping.render_size(
+        render.resolution_x, render.resolution_y, render.resolution_percentage
+    )
+    region = (0, 0, width, height)
+    if render.use_border:
+        region = mapping.border_rectangle(
+            render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y, width, height
+        )
+        if region[2] <= region[0] or region[3] <= region[1]:
+            raise ValueError(f"render border: the border covers no pixel ({region})")
+        camera = Camera(
+            camera.view, mapping.crop_projection(camera.projection, width, height, region), camera.kind
+        )
+
+    meshes: list[Mesh] = []
+    names: list[str] = []
+    extras: list[dict[str, object]] = []
+    notes: list[str] = []
+    lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
+    geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
+
+    for instance in depsgraph.object_instances:
+        obj = instance.object
+        matrix = np.array(instance.matrix_world, dtype=np.float64)
+        if obj.type == "LIGHT":
+            lights.append(light_from_object(obj.data, matrix))
+            continue
+        if obj.type not in ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"):
+            continue
+        key = obj.name
+        if key not in geometry_cache:
+            try:
+                mesh = obj.to_mesh()
+            except RuntimeError:
+                mesh = None
+            if mesh is None:
+                notes.append(f"{obj.name}: has no mesh geometry; skipped")
+                continue
+            try:
+                arrays = mesh_arrays(mesh)
+            finally:
+                obj.to_mesh_clear()
+            slots = [slot.material for slot in obj.material_slots]
+            geometry_cache[key] = (*arrays, slots)
+        positions, normals, triangles, material_index, slots = geometry_cache[key]
+        if len(triangles) == 0:
+            continue
+        if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
+            notes.append(f"{obj.name}: zero scale; skipped")
+            continue
+        for slot_index in np.unique(material_index):
+            blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
+            material, extra, material_notes = material_from_blender(blender_material)
+            notes.extend(n for n in material_notes if n not in notes)
+            used = triangles[material_index == slot_index]
+            meshes.append(
+                Mesh(
+                    positions=positions,
+                    triangles=used,
+                    normals=normals,
+                    transform=matrix,
+                    material=material,
+                    shading=extra.pop("shading"),
+                )
+            )
+            names.append(f"{obj.name}/{blender_material.name if blender_material else '(none)'}")
+            extras.append(extra)
+
+    ambient = world_ambient(bl_scene.world)
+    light_model = LightModel(
+        specular="phong" if settings is not None and settings.specular_model == "PHONG" else "blinn",
+        local_viewer=camera.kind == "perspective",
+        two_sided=bool(settings.two_sided) if settings is not None else True,
+    )
+    scene = Scene(
+        meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
+    )
+    return ConvertedScene(scene, width, height, region, options, names, extras, notes)
