@@ -18,9 +18,12 @@ top-left rule):
   llvmpipe's fixed-point setup) so edge tests are exact.
 * Sampling: pixel centres at +0.5. ``samples = k²`` places an ordered k×k grid of
   sample points in each pixel (centres of the k×k sub-pixels).
-* Fill rule: a sample exactly on an edge belongs to the triangle if the edge is
-  a *top* or *left* edge in the returned image orientation (row 0 at the top), so
-  two triangles sharing an edge never both cover, and never both miss, a sample.
+* Fill rule: the top-left rule in OpenGL window coordinates read in memory order
+  (window y = 0 first), which is how Mesa llvmpipe applies it to framebuffer
+  objects: a sample exactly on an edge belongs to the triangle if the edge is a
+  *left* edge, or a horizontal edge with the interior at larger window y — in the
+  returned top-row-first image, a *bottom* edge. Two triangles sharing an edge
+  never both cover, and never both miss, a sample.
 * Returned arrays use row 0 at the TOP: ``pixel = row·width + column``.
 * Barycentrics are perspective-correct (§3.5.1 eq. 3.9): attributes linear in
   clip space interpolate exactly with them. Window depth is interpolated linearly
@@ -261,9 +264,11 @@ def rasterize(
         a[:, i] = -(yk - yj) * sign
         b[:, i] = (xk - xj) * sign
         c[:, i] = ((yk - yj) * xj - (xk - xj) * yj) * sign
-    # Top-left rule (row 0 at the top): the inward normal (a, b) of a left edge points right
-    # (a > 0); of a top edge (horizontal, interior below) it points down (a == 0, b > 0).
-    top_left = (a > 0) | ((a == 0) & (b > 0))
+    # Top-left rule applied in OpenGL window coordinates taken in memory order (y_w = 0 first, as
+    # llvmpipe does for framebuffer objects): the inward normal (a, b) of a left edge points right
+    # (a > 0); a horizontal edge counts when the interior has larger y_w, i.e. lies above it in
+    # the returned top-row-first image (inward normal points up in rows: a == 0, b < 0).
+    top_left = (a > 0) | ((a == 0) & (b < 0))
     abs_area = np.abs(area)
 
     jobs = _tile_jobs(sel, x0, x1, y0, y1)

@@ -36,10 +36,11 @@ def test_shared_edges_cover_every_sample_exactly_once(samples: int) -> None:
     assert hits.min() == 1 and hits.max() == 1
 
 
-def test_axis_aligned_rectangle_follows_the_top_left_rule() -> None:
+def test_axis_aligned_rectangle_follows_the_fill_rule() -> None:
     # Rectangle whose edges pass exactly through pixel centres: columns 2..7 and rows 3..8 have
-    # their centres on or inside it. Top-left rule: the left edge (x = 2.5) and the top edge
-    # (row 3 centre, image row 0 at the top) are included, the right (x = 7.5) and bottom excluded.
+    # their centres on or inside it. Top-left rule in OpenGL window coordinates (y up, memory
+    # order): the left edge (x = 2.5) and the edge with the interior at larger window y (image
+    # row 8, the bottom in a top-row-first image) are included; the right and top edges are not.
     w, h = 12, 10
     x_left, x_right = 2.5, 7.5
     row_top, row_bottom = 3.5, 8.5  # from the top
@@ -50,7 +51,7 @@ def test_axis_aligned_rectangle_follows_the_top_left_rule() -> None:
     covered = np.zeros(w * h, bool)
     covered[frags.pixel] = True
     expected = np.zeros((h, w), bool)
-    expected[3:8, 2:7] = True
+    expected[4:9, 2:7] = True
     np.testing.assert_array_equal(covered.reshape(h, w), expected)
 
 

@@ -1,0 +1,314 @@
+"""Render a :class:`blinn_phong.Scene` with a real OpenGL implementation (Mesa llvmpipe).
+
+Two drivers, both drawing the same geometry with the same GL state:
+
+* :func:`render_fixed_function` — OpenGL 2.1 fixed-function lighting
+  (``glLight*``, ``glMaterial*``, ``glLightModel*``), ``GL_SMOOTH`` or ``GL_FLAT``;
+* :func:`render_glsl_phong` — a small GLSL 1.20 program evaluating the same
+  lighting equation per pixel (interpolated eye-space position and normal),
+  reading the light and material state from the built-in uniforms
+  (``gl_LightSource``, ``gl_FrontMaterial``...).
+
+Comparison hygiene (see docs/renderer.md): dithering off, ``GL_NORMALIZE`` on,
+lights specified under an identity modelview (their eye-space positions are
+computed here in float64), global ambient set explicitly, depth test ``GL_LESS``.
+Output: uint8 RGBA, row 0 at the TOP (flipped from OpenGL's bottom-up readback),
+background (0, 0, 0, 0) so alpha marks coverage.
+
+Used only by tests and benchmarks. Call :func:`oracles.egl.gl_context` before
+anything imports OpenGL (this module imports it lazily).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from blinn_phong.lighting import lights_in_eye_space
+from blinn_phong.normals import vertex_normals
+from blinn_phong.scene import Mesh, Scene
+from oracles.egl import gl_context
+
+__all__ = ["GLRender", "render_fixed_function", "render_glsl_phong"]
+
+MAX_LIGHTS = 8
+
+_VERTEX_SHADER = """
+#version 120
+varying vec3 v_position;
+varying vec3 v_normal;
+void main() {
+    vec4 eye = gl_ModelViewMatrix * gl_Vertex;
+    v_position = eye.xyz;
+    v_normal = normalize(gl_NormalMatrix * gl_Normal);  // unit per vertex, as GL_NORMALIZE does
+    gl_Position = gl_ProjectionMatrix * eye;
+}
+"""
+
+# The OpenGL 2.1 §2.14.1 equation per fragment (Blinn half vector), all lights' state from built-ins.
+_FRAGMENT_SHADER = """
+#version 120
+uniform int n_lights;
+uniform bool local_viewer;
+uniform bool two_sided;
+varying vec3 v_position;
+varying vec3 v_normal;
+void main() {
+    bool front = gl_FrontFacing || !two_sided;
+    vec3 n = normalize(v_normal);
+    if (!front) n = -n;
+    vec4 m_ambient = front ? gl_FrontMaterial.ambient : gl_BackMaterial.ambient;
+    vec4 m_diffuse = front ? gl_FrontMaterial.diffuse : gl_BackMaterial.diffuse;
+    vec4 m_specular = front ? gl_FrontMaterial.specular : gl_BackMaterial.specular;
+    float shininess = front ? gl_FrontMaterial.shininess : gl_BackMaterial.shininess;
+    vec3 scene = front ? gl_FrontLightModelProduct.sceneColor.rgb : gl_BackLightModelProduct.sceneColor.rgb;
+    vec3 v = local_viewer ? normalize(-v_position) : vec3(0.0, 0.0, 1.0);
+    vec3 ambient = scene;
+    vec3 diffuse = vec3(0.0);
+    vec3 specular = vec3(0.0);
+    for (int i = 0; i < 8; i++) {
+        if (i >= n_lights) break;
+        vec4 p = gl_LightSource[i].position;
+        vec3 l;
+        float att = 1.0;
+        if (p.w != 0.0) {
+            vec3 d = p.xyz / p.w - v_position;
+            float dist = length(d);
+            l = d / dist;
+            att = 1.0 / (gl_LightSource[i].constantAttenuation + gl_LightSource[i].linearAttenuation * dist
+                         + gl_LightSource[i].quadraticAttenuation * dist * dist);
+        } else {
+            l = normalize(p.xyz);
+        }
+        if (gl_LightSource[i].spotCutoff != 180.0) {
+            float c = dot(-l, normalize(gl_LightSource[i].spotDirection));
+            float cone = pow(max(c, 0.0), gl_LightSource[i].spotExponent);
+            att *= (c >= gl_LightSource[i].spotCosCutoff) ? cone : 0.0;
+        }
+        ambient += att * m_ambient.rgb * gl_LightSource[i].ambient.rgb;
+        float ndl = dot(n, l);
+        if (ndl > 0.0) {
+            diffuse += att * ndl * m_diffuse.rgb * gl_LightSource[i].diffuse.rgb;
+            float nh = max(dot(n, normalize(l + v)), 0.0);
+            specular += att * pow(nh, shininess) * m_specular.rgb * gl_LightSource[i].specular.rgb;
+        }
+    }
+    gl_FragColor = vec4(ambient + diffuse + specular, m_diffuse.a);
+}
+"""
+
+
+@dataclass(frozen=True)
+class GLRender:
+    """An OpenGL render read back: ``rgba`` uint8 (H, W, 4), row 0 at the top; ``seconds`` to draw + finish.
+
+    ``renderer`` is the ``GL_RENDERER`` string.
+    """
+
+    rgba: np.ndarray
+    seconds: float
+    renderer: str
+
+
+class _Framebuffer:
+    """An RGBA8 + DEPTH24 framebuffer object of the given size, bound for drawing."""
+
+    def __init__(self, gl: object, width: int, height: int) -> None:
+        self.gl = gl
+        self.fbo = gl.glGenFramebuffers(1)
+        gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, self.fbo)
+        self.rbs = gl.glGenRenderbuffers(2)
+        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, self.rbs[0])
+        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_RGBA8, width, height)
+        gl.glFramebufferRenderbuffer(
+            gl.GL_FRAMEBUFFER, gl.GL_COLOR_ATTACHMENT0, gl.GL_RENDERBUFFER, self.rbs[0]
+        )
+        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, self.rbs[1])
+        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_DEPTH_COMPONENT24, width, height)
+        gl.glFramebufferRenderbuffer(
+            gl.GL_FRAMEBUFFER, gl.GL_DEPTH_ATTACHMENT, gl.GL_RENDERBUFFER, self.rbs[1]
+        )
+        status = gl.glCheckFramebufferStatus(gl.GL_FRAMEBUFFER)
+        if status != gl.GL_FRAMEBUFFER_COMPLETE:
+            raise RuntimeError(f"framebuffer incomplete: status 0x{int(status):x}")
+        gl.glViewport(0, 0, width, height)
+        self.width, self.height = width, height
+
+    def read(self) -> np.ndarray:
+        gl = self.gl
+        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
+        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE)
+        img = np.frombuffer(data, np.uint8).reshape(self.height, self.width, 4)
+        return img[::-1].copy()  # OpenGL rows are bottom-up
+
+    def delete(self) -> None:
+        self.gl.glBindFramebuffer(self.gl.GL_FRAMEBUFFER, 0)
+        self.gl.glDeleteRenderbuffers(2, self.rbs)
+        self.gl.glDeleteFramebuffers(1, [self.fbo])
+
+
+def _mesh_normals(mesh: Mesh) -> np.ndarray:
+    if mesh.normals is not None:
+        return mesh.normals
+    return vertex_normals(mesh.positions, mesh.triangles, mesh.normal_weighting)
+
+
+def _set_state(gl, scene: Scene, *, flat: bool) -> int:
+    """Lighting, material-independent state; returns the number of GL lights used."""
+    gl.glDisable(gl.GL_DITHER)
+    gl.glEnable(gl.GL_DEPTH_TEST)
+    gl.glDepthFunc(gl.GL_LESS)
+    gl.glDisable(gl.GL_CULL_FACE)
+    gl.glEnable(gl.GL_NORMALIZE)
+    gl.glEnable(gl.GL_LIGHTING)
+    gl.glShadeModel(gl.GL_FLAT if flat else gl.GL_SMOOTH)
+    gl.glClearColor(0.0, 0.0, 0.0, 0.0)
+    gl.glClearDepth(1.0)
+    gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
+
+    lights = lights_in_eye_space(scene.lights, scene.camera.view)
+    if len(lights) > MAX_LIGHTS:
+        raise ValueError(
+            f"scene.lights: OpenGL fixed function has {MAX_LIGHTS} lights, the scene has {len(lights)}"
+        )
+    model = scene.light_model
+    global_ambient = np.asarray(scene.ambient) + lights.ambient_lights
+    gl.glLightModelfv(gl.GL_LIGHT_MODEL_AMBIENT, (*global_ambient, 1.0))
+    gl.glLightModeli(gl.GL_LIGHT_MODEL_LOCAL_VIEWER, int(model.local_viewer))
+    gl.glLightModeli(gl.GL_LIGHT_MODEL_TWO_SIDE, int(model.two_sided))
+    gl.glLightModeli(
+        gl.GL_LIGHT_MODEL_COLOR_CONTROL,
+        gl.GL_SEPARATE_SPECULAR_COLOR if model.separate_specular else gl.GL_SINGLE_COLOR,
+    )
+    gl.glMatrixMode(gl.GL_MODELVIEW)
+    gl.glLoadIdentity()  # light positions below are already in eye space
+    for i in range(MAX_LIGHTS):
+        gl.glDisable(gl.GL_LIGHT0 + i)
+    for i in range(len(lights)):
+        light = gl.GL_LIGHT0 + i
+        gl.glEnable(light)
+        gl.glLightfv(light, gl.GL_POSITION, tuple(lights.position[i]))
+        gl.glLightfv(light, gl.GL_AMBIENT, (*lights.ambient[i], 1.0))
+        gl.glLightfv(light, gl.GL_DIFFUSE, (*lights.diffuse[i], 1.0))
+        gl.glLightfv(light, gl.GL_SPECULAR, (*lights.specular[i], 1.0))
+        kc, kl, kq = lights.attenuation[i]
+        gl.glLightf(light, gl.GL_CONSTANT_ATTENUATION, kc)
+        gl.glLightf(light, gl.GL_LINEAR_ATTENUATION, kl)
+        gl.glLightf(light, gl.GL_QUADRATIC_ATTENUATION, kq)
+        if np.isfinite(lights.cos_cutoff[i]):
+            source = scene.lights[lights.source[i]]
+            gl.glLightfv(light, gl.GL_SPOT_DIRECTION, tuple(lights.spot_direction[i]))
+            gl.glLightf(light, gl.GL_SPOT_CUTOFF, source.cutoff)
+            gl.glLightf(light, gl.GL_SPOT_EXPONENT, lights.spot_exponent[i])
+        else:
+            gl.glLightf(light, gl.GL_SPOT_CUTOFF, 180.0)
+    gl.glMatrixMode(gl.GL_PROJECTION)
+    gl.glLoadMatrixd(np.ascontiguousarray(scene.camera.projection.T))
+    return len(lights)
+
+
+def _set_material(gl, face, material) -> None:
+    gl.glMaterialfv(face, gl.GL_AMBIENT, (*material.ambient, 1.0))
+    gl.glMaterialfv(face, gl.GL_DIFFUSE, (*material.diffuse, material.opacity))
+    gl.glMaterialfv(face, gl.GL_SPECULAR, (*material.specular, 1.0))
+    gl.glMaterialfv(face, gl.GL_EMISSION, (*material.emission, 1.0))
+    gl.glMaterialf(face, gl.GL_SHININESS, material.shininess)
+
+
+def _draw_meshes(gl, scene: Scene) -> None:
+    gl.glEnableClientState(gl.GL_VERTEX_ARRAY)
+    gl.glEnableClientState(gl.GL_NORMAL_ARRAY)
+    for mesh in scene.meshes:
+        _set_material(gl, gl.GL_FRONT_AND_BACK, mesh.material)
+        if mesh.back_material is not None:
+            _set_material(gl, gl.GL_BACK, mesh.back_material)
+        gl.glMatrixMode(gl.GL_MODELVIEW)
+        gl.glLoadMatrixd(np.ascontiguousarray((scene.camera.view @ mesh.transform).T))
+        positions = np.ascontiguousarray(mesh.positions, dtype=np.float64)
+        normals = np.ascontiguousarray(_mesh_normals(mesh), dtype=np.float64)
+        indices = np.ascontiguousarray(mesh.triangles, dtype=np.uint32)
+        gl.glVertexPointer(3, gl.GL_DOUBLE, 0, positions)
+        gl.glNormalPointer(gl.GL_DOUBLE, 0, normals)
+        gl.glDrawElements(gl.GL_TRIANGLES, indices.size, gl.GL_UNSIGNED_INT, indices)
+    gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
+    gl.glDisableClientState(gl.GL_NORMAL_ARRAY)
+
+
+def render_fixed_function(scene: Scene, width: int, height: int, *, flat: bool = False) -> GLRender:
+    """Render ``scene`` with OpenGL fixed-function lighting (``GL_SMOOTH``, or ``GL_FLAT`` with ``flat``).
+
+    Meshes without normals get the same averaged vertex normals the renderer uses.
+    Raises :class:`oracles.egl.EGLUnavailable` when no context can be created.
+    """
+    info = gl_context()
+    from OpenGL import GL
+
+    gl = GL
+
+    fb = _Framebuffer(gl, width, height)
+    try:
+        start = time.perf_counter()
+        _set_state(gl, scene, flat=flat)
+        _draw_meshes(gl, scene)
+        gl.glFinish()
+        seconds = time.perf_counter() - start
+        return GLRender(fb.read(), seconds, info.renderer)
+    finally:
+        fb.delete()
+
+
+_PROGRAM: dict[str, int] = {}
+
+
+def _program(gl) -> int:
+    if "phong" in _PROGRAM:
+        return _PROGRAM["phong"]
+    program = gl.glCreateProgram()
+    for kind, source in ((gl.GL_VERTEX_SHADER, _VERTEX_SHADER), (gl.GL_FRAGMENT_SHADER, _FRAGMENT_SHADER)):
+        shader = gl.glCreateShader(kind)
+        gl.glShaderSource(shader, source)
+        gl.glCompileShader(shader)
+        if not gl.glGetShaderiv(shader, gl.GL_COMPILE_STATUS):
+            raise RuntimeError(f"GLSL compile failed: {gl.glGetShaderInfoLog(shader).decode()}")
+        gl.glAttachShader(program, shader)
+    gl.glLinkProgram(program)
+    if not gl.glGetProgramiv(program, gl.GL_LINK_STATUS):
+        raise RuntimeError(f"GLSL link failed: {gl.glGetProgramInfoLog(program).decode()}")
+    _PROGRAM["phong"] = program
+    return program
+
+
+def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1) -> GLRender:
+    """Render ``scene`` with the per-pixel Blinn-Phong GLSL program (same state as the fixed function).
+
+    ``repeats`` > 1 draws the frame that many times and reports the mean time per frame
+    (for benchmarks; the first draw also compiles the shader variant and is excluded).
+    """
+    info = gl_context()
+    from OpenGL import GL
+
+    gl = GL
+
+    fb = _Framebuffer(gl, width, height)
+    try:
+        program = _program(gl)
+        gl.glUseProgram(program)
+        n = _set_state(gl, scene, flat=False)
+        gl.glUniform1i(gl.glGetUniformLocation(program, "n_lights"), n)
+        gl.glUniform1i(gl.glGetUniformLocation(program, "local_viewer"), int(scene.light_model.local_viewer))
+        gl.glUniform1i(gl.glGetUniformLocation(program, "two_sided"), int(scene.light_model.two_sided))
+        _draw_meshes(gl, scene)
+        gl.glFinish()
+        start = time.perf_counter()
+        for _ in range(max(repeats, 1)):
+            gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
+            _draw_meshes(gl, scene)
+            gl.glFinish()
+        seconds = (time.perf_counter() - start) / max(repeats, 1)
+        image = fb.read()
+        gl.glUseProgram(0)
+        return GLRender(image, seconds, info.renderer)
+    finally:
+        fb.delete()

@@ -1,0 +1,264 @@
+"""The GL-compatibility preset against real OpenGL: Mesa llvmpipe, fixed function and a GLSL shader.
+
+Every scene is rendered twice — by ``blinn_phong.render(..., gl_compat=True)`` and by
+Mesa (``oracles.gl_lighting``) from the same Scene object — and compared on the
+pixels both cover away from triangle edges (pixel centre at least 1/16 pixel from
+every edge of its visible triangle): at most 1/255 per channel after OpenGL's float -> UNORM8
+rounding ``floor(255·c + 0.5)``, and identical coverage there. Hygiene as in
+docs/renderer.md: shininess in [1, 128], spot boundaries not on a sample,
+dithering off, GL_NORMALIZE on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+from renderer_scenes import (
+    DIRECTIONAL,
+    MATTE,
+    POINT,
+    SHINY,
+    SPOT,
+    floor_mesh,
+    ortho_camera,
+    perspective_camera,
+    sphere_mesh,
+)
+
+import blinn_phong as bp
+from oracles.egl import EGLUnavailable, gl_context
+
+pytestmark = pytest.mark.mesa
+
+SIZE = 128
+
+
+@pytest.fixture(scope="module")
+def gl() -> object:
+    try:
+        gl_context()
+    except EGLUnavailable as exc:
+        pytest.skip(f"Mesa EGL unavailable: {exc}")
+    from oracles import gl_lighting
+
+    return gl_lighting
+
+
+def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 / 16.0) -> np.ndarray:
+    """Pixels whose centre lies inside its visible triangle, at least ``margin`` pixels from every edge.
+
+    Away from edges, coverage cannot depend on the fill rule or on float32 vs float64
+    vertex transformation, and all three vertices' colours contribute.
+    """
+    prepared = bp.prepare_scene(scene)
+    frags = bp.rasterize(prepared.clip, prepared.triangles, width, height)
+    winner = bp.resolve_nearest(frags)
+    mask = np.zeros(width * height, bool)
+    hit = np.flatnonzero(winner >= 0)
+    clip = prepared.clip[prepared.triangles[frags.triangle[winner[hit]]]]  # (n, 3, 4)
+    x = (clip[..., 0] / clip[..., 3] + 1) * width / 2
+    y = (1 - clip[..., 1] / clip[..., 3]) * height / 2  # rows from the top
+    px = hit % width + 0.5
+    py = hit // width + 0.5
+    nearest_edge = np.full(len(hit), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        ex, ey = x[:, j] - x[:, i], y[:, j] - y[:, i]
+        cross = ex * (py - y[:, i]) - ey * (px - x[:, i])
+        nearest_edge = np.minimum(nearest_edge, np.abs(cross) / np.hypot(ex, ey))
+    mask[hit] = nearest_edge >= margin
+    return mask.reshape(height, width)
+
+
+def to_unorm8(rgba: np.ndarray) -> np.ndarray:
+    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does."""
+    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
+
+
+def compare(ours: np.ndarray, theirs: np.ndarray, interior: np.ndarray) -> tuple[int, int, int]:
+    """(coverage mismatches in the interior, max |diff| in 8-bit units there, interior pixel count)."""
+    mine = to_unorm8(ours)
+    gl = theirs.astype(np.int64)
+    coverage_mismatch = int(np.count_nonzero((mine[..., 3] > 0)[interior] != (gl[..., 3] > 0)[interior]))
+    diff = np.abs(mine[..., :3] - gl[..., :3]).max(axis=-1)
+    return coverage_mismatch, int(diff[interior].max()), int(interior.sum())
+
+
+def non_uniform_transform() -> np.ndarray:
+    c, s = np.cos(0.6), np.sin(0.6)
+    rot = np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1]])
+    scale = np.diag([1.4, 0.6, 0.9, 1.0])
+    tilt = np.array(
+        [[1, 0, 0, 0.1], [0, np.cos(0.4), -np.sin(0.4), 0], [0, np.sin(0.4), np.cos(0.4), 0], [0, 0, 0, 1]]
+    )
+    return tilt @ rot @ scale
+
+
+SceneFactory = Callable[[], bp.Scene]
+
+SCENES: dict[str, SceneFactory] = {
+    "directional_ortho_infinite_viewer": lambda: bp.Scene(
+        [sphere_mesh(SHINY)],
+        [DIRECTIONAL],
+        ortho_camera(),
+        ambient=(0.1, 0.1, 0.1),
+        light_model=bp.LightModel(local_viewer=False),
+    ),
+    "directional_ortho_local_viewer": lambda: bp.Scene(
+        [sphere_mesh(SHINY)], [DIRECTIONAL], ortho_camera(), light_model=bp.LightModel(local_viewer=True)
+    ),
+    "point_attenuated_perspective_local_viewer": lambda: bp.Scene(
+        [sphere_mesh(SHINY), floor_mesh(MATTE)],
+        [POINT],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=True),
+    ),
+    "spot_perspective_infinite_viewer": lambda: bp.Scene(
+        [sphere_mesh(SHINY), floor_mesh(MATTE, n=24)],
+        [SPOT, bp.AmbientLight((0.1, 0.1, 0.12))],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=False),
+    ),
+    "three_lights_perspective_local_viewer": lambda: bp.Scene(
+        [sphere_mesh(SHINY), floor_mesh(MATTE, n=24)],
+        [DIRECTIONAL, POINT, SPOT],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=True),
+    ),
+    "non_uniform_scale_perspective": lambda: bp.Scene(
+        [sphere_mesh(SHINY, non_uniform_transform())],
+        [DIRECTIONAL, POINT],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=True),
+    ),
+    "two_sided_back_material": lambda: bp.Scene(
+        [
+            bp.Mesh(
+                *_open_hemisphere(),
+                material=SHINY,
+                back_material=bp.Material(diffuse=(0.2, 0.8, 0.3), specular=(0.5, 0.5, 0.5), shininess=20.0),
+                transform=non_uniform_transform(),
+            )
+        ],
+        [DIRECTIONAL, POINT],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=True, two_sided=True),
+    ),
+    "separate_specular_overbright": lambda: bp.Scene(
+        [sphere_mesh(SHINY)],
+        [DIRECTIONAL, bp.PointLight((1.5, 2.0, 3.0), (1.0, 1.0, 1.0), 1.6, linear=0.1)],
+        perspective_camera(),
+        light_model=bp.LightModel(local_viewer=True, separate_specular=True),
+    ),
+}
+
+
+def _open_hemisphere() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The upper half of a UV sphere, open at the bottom so its inside (back faces) shows."""
+    from blinn_phong.primitives import uv_sphere
+
+    pos, tris, normals = uv_sphere(40, 20)
+    keep = (pos[tris][:, :, 1] >= -1e-9).all(axis=1)
+    pos = np.asarray(pos, np.float32).astype(np.float64)
+    normals = np.asarray(normals, np.float32).astype(np.float64)
+    # Turn it upside down and towards the camera so both the outside and the inside are seen.
+    flip = np.array([[1, 0, 0], [0, -1, 0], [0, 0, -1]], float) @ np.array(
+        [[1, 0, 0], [0, np.cos(1.1), -np.sin(1.1)], [0, np.sin(1.1), np.cos(1.1)]]
+    )
+    return (
+        np.asarray(pos @ flip.T, np.float32).astype(np.float64),
+        tris[keep][:, [0, 2, 1]],
+        -(normals @ flip.T),
+    )
+
+
+GOURAUD_CASES = list(SCENES)
+FLAT_CASES = [
+    "directional_ortho_infinite_viewer",
+    "three_lights_perspective_local_viewer",
+    "two_sided_back_material",
+]
+PHONG_CASES = [
+    "directional_ortho_local_viewer",
+    "point_attenuated_perspective_local_viewer",
+    "spot_perspective_infinite_viewer",
+    "three_lights_perspective_local_viewer",
+    "non_uniform_scale_perspective",
+    "two_sided_back_material",
+]
+
+
+@pytest.mark.parametrize("case", GOURAUD_CASES)
+def test_gouraud_matches_fixed_function_smooth(gl, case: str) -> None:
+    scene = SCENES[case]()
+    ours = bp.render(scene, SIZE, SIZE, shading="gouraud", gl_compat=True).rgba
+    theirs = gl.render_fixed_function(scene, SIZE, SIZE).rgba
+    mismatch, max_diff, n = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
+    assert n > 2000
+    assert mismatch == 0
+    assert max_diff <= 1
+
+
+@pytest.mark.parametrize("case", FLAT_CASES)
+def test_flat_matches_fixed_function_provoking_vertex(gl, case: str) -> None:
+    scene = SCENES[case]()
+    ours = bp.render(scene, SIZE, SIZE, shading="flat", gl_compat=True).rgba
+    theirs = gl.render_fixed_function(scene, SIZE, SIZE, flat=True).rgba
+    mismatch, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
+    assert mismatch == 0
+    assert max_diff <= 1
+
+
+@pytest.mark.parametrize("case", PHONG_CASES)
+def test_phong_matches_glsl_per_pixel_shader(gl, case: str) -> None:
+    scene = SCENES[case]()
+    ours = bp.render(scene, SIZE, SIZE, shading="phong", gl_compat=True).rgba
+    theirs = gl.render_glsl_phong(scene, SIZE, SIZE).rgba
+    mismatch, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
+    assert mismatch == 0
+    assert max_diff <= 1
+
+
+def test_single_sample_coverage_matches_including_edges_and_ties(gl) -> None:
+    # Edges through pixel centres (exact ties) and arbitrary ones: the fill rule, the sub-pixel
+    # snapping and near-plane handling give the same covered set as llvmpipe, edges included.
+    width, height = 48, 40
+    pts = np.array(
+        [
+            [2.5, 3.5],
+            [17.5, 3.5],
+            [17.5, 21.5],
+            [2.5, 21.5],
+            [30.5, 2.5],
+            [44.5, 16.5],
+            [30.5, 30.5],
+            [20.25, 36.75],
+            [33.1, 25.3],
+            [46.9, 39.2],
+            [5.0, 25.0],
+            [14.0, 38.0],
+            [3.0, 37.5],
+        ]
+    )
+    tris = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12], [2, 1, 4]])
+    pos = np.c_[pts, np.zeros(len(pts))]
+    mesh = bp.Mesh(
+        pos, tris, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), material=bp.Material(ambient=(1, 1, 1))
+    )
+    scene = bp.Scene([mesh], [], bp.Camera.orthographic(0, width, 0, height, -1, 1), ambient=(1, 1, 1))
+    ours = bp.render(scene, width, height, shading="gouraud", gl_compat=True).rgba[..., 3] > 0
+    theirs = gl.render_fixed_function(scene, width, height).rgba[..., 3] > 0
+    assert ours.sum() > 400
+    np.testing.assert_array_equal(ours, theirs)
+
+
+def test_comparison_detects_a_wrong_viewer_model(gl) -> None:
+    # The oracle comparison is discriminating: the infinite-viewer equation against a
+    # local-viewer OpenGL render differs by far more than 1/255 on the highlight.
+    scene = SCENES["point_attenuated_perspective_local_viewer"]()
+    wrong = bp.Scene(scene.meshes, scene.lights, scene.camera, light_model=bp.LightModel(local_viewer=False))
+    ours = bp.render(wrong, SIZE, SIZE, shading="gouraud", gl_compat=True).rgba
+    theirs = gl.render_fixed_function(scene, SIZE, SIZE).rgba
+    _, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
+    assert max_diff > 10
