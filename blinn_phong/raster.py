@@ -233,9 +233,10 @@ def rasterize(
     w = sub_clip[:, :, 3]
     ndc = sub_clip[:, :, :3] / w[:, :, None]
     scale = float(1 << SUBPIXEL_BITS)
-    x = np.round((ndc[:, :, 0] + 1.0) * (0.5 * fine_w) * scale) / scale
-    y_up = np.round((ndc[:, :, 1] + 1.0) * (0.5 * fine_h) * scale) / scale
-    y = fine_h - y_up  # rows counted from the top
+    x_exact = (ndc[:, :, 0] + 1.0) * (0.5 * fine_w)
+    y_exact = fine_h - (ndc[:, :, 1] + 1.0) * (0.5 * fine_h)  # rows counted from the top
+    x = np.round(x_exact * scale) / scale  # snapped: coverage only
+    y = fine_h - np.round((fine_h - y_exact) * scale) / scale
     z = (ndc[:, :, 2] + 1.0) * 0.5
 
     # Signed area in the y-down frame: negative <=> counter-clockwise with y up (front).
@@ -269,7 +270,6 @@ def rasterize(
     # (a > 0); a horizontal edge counts when the interior has larger y_w, i.e. lies above it in
     # the returned top-row-first image (inward normal points up in rows: a == 0, b < 0).
     top_left = (a > 0) | ((a == 0) & (b < 0))
-    abs_area = np.abs(area)
 
     jobs = _tile_jobs(sel, x0, x1, y0, y1)
     pieces: list[tuple[np.ndarray, ...]] = []
@@ -300,7 +300,7 @@ def rasterize(
         fx = fy = np.zeros(0, np.int64)
         edge = np.zeros((0, 3))
 
-    lam = edge / abs_area[frag_sub, None]  # screen-space barycentrics on the sub-triangle
+    lam = _exact_barycentrics(x_exact, y_exact, frag_sub, fx + 0.5, fy + 0.5, area, edge)
     depth = np.einsum("ni,ni->n", lam, z[frag_sub])
     in_range = depth <= 1.0
     if not in_range.all():
@@ -329,6 +329,31 @@ def rasterize(
         bary=bary,
         front_facing=front[frag_sub],
     )
+
+
+def _exact_barycentrics(
+    x: np.ndarray,
+    y: np.ndarray,
+    sub: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+    snapped_area: np.ndarray,
+    snapped_edges: np.ndarray,
+) -> np.ndarray:
+    """Screen-space barycentrics of sample points from the unsnapped window positions.
+
+    Snapping decides coverage only; interpolation uses the exact vertex positions so
+    attributes are not shifted by up to 1/512 pixel. Where snapping changed the
+    orientation or the exact area vanishes, the snapped values are kept.
+    """
+    xs, ys = x[sub], y[sub]  # (n, 3)
+    area = (xs[:, 1] - xs[:, 0]) * (ys[:, 2] - ys[:, 0]) - (xs[:, 2] - xs[:, 0]) * (ys[:, 1] - ys[:, 0])
+    lam = np.empty((len(sub), 3))
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        lam[:, i] = (xs[:, k] - xs[:, j]) * (py - ys[:, j]) - (ys[:, k] - ys[:, j]) * (px - xs[:, j])
+    ok = (area * snapped_area[sub] > 0) & (np.abs(area) > 1e-12)
+    safe = np.where(ok, area, 1.0)
+    return np.where(ok[:, None], lam / safe[:, None], snapped_edges / np.abs(snapped_area[sub])[:, None])
 
 
 def _tile_jobs(
