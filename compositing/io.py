@@ -137,7 +137,10 @@ def write_image(
     if clip:
         img = img.astype(np.float64)
         img[..., 3] = np.clip(img[..., 3], 0.0, 1.0)
-    check_alpha_range(img, "rgba")
+    try:
+        check_alpha_range(img, "rgba")
+    except ValueError as exc:
+        raise ValueError(f"{exc}; a {bits}-bit file cannot hold it: pass clip=True to clip") from None
     if ext in (".jpg", ".jpeg"):
         if not flatten:
             raise ValueError("flatten: JPEG has no alpha; pass flatten=True to store the image over black")
