@@ -14,8 +14,9 @@ list of cases; each case is one branch of a compositor tree:
 
 Mode ``"verify"`` puts every case in one tree and renders once; a File Output node
 writes one 32-bit multilayer EXR with a layer per case key. Mode ``"benchmark"``
-renders each case alone into the render result, ``repeat`` times after one warm-up
-render, and records wall-clock seconds per render. A report JSON (Blender version,
+gives each case its own scene whose tree holds only that case, renders each once to
+warm up, then renders all of them round-robin ``repeat`` times, recording wall-clock
+seconds per render. A report JSON (Blender version,
 Alpha Over modes available, timings) is written next to the job.
 
 Images are loaded as ``Non-Color`` with alpha mode ``Channel Packed`` so that no colour
@@ -88,21 +89,26 @@ def _new_tree(scene: bpy.types.Scene, images: dict[str, bpy.types.Image]) -> tup
     return tree, sockets[0], sockets[1]
 
 
-def _render() -> float:
+def _render(scene: bpy.types.Scene) -> float:
     start = time.perf_counter()
-    bpy.ops.render.render(write_still=False)
+    bpy.ops.render.render(write_still=False, scene=scene.name)
     return time.perf_counter() - start
+
+
+def _configure(scene: bpy.types.Scene, width: int, height: int) -> None:
+    scene.render.resolution_x = width
+    scene.render.resolution_y = height
+    scene.render.resolution_percentage = 100
+    scene.view_settings.view_transform = "Standard"
+    compat.set_full_precision(scene)
 
 
 def run_job(job: dict) -> dict:
     """Run one job (see the module docstring) and return its report."""
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     scene = bpy.context.scene
-    scene.render.resolution_x = int(job["width"])
-    scene.render.resolution_y = int(job["height"])
-    scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    compat.set_full_precision(scene)
+    size = int(job["width"]), int(job["height"])
+    _configure(scene, *size)
 
     registered = bool(job.get("register_addon", False))
     if registered:
@@ -127,13 +133,21 @@ def run_job(job: dict) -> dict:
             outputs = compat.add_file_output(tree, job["output_dir"], job["file_name"], list(job["cases"]))
             for key, case in job["cases"].items():
                 tree.links.new(_add_case(tree, case, src, dst), outputs[key])
-            report["timings"]["render"] = _render()
+            report["timings"]["render"] = _render(scene)
         elif job["mode"] == "benchmark":
+            # One scene per case, rendered round-robin, so that load from other processes
+            # spreads over all cases alike.
+            scenes = {}
             for key, case in job["cases"].items():
-                tree, src, dst = _new_tree(scene, images)
+                scenes[key] = bpy.data.scenes.new(f"Benchmark {key}")
+                _configure(scenes[key], *size)
+                tree, src, dst = _new_tree(scenes[key], images)
                 tree.links.new(_add_case(tree, case, src, dst), compat.add_render_output(tree))
-                _render()
-                report["timings"][key] = [_render() for _ in range(int(job["repeat"]))]
+                _render(scenes[key])  # warm-up: image loading, first allocation
+            report["timings"] = {key: [] for key in scenes}
+            for _ in range(int(job["repeat"])):
+                for key, case_scene in scenes.items():
+                    report["timings"][key].append(_render(case_scene))
         else:
             raise ValueError(f"job mode: expected 'verify' or 'benchmark', got {job['mode']!r}")
         return report

@@ -56,6 +56,7 @@ __all__ = [
     "ours",
     "read_exr_layers",
     "run_blender",
+    "run_compositor_job",
     "sample_images",
     "standard_cases",
     "verify",
@@ -235,7 +236,7 @@ def run_blender(
             "register_addon": True,
             "cases": {f"case{i:03d}": asdict(case) for i, case in enumerate(cases)},
         }
-        report = _run_job(job, work / "job.json", python=python, timeout=timeout)
+        report = run_compositor_job(job, work / "job.json", python=python, timeout=timeout)
         files = sorted((work / "out").glob("result*.exr"))
         if len(files) != 1:
             raise RuntimeError(f"Blender wrote {len(files)} result files, expected 1: {files}")
@@ -246,8 +247,18 @@ def run_blender(
         return BlenderRun([layers[key] for key in job["cases"]], report)
 
 
-def _run_job(job: dict, job_path: Path, *, python: str | None, timeout: float) -> dict:
-    """Write ``job`` to ``job_path``, run ``addon.compositor_job`` on it, return its report."""
+def run_compositor_job(job: dict, job_path: Path, *, python: str | None, timeout: float) -> dict:
+    """Write ``job`` to ``job_path``, run ``addon.compositor_job`` on it in Blender, return its report.
+
+    Args:
+        job: the job description (see :mod:`addon.compositor_job`).
+        job_path: where the job JSON goes; the report is written next to it.
+        python: the interpreter with ``bpy`` (default: the running one).
+        timeout: seconds before the Blender process is killed.
+
+    Raises:
+        RuntimeError: Blender exited non-zero or wrote no report (the message carries its output).
+    """
     job_path.write_text(json.dumps(job))
     env = dict(os.environ)
     # A private user-resources directory: no user preferences or add-ons leak into the run.

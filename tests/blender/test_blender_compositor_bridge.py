@@ -9,7 +9,7 @@ operator puts into the file. Each case is then checked three ways:
 * against ``compositing`` (the issue's requirement: max abs error ≤ 1e-6);
 * against closed forms written out here: Porter & Duff (1984) table 1 for the node
   groups, and the Alpha Over / Alpha Convert formulas of Blender's source
-  (5.0: ``node_composite_alpha_over.cc``, ``node_composite_premulkey.cc``; 4.x:
+  (4.5/5.0: ``node_composite_alpha_over.cc``, ``node_composite_premulkey.cc``; 4.2:
   ``COM_AlphaOver{Premultiply,Key}Operation.cc``, ``COM_ConvertOperation.cc``);
 * exact pass-through of ``src`` and ``dst``, which catches any flip or transpose.
 """
@@ -33,6 +33,9 @@ pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]
 REPO = Path(__file__).resolve().parents[2]
 BPY_VERSION = tuple(int(p) for p in importlib.metadata.version("bpy").split(".")[:2])
 HAS_ALPHA_OVER_MODES = BPY_VERSION >= (5, 0)
+# Blender 4.4 replaced the CPU compositor (release notes 4.4, Compositor); 4.2 still runs the old
+# operations (source/blender/compositor/operations/COM_*Operation.cc).
+LEGACY_CPU_COMPOSITOR = BPY_VERSION < (4, 4)
 EXPECTED_MODES = ALPHA_OVER_OPERATORS if HAS_ALPHA_OVER_MODES else ("src_over",)
 CASES = standard_cases(EXPECTED_MODES)
 TOLERANCE = 1e-6
@@ -96,8 +99,8 @@ def test_images_pass_through_unchanged(matrix, images) -> None:
 def test_blender_matches_our_kernels(matrix, case: Case) -> None:
     result = matrix[0][case]
     assert result.blender.shape == (61, 97, 4)
-    if case == Case("alpha_convert", "unpremultiply") and not HAS_ALPHA_OVER_MODES:
-        # Blender 4.x multiplies by the reciprocal (rgb·(1/a)), we divide: one rounding apart,
+    if case == Case("alpha_convert", "unpremultiply") and LEGACY_CPU_COMPOSITOR:
+        # Blender 4.2 multiplies by the reciprocal (rgb·(1/a)), we divide: one rounding apart,
         # relative error ≤ 1 ulp (absolute error grows with rgb/a, ~2e-4 at rgb/a ≈ 2000).
         bound = np.finfo(np.float32).eps * np.abs(result.ours)
         assert (result.difference <= bound).all(), result.max_abs_error
@@ -117,7 +120,7 @@ def test_node_groups_match_porter_duff_closed_form(matrix, images, case: Case) -
 
 
 def _alpha_over_5(src, dst, mode, straight, factor):
-    """Blender 5.0 ``node_composite_alpha_over.cc``, transcribed."""
+    """Blender 5.0 ``node_composite_alpha_over.cc``, transcribed (4.5 has its Over mode)."""
     fa = np.clip(src[..., 3:], 0, 1)
     ba = np.clip(dst[..., 3:], 0, 1)
     fg = np.concatenate([src[..., :3] * fa, fa], axis=-1) if straight else src
@@ -135,7 +138,7 @@ def _alpha_over_5(src, dst, mode, straight, factor):
 
 
 def _alpha_over_4(src, dst, straight, factor):
-    """Blender 4.x ``COM_AlphaOverPremultiplyOperation`` / ``COM_AlphaOverKeyOperation``, transcribed."""
+    """Blender 4.2 ``COM_AlphaOverPremultiplyOperation`` / ``COM_AlphaOverKeyOperation``, transcribed."""
     fa = src[..., 3:]
     if straight:  # key: fa <= 0 -> bg, else lerp(bg, (fg.rgb, 1), f·fa)
         fg = np.concatenate([src[..., :3], np.ones_like(fa)], axis=-1)
@@ -150,7 +153,7 @@ ALPHA_OVER_CASES = [c for c in CASES if c.kind == "alpha_over"]
 @pytest.mark.parametrize("case", ALPHA_OVER_CASES, ids=_ids(ALPHA_OVER_CASES))
 def test_alpha_over_matches_blenders_formula(matrix, images, case: Case) -> None:
     src, dst = (x.astype(np.float64) for x in images)
-    if HAS_ALPHA_OVER_MODES:
+    if not LEGACY_CPU_COMPOSITOR:
         want = _alpha_over_5(src, dst, case.operator, case.straight_alpha, case.factor)
     else:
         want = _alpha_over_4(src, dst, case.straight_alpha, case.factor)
@@ -163,8 +166,8 @@ def test_alpha_convert_matches_blenders_formula(matrix, images) -> None:
     premultiplied = np.concatenate([src[..., :3] * a, a], axis=-1)
     np.testing.assert_array_equal(matrix[0][Case("alpha_convert", "premultiply")].blender, premultiplied)
     with np.errstate(divide="ignore", invalid="ignore"):
-        # 5.0 divides; 4.x multiplies by the reciprocal. α = 0 keeps the colour (glow survives).
-        rgb = src[..., :3] / a if HAS_ALPHA_OVER_MODES else src[..., :3] * (np.float32(1) / a)
+        # 4.5 and 5.0 divide; 4.2 multiplies by the reciprocal. α = 0 keeps the colour (glow survives).
+        rgb = src[..., :3] * (np.float32(1) / a) if LEGACY_CPU_COMPOSITOR else src[..., :3] / a
     straight = np.concatenate([np.where(a == 0, src[..., :3], rgb), a], axis=-1)
     np.testing.assert_array_equal(matrix[0][Case("alpha_convert", "unpremultiply")].blender, straight)
 
