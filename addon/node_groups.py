@@ -33,6 +33,7 @@ _OPERATOR_KEY = "porter_duff_operator"
 
 _COLUMN = 200.0
 _ROW = 170.0
+_HIDDEN_ROW = 45.0
 
 
 def group_name(operator: str) -> str:
@@ -124,7 +125,7 @@ def _build(group: bpy.types.NodeTree, spec: OperatorSpec) -> None:
             else:
                 links.new(socket, node.inputs[slot])
         level += 1
-        node.location = ((level) * _COLUMN, -rows.get(level, 0) * _ROW)
+        node.location = (level * _COLUMN, -rows.get(level, 0) * _HIDDEN_ROW)
         rows[level] = rows.get(level, 0) + 1
         node.hide = True
         depth.append(level)
