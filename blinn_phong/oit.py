@@ -40,6 +40,7 @@ import numpy as np
 from compositing import composite
 
 __all__ = [
+    "TRANSPARENCY_METHODS",
     "WBOIT_EQUATIONS",
     "depth_complexity",
     "depth_test",
@@ -47,6 +48,7 @@ __all__ = [
     "resolve_a_buffer",
     "resolve_depth_peeling",
     "resolve_in_draw_order",
+    "resolve_transparency",
     "resolve_weighted_blended",
     "triangle_draw_order",
     "wboit_weights",
@@ -382,3 +384,75 @@ def resolve_weighted_blended(
     return composite(
         layer.astype(dtype), _background(background, n_pixels, dtype), "src_over", engine="numpy"
     )
+
+
+#: Methods :func:`resolve_transparency` dispatches (the planner's transparency choices).
+TRANSPARENCY_METHODS: tuple[str, ...] = (
+    "a_buffer",
+    "draw_last",
+    "sort_objects",
+    "sort_triangles",
+    "depth_peeling",
+    "weighted_blended",
+)
+
+
+def resolve_transparency(
+    method: str,
+    pixel: np.ndarray,
+    depth: np.ndarray,
+    rgba: np.ndarray,
+    n_pixels: int,
+    *,
+    triangle: np.ndarray,
+    triangle_mesh: np.ndarray,
+    triangle_eye_distance: np.ndarray,
+    background: np.ndarray | None = None,
+    layers: int | None = None,
+    weights: np.ndarray | None = None,
+) -> np.ndarray:
+    """Resolve transparent fragments with a named method (a planner choice).
+
+    Args:
+        method: one of :data:`TRANSPARENCY_METHODS`. ``draw_last`` and ``sort_objects`` draw
+            meshes back to front by the mean eye distance of their triangles' centroids,
+            triangles in mesh order inside; ``sort_triangles`` sorts triangles by their
+            centroids' eye distance.
+        pixel: (n,) flat pixel (or sample) index of each transparent fragment (already
+            depth-tested against the opaque pass, see :func:`depth_test`).
+        depth: (n,) window depth of each fragment.
+        rgba: (n, 4) premultiplied linear RGBA of each fragment.
+        n_pixels: number of pixels (or samples).
+        triangle: (n,) triangle index of each fragment.
+        triangle_mesh: (T,) mesh index of every triangle.
+        triangle_eye_distance: (T,) eye distance of every triangle's centroid.
+        background: the opaque image, (n_pixels, 4) premultiplied RGBA.
+        layers: passes for ``depth_peeling``.
+        weights: (n,) weights for ``weighted_blended`` (:func:`wboit_weights`).
+
+    Returns:
+        (n_pixels, 4) premultiplied RGBA in the dtype of ``rgba``.
+    """
+    tri = np.asarray(triangle)
+    if method == "a_buffer":
+        return resolve_a_buffer(pixel, depth, rgba, n_pixels, background)
+    if method == "depth_peeling":
+        if layers is None:
+            raise ValueError("depth_peeling needs layers (an integer >= 1)")
+        return resolve_depth_peeling(pixel, depth, rgba, n_pixels, layers, background)
+    if method == "weighted_blended":
+        if weights is None:
+            raise ValueError("weighted_blended needs weights (see wboit_weights)")
+        return resolve_weighted_blended(pixel, weights, rgba, n_pixels, background)
+    dist = np.asarray(triangle_eye_distance, dtype=np.float64)
+    if method in ("draw_last", "sort_objects"):
+        owner = np.asarray(triangle_mesh)
+        n_mesh = int(owner.max()) + 1 if len(owner) else 0
+        mesh_dist = np.bincount(owner, weights=dist, minlength=n_mesh) / np.maximum(
+            np.bincount(owner, minlength=n_mesh), 1
+        )
+        order = object_draw_order(owner[tri], tri, mesh_dist)
+        return resolve_in_draw_order(pixel, order, rgba, n_pixels, background)
+    if method == "sort_triangles":
+        return resolve_in_draw_order(pixel, triangle_draw_order(tri, dist), rgba, n_pixels, background)
+    raise ValueError(f"method must be one of {TRANSPARENCY_METHODS}, got {method!r}")

@@ -44,8 +44,10 @@ from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographi
 
 __all__ = [
     "PCF_KERNELS",
+    "SHADOW_METHODS",
     "ShadowMap",
     "light_shadow_maps",
+    "light_visibility",
     "planar_shadow_mask",
     "planar_shadow_matrix",
     "render_shadow_map",
@@ -417,3 +419,72 @@ def planar_shadow_mask(
         degenerate = np.abs(e0 + e1 + e2) == 0
         shadowed[s : s + chunk] = np.any(inside & ~degenerate, axis=1)
     return 1.0 - shadowed.astype(np.float64)
+
+
+#: Shadow methods :func:`light_visibility` dispatches (the planner's shadow choices).
+SHADOW_METHODS: tuple[str, ...] = ("none", "planar", "shadow_map", "ray_traced")
+
+
+def light_visibility(
+    method: str,
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    *,
+    resolution: int = 1024,
+    constant_bias: float = 1e-4,
+    slope_bias: float = 2.0,
+    kernel: str = "nearest",
+    plane: np.ndarray | tuple[float, ...] | None = None,
+    caster_triangles: np.ndarray | None = None,
+) -> np.ndarray:
+    """Visibility of points for one light by a named method (a planner choice).
+
+    Args:
+        method: one of :data:`SHADOW_METHODS`.
+        light: the light.
+        world_triangles: (n, 3, 3) every triangle of the scene, world space.
+        points: (m, 3) world-space receiver points.
+        normals: (m, 3) their normals.
+        resolution: shadow-map size for ``shadow_map``.
+        constant_bias: see :func:`render_shadow_map`.
+        slope_bias: see :func:`render_shadow_map`.
+        kernel: PCF kernel for ``shadow_map``.
+        plane: ``(a, b, c, d)`` receiving plane for ``planar``.
+        caster_triangles: casters for ``planar`` (default: every triangle not in the plane).
+
+    Returns:
+        (m,) float64 visibility in [0, 1].
+    """
+    p = _points("points", points)
+    if method == "none":
+        return np.ones(len(p))
+    tris = _triangles("world_triangles", world_triangles)
+    if method == "ray_traced":
+        from .raytrace import RayScene, directional_light_visibility, point_light_visibility
+
+        scene = RayScene(tris)
+        if isinstance(light, DirectionalLight):
+            return directional_light_visibility(scene, p, normals, -np.asarray(light.direction))
+        return point_light_visibility(scene, p, normals, light.position)
+    if method == "shadow_map":
+        maps = light_shadow_maps(light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias)
+        return shadow_map_visibility(light, maps, p, normals, kernel=kernel)
+    if method == "planar":
+        if plane is None:
+            raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
+        pl = np.asarray(plane, dtype=np.float64)
+        if caster_triangles is None:
+            off_plane = np.abs(tris @ pl[:3] + pl[3]).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
+            caster_triangles = tris[off_plane]
+        if isinstance(light, DirectionalLight):
+            homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
+        else:
+            homogeneous_light = np.r_[np.asarray(light.position), 1.0]
+        on_plane = np.abs(p @ pl[:3] + pl[3]) <= 1e-6 * max(np.abs(p).max(), 1.0)
+        vis = np.ones(len(p))
+        if len(caster_triangles) and on_plane.any():
+            vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, p[on_plane])
+        return vis
+    raise ValueError(f"method must be one of {SHADOW_METHODS}, got {method!r}")

@@ -1,0 +1,405 @@
+"""The planner: per concern, the cheapest method that is exact (or within a tolerance) for a scene.
+
+:func:`plan` inspects a :class:`~blinn_phong.scene.Scene` — geometry, materials, lights,
+camera — and returns a :class:`Plan`: one :class:`Choice` (method, parameters and a
+sentence saying why) for transparency, one per light for shadows and one per mesh for the
+shading frequency. It renders nothing; all tests are conservative geometric facts.
+
+Transparency (methods of :mod:`blinn_phong.oit`):
+
+* ``zbuffer`` — no material has opacity < 1.
+* ``draw_last`` — one transparent mesh that cannot overlap itself on screen (all its
+  triangles lie in one plane): draw it after the opaque ones.
+* ``sort_triangles`` — one transparent convex mesh: triangles sorted back to front are
+  exact, since along any view ray its back faces lie behind its front faces.
+* ``sort_objects`` — several transparent meshes, each planar, and every pair whose screen
+  rectangles overlap is separated in eye depth: the per-object order is the per-pixel
+  order everywhere.
+* ``depth_peeling`` — with a tolerance: ``k`` layers such that what lies behind them,
+  at most ``(1 − α_min)^k`` of the brightest transparent radiance, is below the tolerance.
+* ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
+
+Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
+
+* ``none`` — ambient lights; or no mesh can shade another from this light: every caster's
+  shadow volume (the cylinder or cone its bounding sphere sweeps away from the light)
+  misses every other mesh's bounding sphere, and no mesh can shade itself (planar, or
+  convex, whose self-shadowed faces face away from the light and are unlit anyway).
+* ``planar`` — every receiver that can be shadowed is a planar mesh on one common plane and
+  every caster lies between that plane and the light: Blinn's projected shadows are exact.
+* ``shadow_map`` — with a tolerance: the map spans the scene's bounding sphere (diameter
+  D), its edge band is one texel (D/resolution) wide, and a shadow of a caster of radius r
+  has a perimeter/area ratio of about 2/r, so about ``2·D/(r·resolution)`` of the shadowed
+  area is misclassified; the resolution is the next power of two that brings this under
+  the tolerance (smallest caster radius r), if that is at most 4096.
+* ``ray_traced`` — otherwise: exact hard shadows.
+
+Shading frequency, per mesh (:mod:`blinn_phong.render`):
+
+* ``flat`` — every triangle's vertex normals equal its face normal (planar faces), all
+  lights are directional or ambient and the viewer is at infinity
+  (``LightModel(local_viewer=False)``, what an orthographic camera should use): L, H and N
+  are constant over each face, so the lighting is.
+* ``phong`` — otherwise (per-pixel evaluation, the reference).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .scene import AmbientLight, DirectionalLight, Mesh, PointLight, Scene, SpotLight
+
+__all__ = ["Choice", "Plan", "plan"]
+
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class Choice:
+    """One decision: ``method``, its ``params`` (e.g. layers, resolution) and the ``reason``."""
+
+    method: str
+    reason: str
+    params: dict[str, float | int] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        extra = ", ".join(f"{k}={v}" for k, v in self.params.items())
+        return f"{self.method}{f' ({extra})' if extra else ''}: {self.reason}"
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The planner's decisions for one scene.
+
+    Attributes:
+        transparency: how transparent fragments are resolved.
+        shadows: one choice per entry of ``scene.lights`` (same order).
+        shading: one choice per entry of ``scene.meshes`` (same order).
+        tolerance: the tolerance the plan was made for.
+    """
+
+    transparency: Choice
+    shadows: tuple[Choice, ...]
+    shading: tuple[Choice, ...]
+    tolerance: float
+
+    def reasons(self) -> list[str]:
+        """Every decision as one human-readable line."""
+        lines = [f"transparency: {self.transparency}"]
+        lines += [f"shadows, light {i}: {c}" for i, c in enumerate(self.shadows)]
+        lines += [f"shading, mesh {i}: {c}" for i, c in enumerate(self.shading)]
+        return lines
+
+    def __str__(self) -> str:
+        return "\n".join(self.reasons())
+
+
+# --------------------------------------------------------------------------- geometry facts
+
+
+@dataclass(frozen=True)
+class _MeshFacts:
+    world: np.ndarray  # (V, 3)
+    tris: np.ndarray  # (T, 3, 3) world
+    centre: np.ndarray
+    radius: float
+    planar: bool
+    plane: np.ndarray | None  # (a, b, c, d) unit normal when planar
+    convex: bool
+    flat_normals: bool
+
+
+def _mesh_facts(mesh: Mesh) -> _MeshFacts:
+    hom = np.c_[mesh.positions, np.ones(len(mesh.positions))]
+    world = (hom @ mesh.transform.T)[:, :3]
+    used = world[np.unique(mesh.triangles)] if len(mesh.triangles) else world
+    tris = world[mesh.triangles]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    centre = (lo + hi) / 2
+    radius = float(np.max(np.linalg.norm(used - centre, axis=1))) if len(used) else 0.0
+    scale = max(radius, 1e-300)
+    fn = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    fn_len = np.linalg.norm(fn, axis=1)
+    good = fn_len > 0
+    fn_unit = fn[good] / fn_len[good, None]
+    # planar: all used vertices on the plane of the first good face
+    plane = None
+    planar = False
+    if good.any():
+        n0 = fn_unit[0]
+        d0 = -float(n0 @ tris[good][0, 0])
+        planar = bool(np.all(np.abs(used @ n0 + d0) <= 1e-9 * scale))
+        if planar:
+            plane = np.r_[n0, d0]
+    # convex (closed, outward-wound): no vertex in front of any face plane
+    convex = planar
+    if not planar and good.any() and len(fn_unit) * len(used) <= 4_000_000:
+        dist = used @ fn_unit.T - np.einsum("ij,ij->i", fn_unit, tris[good][:, 0])[None, :]
+        convex = bool(np.all(dist <= 1e-9 * scale))
+    # flat normals: every vertex normal of a triangle is parallel to the face normal
+    if mesh.normals is None:
+        flat_normals = planar
+    else:
+        nrm = mesh.normals @ np.linalg.inv(mesh.transform[:3, :3])  # inverse-transpose, row vectors
+        nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+        per_corner = nrm[mesh.triangles][good]  # (T, 3, 3)
+        cos = np.einsum("tkc,tc->tk", per_corner, fn_unit)
+        flat_normals = bool(np.all(cos >= 1 - 1e-9))
+    return _MeshFacts(world, tris, centre, radius, planar, plane, convex, flat_normals)
+
+
+def _screen_rect_and_depth(facts: _MeshFacts, scene: Scene) -> tuple[np.ndarray, tuple[float, float]]:
+    """NDC rectangle (x0, y0, x1, y1) and eye distance interval (−z) of a mesh."""
+    hom = np.c_[facts.world, np.ones(len(facts.world))]
+    eye = hom @ scene.camera.view.T
+    clip = eye @ scene.camera.projection.T
+    depth = (-float(eye[:, 2].max()), -float(eye[:, 2].min()))
+    if np.any(clip[:, 3] <= 0):
+        return np.array([-np.inf, -np.inf, np.inf, np.inf]), depth
+    ndc = clip[:, :2] / clip[:, 3:4]
+    return np.r_[ndc.min(axis=0), ndc.max(axis=0)], depth
+
+
+def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    return bool(a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3])
+
+
+def _may_shadow(
+    caster: _MeshFacts, receiver: _MeshFacts, light: DirectionalLight | PointLight | SpotLight
+) -> bool:
+    """Conservative: can ``caster`` lie between ``light`` and any point of ``receiver``?"""
+    if caster.planar and caster.plane is not None:
+        # a flat caster shades only what lies on its far side from the light
+        oriented, _ = _light_side_distance(caster.plane, light)
+        if float(np.min(receiver.world @ oriented[:3]) + oriented[3]) >= -_EPS * max(receiver.radius, 1.0):
+            return False
+    r = caster.radius + receiver.radius
+    if isinstance(light, DirectionalLight):
+        d = np.asarray(light.direction)  # the direction light travels
+        w = receiver.centre - caster.centre
+        along = float(w @ d)
+        if along < -r:
+            return False  # receiver entirely on the light's side of the caster
+        perp = float(np.linalg.norm(w - max(along, 0.0) * d))
+        return perp < r
+    pos = np.asarray(light.position)
+    to_c = caster.centre - pos
+    to_r = receiver.centre - pos
+    dc, dr = float(np.linalg.norm(to_c)), float(np.linalg.norm(to_r))
+    if dc <= caster.radius or dr <= receiver.radius:
+        return True  # the light is inside a bounding sphere
+    if dr + receiver.radius < dc - caster.radius:
+        return False  # receiver entirely nearer the light than the caster
+    angle = math.acos(float(np.clip(to_c @ to_r / (dc * dr), -1, 1)))
+    return angle < math.asin(min(caster.radius / dc, 1.0)) + math.asin(min(receiver.radius / dr, 1.0))
+
+
+def _light_side_distance(
+    plane: np.ndarray, light: DirectionalLight | PointLight | SpotLight
+) -> tuple[np.ndarray, float]:
+    """Plane oriented towards the light, and the light's signed distance (inf if directional)."""
+    n, d = plane[:3], plane[3]
+    if isinstance(light, DirectionalLight):
+        towards = -np.asarray(light.direction)
+        if float(n @ towards) < 0:
+            n, d = -n, -d
+        return np.r_[n, d], math.inf
+    lp = np.asarray(light.position)
+    h = float(n @ lp + d)
+    if h < 0:
+        n, d, h = -n, -d, -h
+    return np.r_[n, d], h
+
+
+# --------------------------------------------------------------------------- decisions
+
+
+def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float) -> Choice:
+    transparent = [i for i, m in enumerate(scene.meshes) if m.material.opacity < 1.0 and len(m.triangles)]
+    if not transparent:
+        return Choice("zbuffer", "no transparent objects: a plain z-buffer is exact")
+    if len(transparent) == 1:
+        i = transparent[0]
+        if facts[i].planar:
+            return Choice(
+                "draw_last", f"one transparent object (mesh {i}), planar: drawn after the opaque ones"
+            )
+        if facts[i].convex:
+            return Choice(
+                "sort_triangles",
+                f"one transparent object (mesh {i}), convex: its back faces lie behind its front faces "
+                "on every ray, so triangles sorted back to front are exact",
+            )
+    rects = {i: _screen_rect_and_depth(facts[i], scene) for i in transparent}
+    all_planar = all(facts[i].planar for i in transparent)
+    conflicts = []
+    for a_pos, a in enumerate(transparent):
+        for b in transparent[a_pos + 1 :]:
+            (ra, (na, fa)), (rb, (nb, fb)) = rects[a], rects[b]
+            if _rects_overlap(ra, rb) and not (fa < nb or fb < na):
+                conflicts.append((a, b))
+    if all_planar and not conflicts:
+        return Choice(
+            "sort_objects",
+            f"{len(transparent)} transparent planar objects that never overlap in depth where they "
+            "overlap on screen: sorting them back to front is exact",
+        )
+    why = (
+        f"transparent meshes {conflicts[0][0]} and {conflicts[0][1]} overlap on screen and in depth "
+        "(they may interpenetrate)"
+        if conflicts
+        else "a transparent object can overlap itself (neither planar nor convex)"
+    )
+    if tolerance > 0:
+        alpha_min = min(scene.meshes[i].material.opacity for i in transparent)
+        brightest = max(_max_radiance(scene, scene.meshes[i]) for i in transparent)
+        layers_bound = sum(
+            1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
+        )
+        if 0 < alpha_min and brightest > 0:
+            k = (
+                max(1, math.ceil(math.log(tolerance / brightest) / math.log(1 - alpha_min)))
+                if alpha_min < 1
+                else 1
+            )
+            if k < layers_bound:
+                return Choice(
+                    "depth_peeling",
+                    f"{why}; {k} layers leave at most (1 − {alpha_min:g})^{k}·{brightest:g} "
+                    f"≤ {tolerance:g} unaccounted",
+                    {"layers": k},
+                )
+    return Choice("a_buffer", f"{why}: only a per-pixel sort (A-buffer) is exact")
+
+
+def _max_radiance(scene: Scene, mesh: Mesh) -> float:
+    """Upper bound of the straight colour a surface of ``mesh`` can reach (unclamped lighting)."""
+    m = mesh.material
+    total = np.asarray(m.emission) + np.asarray(m.ambient) * np.asarray(scene.ambient)
+    for light in scene.lights:
+        if isinstance(light, AmbientLight):
+            total = total + np.asarray(m.ambient) * np.asarray(light.radiance)
+            continue
+        total = total + np.asarray(m.ambient) * np.asarray(light.ambient)
+        total = total + np.asarray(m.diffuse) * np.asarray(light.diffuse)
+        total = total + np.asarray(m.specular) * np.asarray(light.specular)
+    return float(np.max(total))
+
+
+def _plan_shadow(scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float) -> Choice:
+    light = scene.lights[index]
+    if isinstance(light, AmbientLight):
+        return Choice("none", "an ambient light has no direction and casts no shadow")
+    pairs = []
+    for a, fa in enumerate(facts):
+        if len(fa.tris) == 0:
+            continue
+        for b, fb in enumerate(facts):
+            if len(fb.tris) == 0:
+                continue
+            if a == b:
+                if not (fa.planar or fa.convex):
+                    pairs.append((a, b))
+            elif _may_shadow(fa, fb, light):
+                pairs.append((a, b))
+    if not pairs:
+        return Choice(
+            "none",
+            "no occluder between the light and anything: every shadow volume misses the other meshes "
+            "and no mesh can shade itself",
+        )
+    receivers = {b for _, b in pairs}
+    casters = {a for a, _ in pairs}
+    planes = [facts[b].plane for b in receivers]
+    if all(facts[b].planar for b in receivers) and not (receivers & casters):
+        base = planes[0]
+        same_plane = all(
+            abs(abs(float(p[:3] @ base[:3])) - 1) < 1e-9 and abs(abs(p[3]) - abs(base[3])) < 1e-9
+            for p in planes
+        )
+        if same_plane:
+            oriented, light_height = _light_side_distance(base, light)
+            ok = True
+            for a in casters:
+                h = facts[a].world @ oriented[:3] + oriented[3]
+                if h.min() < -1e-9 or h.max() >= light_height:
+                    ok = False
+            if ok:
+                return Choice(
+                    "planar",
+                    f"only the plane of mesh {min(receivers)} receives shadows and every caster lies between "
+                    "it and the light: projected (fake) shadows are exact",
+                    {
+                        "a": float(oriented[0]),
+                        "b": float(oriented[1]),
+                        "c": float(oriented[2]),
+                        "d": float(oriented[3]),
+                    },
+                )
+    a, b = pairs[0]
+    what = f"mesh {a} can shade itself" if a == b else f"mesh {a} can shadow mesh {b}"
+    if tolerance > 0:
+        everything = np.concatenate([f.world for f in facts if len(f.tris)])
+        diameter = float(np.linalg.norm(everything.max(axis=0) - everything.min(axis=0)))
+        r_min = min(facts[c].radius for c in casters)
+        needed = 2 * diameter / (max(r_min, 1e-300) * tolerance)
+        if needed <= 4096:
+            res = 1 << max(6, math.ceil(math.log2(needed)))
+            return Choice(
+                "shadow_map",
+                f"{what}; a {res}² map misclassifies about 2·{diameter:.3g}/({r_min:.3g}·{res}) "
+                f"≤ {tolerance:g} of the shadowed area",
+                {"resolution": res},
+            )
+    return Choice("ray_traced", f"{what}: ray-traced shadows are exact")
+
+
+def _plan_shading(scene: Scene, facts: list[_MeshFacts], index: int) -> Choice:
+    mesh = scene.meshes[index]
+    if mesh.shading is not None:
+        return Choice(mesh.shading, "set on the mesh by the caller")
+    positional = [type(light).__name__ for light in scene.lights if isinstance(light, PointLight | SpotLight)]
+    infinite_viewer = not scene.light_model.local_viewer
+    if not facts[index].flat_normals:
+        return Choice("phong", "normals vary across faces: per-pixel shading is the reference")
+    if positional:
+        return Choice(
+            "phong", f"planar faces, but a {positional[0]} changes the light direction across each face"
+        )
+    if not infinite_viewer:
+        return Choice(
+            "phong",
+            "planar faces, but a local viewer changes the view direction across each face "
+            "(an orthographic camera should set LightModel(local_viewer=False))",
+        )
+    return Choice(
+        "flat",
+        "planar faces under directional light with a distant viewer: lighting is constant per face, "
+        "flat shading is exact",
+    )
+
+
+def plan(scene: Scene, tolerance: float = 0.0) -> Plan:
+    """Pick, per concern, the cheapest method that is exact (or within ``tolerance``) for ``scene``.
+
+    Args:
+        scene: the scene to plan for.
+        tolerance: acceptable error, ≥ 0, in linear radiance for transparency (what depth
+            peeling may leave out) and as the fraction of shadowed area a shadow map may
+            misclassify; 0 asks for exact methods only.
+
+    Returns:
+        :class:`Plan` with a choice and a reason per concern.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a blinn_phong.Scene, got {type(scene).__name__}")
+    if not (isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0):
+        raise ValueError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
+    facts = [_mesh_facts(m) for m in scene.meshes]
+    transparency = _plan_transparency(scene, facts, float(tolerance))
+    shadows = tuple(_plan_shadow(scene, facts, i, float(tolerance)) for i in range(len(scene.lights)))
+    shading = tuple(_plan_shading(scene, facts, i) for i in range(len(scene.meshes)))
+    return Plan(transparency, shadows, shading, float(tolerance))

@@ -1,0 +1,222 @@
+"""The planner picks the cheap method where it is exact, and that choice renders like the exact method."""
+
+import numpy as np
+import pytest
+
+from blinn_phong.planner import plan
+from blinn_phong.render import render
+from blinn_phong.scene import AmbientLight, DirectionalLight, LightModel, PointLight
+from blinn_phong.shadows import light_visibility
+
+from .scenes import (
+    flat_cube,
+    horizontal_quad,
+    perspective_camera,
+    quad,
+    render_transparency,
+    scene_of,
+    sphere,
+    visible_surface_points,
+    world_triangles,
+)
+
+LIGHT = DirectionalLight((0.3, 0.2, -1.0))
+FLOOR = horizontal_quad(-1.0, half=3.0, colour=(0.2, 0.3, 0.4))
+
+
+# --------------------------------------------------------------------------- transparency
+
+
+def test_no_transparent_objects_means_a_plain_z_buffer():
+    p = plan(scene_of([FLOOR, horizontal_quad(0.0)], [LIGHT]))
+    assert p.transparency.method == "zbuffer"
+    assert "no transparent" in p.transparency.reason
+
+
+def test_one_planar_transparent_object_is_drawn_last_and_matches_the_a_buffer():
+    scene = scene_of([FLOOR, horizontal_quad(0.0, colour=(1, 0, 0), opacity=0.4)], [LIGHT])
+    choice = plan(scene).transparency
+    assert choice.method == "draw_last"
+    np.testing.assert_allclose(
+        render_transparency(scene, "draw_last"), render_transparency(scene, "a_buffer"), atol=1e-12
+    )
+
+
+def test_one_convex_transparent_object_sorts_its_triangles_exactly():
+    # seen from +y, where the mesh order (rings from the +y pole down) runs front to back
+    camera = perspective_camera((0.0, 6.0, 5.0))
+    scene = scene_of([FLOOR, sphere((0, 0, 0), 1.0, (0, 1, 0), opacity=0.5)], [LIGHT], camera)
+    choice = plan(scene).transparency
+    assert choice.method == "sort_triangles"
+    exact = render_transparency(scene, "a_buffer")
+    np.testing.assert_allclose(render_transparency(scene, "sort_triangles"), exact, atol=1e-12)
+    # drawing the triangles in mesh order instead is wrong where back faces come later
+    assert np.abs(render_transparency(scene, "draw_last") - exact).max() > 0.01
+
+
+def test_separated_transparent_layers_are_sorted_per_object():
+    layers = [
+        horizontal_quad(0.0, colour=(1, 0, 0), opacity=0.5),
+        horizontal_quad(1.0, half=1.0, colour=(0, 0, 1), opacity=0.3),
+        horizontal_quad(-0.5, half=1.2, colour=(0, 1, 0), opacity=0.6),
+    ]
+    scene = scene_of([FLOOR, *layers], [LIGHT])
+    choice = plan(scene).transparency
+    assert choice.method == "sort_objects"
+    exact = render_transparency(scene, "a_buffer")
+    np.testing.assert_allclose(render_transparency(scene, "sort_objects"), exact, atol=1e-12)
+
+
+def crossing_quads(opacity):
+    """Two transparent quads crossing each other along the line x = 0, z = 0, and a third one."""
+    tilted = quad(
+        [[-1.5, -1.5, -0.8], [1.5, -1.5, 0.8], [1.5, 1.5, 0.8], [-1.5, 1.5, -0.8]], (1, 0, 0), opacity
+    )
+    flat = horizontal_quad(0.0, colour=(0, 0, 1), opacity=opacity)
+    other = quad(
+        [[-1.5, -1.5, 0.8], [1.5, -1.5, -0.8], [1.5, 1.5, -0.8], [-1.5, 1.5, 0.8]], (0, 1, 0), opacity
+    )
+    return [FLOOR, tilted, flat, other]
+
+
+def test_interpenetrating_transparent_objects_need_the_a_buffer():
+    scene = scene_of(crossing_quads(0.5), [LIGHT])
+    choice = plan(scene).transparency
+    assert choice.method == "a_buffer"
+    assert "overlap" in choice.reason
+    # why: sorting per object is measurably wrong here
+    diff = np.abs(render_transparency(scene, "sort_objects") - render_transparency(scene, "a_buffer"))
+    assert diff.max() > 0.05
+
+
+def test_with_a_tolerance_depth_peeling_stops_when_the_rest_is_invisible():
+    scene = scene_of(crossing_quads(0.9), [AmbientLight((1, 1, 1), 1.0)])
+    tolerance = 0.05
+    choice = plan(scene, tolerance=tolerance).transparency
+    assert choice.method == "depth_peeling"
+    k = choice.params["layers"]
+    assert k == 2  # 0.1^k·(brightest radiance 1.2) <= 0.05 first holds at k = 2
+    err = np.abs(
+        render_transparency(scene, "depth_peeling", layers=k) - render_transparency(scene, "a_buffer")
+    )
+    assert err.max() <= tolerance
+    assert err.max() > 0  # it is an approximation, and the bound is not vacuous
+    assert plan(scene).transparency.method == "a_buffer"  # exact was asked for
+
+
+# --------------------------------------------------------------------------- shadows
+
+
+def shadow_agreement(scene, choice, light_index=0):
+    """Visibility by the chosen method and by ray tracing at the visible points that face the
+    light (elsewhere N·L <= 0 and a shadow changes nothing in the image)."""
+    points, normals = visible_surface_points(scene)
+    light = scene.lights[light_index]
+    if isinstance(light, DirectionalLight):
+        to_light = -np.asarray(light.direction)[None, :]
+    else:
+        to_light = np.asarray(light.position) - points
+    facing = np.einsum("ij,ij->i", normals, np.broadcast_to(to_light, points.shape)) > 0
+    points, normals = points[facing], normals[facing]
+    tris = world_triangles(scene)
+    params = dict(choice.params)
+    kwargs = {}
+    if choice.method == "planar":
+        kwargs["plane"] = (params["a"], params["b"], params["c"], params["d"])
+    if choice.method == "shadow_map":
+        kwargs["resolution"] = params["resolution"]
+    cheap = light_visibility(choice.method, light, tris, points, normals, **kwargs)
+    exact = light_visibility("ray_traced", light, tris, points, normals)
+    return cheap, exact
+
+
+def test_a_light_with_nothing_between_it_and_anything_needs_no_shadow_work():
+    # The sphere sits beside the floor and the light shines away from the floor.
+    scene = scene_of(
+        [horizontal_quad(0.0, half=1.0), sphere((2.5, 0.0, 1.0), 0.5)], [DirectionalLight((1.0, 0.0, -0.2))]
+    )
+    choice = plan(scene).shadows[0]
+    assert choice.method == "none"
+    cheap, exact = shadow_agreement(scene, choice)
+    np.testing.assert_array_equal(cheap, exact)
+
+
+def test_ambient_lights_cast_no_shadows():
+    assert plan(scene_of([FLOOR], [AmbientLight()])).shadows[0].method == "none"
+
+
+@pytest.mark.parametrize("light", [DirectionalLight((0.3, 0.2, -1.0)), PointLight((0.5, 0.3, 4.0))])
+def test_objects_over_a_plane_get_exact_planar_shadows(light):
+    scene = scene_of([FLOOR, sphere((0.0, 0.0, 0.2), 0.6), flat_cube((-1.2, 1.0, -0.5), 0.3)], [light])
+    choice = plan(scene).shadows[0]
+    assert choice.method == "planar", choice
+    cheap, exact = shadow_agreement(scene, choice)
+    assert (exact == 0).sum() > 100
+    # identical up to points whose ray grazes a silhouette edge
+    assert np.mean(cheap != exact) < 2e-3
+
+
+def test_objects_shadowing_each_other_need_ray_tracing_or_a_fine_enough_map():
+    scene = scene_of(
+        [FLOOR, sphere((0.0, 0.0, 1.2), 0.5), sphere((-0.3, -0.2, -0.2), 0.6)],
+        [DirectionalLight((0.2, 0.1, -1.0))],
+    )
+    exact_choice = plan(scene).shadows[0]
+    assert exact_choice.method == "ray_traced"
+    tolerance = 0.05
+    choice = plan(scene, tolerance=tolerance).shadows[0]
+    assert choice.method == "shadow_map"
+    cheap, exact = shadow_agreement(scene, choice)
+    shadowed = exact == 0
+    assert shadowed.sum() > 100
+    assert np.sum(cheap != exact) / shadowed.sum() <= tolerance
+
+
+# --------------------------------------------------------------------------- shading frequency
+
+
+def test_planar_faces_under_directional_light_and_a_distant_viewer_are_flat_shaded_exactly():
+    tilt = np.eye(4)
+    c, s = np.cos(0.5), np.sin(0.5)
+    tilt[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]
+    cube = flat_cube((0, 0, 0), 0.8, transform=tilt)
+    lights = [DirectionalLight((0.4, 0.3, -1.0)), AmbientLight()]
+    scene = scene_of([cube], lights, light_model=LightModel(local_viewer=False))
+    choice = plan(scene).shading[0]
+    assert choice.method == "flat"
+    flat = render(scene, 48, 48, shading="flat").rgba
+    phong = render(scene, 48, 48, shading="phong").rgba
+    np.testing.assert_allclose(flat, phong, atol=1e-6)
+    assert flat[..., 3].sum() > 100
+    # with a local viewer the half vector varies across each face: not exact, and not chosen
+    local = scene_of([cube], lights, light_model=LightModel(local_viewer=True))
+    assert plan(local).shading[0].method == "phong"
+    assert (
+        np.abs(render(local, 48, 48, shading="flat").rgba - render(local, 48, 48, shading="phong").rgba).max()
+        > 1e-3
+    )
+
+
+def test_a_point_light_or_curved_surface_needs_per_pixel_shading():
+    cube = flat_cube((0, 0, 0), 0.8)
+    choice = plan(scene_of([cube], [PointLight((0.0, 0.0, 3.0))])).shading[0]
+    assert choice.method == "phong"
+    assert "PointLight" in choice.reason
+    scene = scene_of([cube], [PointLight((1.0, 1.0, 2.0))])
+    flat = render(scene, 48, 48, shading="flat").rgba
+    phong = render(scene, 48, 48, shading="phong").rgba
+    assert np.abs(flat - phong).max() > 0.01  # flat is not exact here
+    curved = plan(scene_of([sphere((0, 0, 0), 1.0)], [LIGHT])).shading[0]
+    assert curved.method == "phong"
+
+
+def test_plan_explains_every_concern_and_rejects_bad_tolerance():
+    scene = scene_of([FLOOR, horizontal_quad(0.0, opacity=0.5)], [LIGHT, AmbientLight()])
+    p = plan(scene)
+    lines = p.reasons()
+    assert len(lines) == 1 + 2 + 2
+    assert all(": " in line for line in lines)
+    with pytest.raises(ValueError, match="tolerance"):
+        plan(scene, tolerance=-1.0)
+    with pytest.raises(TypeError, match="scene"):
+        plan("scene")  # type: ignore[arg-type]
