@@ -2,11 +2,14 @@
 
 Convention everywhere: float32 (float64 accepted and kept), linear light,
 premultiplied RGBA in the last axis, shape ``(..., 4)``, row 0 at the top.
+Image files: :mod:`compositing.io`. Input checks: :mod:`compositing.validate`.
 """
 
 from .alpha import premultiply, unpremultiply
 from .factors import ALL_OPERATORS, EXTRA_OPERATORS, FACTORS, OPERATORS, PORTER_DUFF
 from .operators import composite, resolve_operator
+from .stack import composite_stack, composite_stack_front_to_back
+from .transparency import absorption, coverage_union, emission, partial_occlusion
 
 __all__ = [
     "ALL_OPERATORS",
@@ -14,7 +17,13 @@ __all__ = [
     "FACTORS",
     "OPERATORS",
     "PORTER_DUFF",
+    "absorption",
     "composite",
+    "composite_stack",
+    "composite_stack_front_to_back",
+    "coverage_union",
+    "emission",
+    "partial_occlusion",
     "premultiply",
     "resolve_operator",
     "unpremultiply",
