@@ -206,3 +206,64 @@ def test_register_and_unregister_leave_blender_clean(tmp_path: Path) -> None:
     before, registered, after = json.loads(out.read_text())
     assert registered == {"menu": True, "operator": True, "add_menu_hook": True}
     assert before == after == {"menu": False, "operator": False, "add_menu_hook": False}
+
+
+def test_add_menu_operator_places_a_working_group_node(tmp_path: Path, images) -> None:
+    """The artist's path: Compositor › Add › Porter-Duff › A atop B, then render."""
+    from addon.verify import read_exr_layers, write_exr
+
+    src, dst = images
+    write_exr(tmp_path / "src.exr", src)
+    write_exr(tmp_path / "dst.exr", dst)
+    script = textwrap.dedent(
+        f"""
+        import sys
+        sys.path.insert(0, {str(REPO)!r})
+        import bpy, addon
+        from addon import compat
+        bpy.ops.wm.read_homefile(use_factory_startup=True)
+        addon.register()
+        try:
+            scene = bpy.context.scene
+            scene.render.resolution_x, scene.render.resolution_y = {src.shape[1]}, {src.shape[0]}
+            scene.render.resolution_percentage = 100
+            compat.set_full_precision(scene)
+            tree = compat.compositor_tree(scene)
+            window = bpy.context.window_manager.windows[0]
+            area = window.screen.areas[0]
+            area.ui_type = "CompositorNodeTree"
+            space = area.spaces.active
+            if space.node_tree is None:
+                space.node_tree = tree
+            region = next(r for r in area.regions if r.type == "WINDOW")
+            with bpy.context.temp_override(window=window, area=area, region=region, space_data=space):
+                bpy.ops.node.porter_duff_add(operator="src_atop")
+            (group,) = [n for n in tree.nodes if n.bl_idname == "CompositorNodeGroup"]
+            for name, socket in (("src", "Source"), ("dst", "Destination")):
+                image = bpy.data.images.load({str(tmp_path)!r} + f"/{{name}}.exr")
+                image.colorspace_settings.name = "Non-Color"
+                image.alpha_mode = "CHANNEL_PACKED"
+                node = tree.nodes.new("CompositorNodeImage")
+                node.image = image
+                tree.links.new(node.outputs["Image"], group.inputs[socket])
+            out = compat.add_file_output(tree, {str(tmp_path / "out")!r}, "atop", ["atop"])
+            tree.links.new(group.outputs[0], out["atop"])
+            bpy.ops.render.render(write_still=False)
+        finally:
+            addon.unregister()
+        """
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={"BLENDER_USER_RESOURCES": str(tmp_path / "user"), "PATH": ""},
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    (result_file,) = (tmp_path / "out").glob("atop*.exr")
+    got = read_exr_layers(result_file)["atop"]
+    s, d = (x.astype(np.float64) for x in images)
+    want = s * d[..., 3:] + d * (1 - s[..., 3:])  # A atop B, Porter & Duff 1984
+    np.testing.assert_allclose(got, want, rtol=0, atol=TOLERANCE)
