@@ -40,6 +40,7 @@ __all__ = [
     "math_node_type",
     "new_group_tree",
     "set_full_precision",
+    "world_uses_nodes",
 ]
 
 #: Alpha Over modes by the name of the operator they realise.
@@ -194,3 +195,21 @@ def set_full_precision(scene: bpy.types.Scene) -> None:
         scene.render.compositor_precision = "FULL"
     if hasattr(scene.render, "compositor_device"):
         scene.render.compositor_device = "CPU"
+
+
+def world_uses_nodes(world: bpy.types.World) -> bool:
+    """True when Blender renders ``world`` from its node tree rather than ``world.color``.
+
+    5.0 always uses the node tree (``World.use_nodes`` is deprecated, reads True and ignores
+    assignments); 4.2/4.5 honour ``use_nodes`` and new worlds start without a tree.
+    """
+    if world.node_tree is None:
+        return False
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        use_nodes = bool(world.use_nodes)
+    if any(issubclass(w.category, DeprecationWarning) for w in caught):
+        return True
+    return use_nodes

@@ -38,7 +38,7 @@ from blinn_phong.scene import (
     SpotLight,
 )
 
-from . import mapping
+from . import compat, mapping
 
 __all__ = [
     "ConvertedScene",
@@ -293,14 +293,15 @@ def light_from_object(
 
 
 def world_ambient(world: bpy.types.World | None) -> tuple[float, float, float]:
-    """Global ambient colour from the world: the Background node's Color × Strength, else ``world.color``.
+    """Global ambient colour: the world's Background node Color × Strength when Blender renders the
+    world from nodes, else ``world.color``.
 
     A uniform environment of radiance ``L`` reflects ``albedo · L`` from an unoccluded Lambertian
     surface, so the world colour is the ambient intensity for ``ka = albedo``.
     """
     if world is None:
         return (0.0, 0.0, 0.0)
-    tree = world.node_tree
+    tree = world.node_tree if compat.world_uses_nodes(world) else None
     node = None if tree is None else next((n for n in tree.nodes if n.type == "BACKGROUND"), None)
     if node is None:
         return tuple(float(c) for c in world.color[:3])

@@ -26,6 +26,7 @@ import numpy as np
 from blinn_phong.scene import orthographic_matrix
 
 __all__ = [
+    "BLENDER_EMPTY_DEPTH",
     "MAX_SHININESS",
     "area_light_intensity",
     "blinn_phong_from_principled",
@@ -42,6 +43,7 @@ __all__ = [
     "spot_mean_blender",
     "spot_mean_gl",
     "sun_light_intensity",
+    "window_depth_to_distance",
 ]
 
 MAX_SHININESS = 10_000.0
@@ -440,3 +442,36 @@ def blinn_phong_from_principled(
         "shininess": shininess,
         "opacity": a,
     }
+
+
+# --------------------------------------------------------------------------- depth
+
+BLENDER_EMPTY_DEPTH = 1e10
+"""Value of Blender's Depth (Z) pass where nothing was hit (Cycles and EEVEE write 1e10)."""
+
+
+def window_depth_to_distance(depth: np.ndarray, projection: np.ndarray) -> np.ndarray:
+    """Blender's Depth pass (distance along the view axis, positive) from OpenGL window depth.
+
+    Window depth ``d`` in [0, 1] gives ``z_ndc = 2d − 1``; the projection's last two rows give
+    ``z_ndc · (P₃₂ z_e + P₃₃) = P₂₂ z_e + P₂₃``, so ``z_e = (P₂₃ − z_ndc P₃₃) / (z_ndc P₃₂ − P₂₂)``
+    for perspective and orthographic matrices alike (their third row has no x, y terms). The result
+    is ``−z_e``; pixels at depth 1.0 (cleared, nothing drawn) get :data:`BLENDER_EMPTY_DEPTH`.
+
+    Args:
+        depth: window depths in [0, 1], any shape.
+        projection: (4, 4) eye -> clip matrix the depths were rendered with.
+
+    Returns:
+        float32 array of the same shape, in scene units.
+    """
+    d = np.asarray(depth, dtype=np.float64)
+    p = np.asarray(projection, dtype=np.float64)
+    if p.shape != (4, 4):
+        raise ValueError(f"projection: expected shape (4, 4), got {p.shape}")
+    if d.size and (not np.isfinite(d).all() or d.min() < 0.0 or d.max() > 1.0):
+        raise ValueError(f"depth: expected finite window depths in [0, 1], got range [{d.min()}, {d.max()}]")
+    empty = d >= 1.0
+    z_ndc = np.where(empty, 0.0, 2.0 * d - 1.0)
+    z_eye = (p[2, 3] - z_ndc * p[3, 3]) / (z_ndc * p[3, 2] - p[2, 2])
+    return np.where(empty, BLENDER_EMPTY_DEPTH, -z_eye).astype(np.float32)

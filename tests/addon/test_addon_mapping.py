@@ -265,3 +265,15 @@ def test_rendering_a_crop_equals_cropping_the_render() -> None:
     assert full_hit[y0:y1, x0:x1].any()
     np.testing.assert_array_equal(crop_hit, full_hit[y0:y1, x0:x1])
     np.testing.assert_allclose(crop_depth, full_depth[y0:y1, x0:x1], atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
+def test_window_depth_round_trips_to_eye_distance(kind: str) -> None:
+    # Project eye-space points with the matrix, apply the OpenGL depth-range map, invert.
+    p = mapping.camera_projection(kind=kind, width=64, height=48, clip_start=0.3, clip_end=50.0, shift_y=0.1)
+    distances = np.array([0.3, 0.5, 2.0, 17.0, 49.0])
+    clip = p @ np.c_[np.zeros((5, 2)), -distances, np.ones(5)].T
+    window = (clip[2] / clip[3] + 1.0) / 2.0
+    got = mapping.window_depth_to_distance(np.r_[window, 1.0], p)
+    np.testing.assert_allclose(got[:5], distances, rtol=1e-5)
+    assert got[5] == mapping.BLENDER_EMPTY_DEPTH

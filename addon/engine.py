@@ -1,0 +1,270 @@
+"""The "Blinn-Phong" render engine: F12, ``bpy.ops.render.render`` and command-line renders.
+
+``render()`` converts the evaluated depsgraph (``addon/convert.py``), renders it with
+``blinn_phong.render`` and writes the passes into Blender's render result:
+
+* Combined: premultiplied linear RGBA with coverage alpha;
+* Depth: distance along the view axis (1e10 where empty, as Cycles/EEVEE);
+* Ambient, Diffuse, Specular: the lighting equation's terms (premultiplied RGB; they sum to
+  Combined's RGB), registered in ``update_render_passes`` so they appear on the Render Layers node.
+
+Pixels go in with ``foreach_set`` on flat float32 arrays, bottom row first (Blender's order).
+``bl_use_postprocess`` lets Blender's compositor run on the result.
+
+Failures: Blender ignores exceptions raised in ``render()`` and writes whatever is in the result
+(black) as if it had succeeded. Here every failure is reported through ``report`` (the status bar
+and the log), ``error_set``, stderr, and :data:`LAST_RENDER`; the image is filled with a
+magenta/black error pattern instead of a plausible black frame; and in background mode, when
+``Scene.blinn_phong.abort_on_error`` is set (the default), the process then exits with code 1 so
+render farms and scripts see the failure.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import traceback
+from typing import Any
+
+import bpy
+import numpy as np
+
+from blinn_phong.render import render as render_core
+
+from . import convert, mapping
+
+__all__ = [
+    "ENGINE_ID",
+    "LAST_RENDER",
+    "BlinnPhongRenderEngine",
+    "RenderCancelled",
+    "classes",
+    "error_pattern",
+    "register",
+    "render_converted",
+    "unregister",
+]
+
+ENGINE_ID = "BLINN_PHONG"
+
+LIGHT_PASSES: tuple[tuple[str, str], ...] = (
+    ("Ambient", "ambient"),
+    ("Diffuse", "diffuse"),
+    ("Specular", "specular"),
+)
+"""Blender pass name and the ``RenderResult.passes`` key it is filled from."""
+
+LAST_RENDER: dict[str, Any] = {}
+"""Status of the most recent render in this process: ``ok``, ``error``, ``seconds``, ``notes``,
+``choices`` (what was rendered how, and why), ``size``. Read by the Render panel and the batch
+runner."""
+
+
+class RenderCancelled(Exception):
+    """The user cancelled the render (``RenderEngine.test_break``)."""
+
+
+def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
+    """A magenta/black checkerboard (opaque, float32 RGBA) marking a failed render.
+
+    Args:
+        height: rows.
+        width: columns.
+        cell: checker cell size in pixels.
+    """
+    rows, cols = np.indices((height, width))
+    magenta = ((rows // cell + cols // cell) % 2 == 0).astype(np.float32)
+    out = np.zeros((height, width, 4), np.float32)
+    out[..., 0] = magenta
+    out[..., 2] = magenta
+    out[..., 3] = 1.0
+    return out
+
+
+def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> tuple[Any, dict[str, Any]]:
+    """Render a converted scene with the core renderer over its region.
+
+    Returns:
+        The ``blinn_phong.RenderResult`` and a dict of the choices made and why (shown in the
+        Render panel and in batch reports).
+    """
+    options = converted.options
+    width, height = converted.region_size
+    choices: dict[str, Any] = {
+        "shading": options.shading,
+        "samples": options.samples,
+        "region": list(converted.region),
+    }
+    reasons = []
+    if options.transparency not in ("AUTO", "OPAQUE"):
+        reasons.append(
+            f"transparency '{options.transparency}' is not available in this build; "
+            "surfaces blend over the nearest opaque hit by their opacity"
+        )
+    if options.shadows not in ("AUTO", "NONE"):
+        reasons.append(
+            f"shadows '{options.shadows}' are not available in this build; rendered without shadows"
+        )
+    if options.fog != "NONE":
+        reasons.append(f"fog '{options.fog}' is not available in this build; rendered without fog")
+    choices["reasons"] = reasons
+    result = render_core(
+        converted.scene, width, height, shading=options.shading, samples=options.samples, progress=progress
+    )
+    return result, choices
+
+
+class BlinnPhongRenderEngine(bpy.types.RenderEngine):
+    """Local Blinn-Phong shading with OpenGL conventions (``blinn_phong`` package)."""
+
+    bl_idname = ENGINE_ID
+    bl_label = "Blinn-Phong"
+    bl_use_preview = False
+    bl_use_postprocess = True
+    bl_use_shading_nodes_custom = False
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        # Blender 4.4+ passes arguments to RenderEngine.__init__; 4.2 passes none. Forward both.
+        super().__init__(*args, **kwargs)
+
+    def update_render_passes(
+        self, scene: bpy.types.Scene = None, renderlayer: bpy.types.ViewLayer = None
+    ) -> None:
+        """Declare the passes so the compositor's Render Layers node shows them."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
+        for name, _key in LIGHT_PASSES:
+            self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+
+    def render(self, depsgraph: bpy.types.Depsgraph) -> None:
+        """Render one view layer of ``depsgraph`` into a render result."""
+        scene = depsgraph.scene
+        render_settings = scene.render
+        full_w, full_h = mapping.render_size(
+            render_settings.resolution_x, render_settings.resolution_y, render_settings.resolution_percentage
+        )
+        started = time.perf_counter()
+        LAST_RENDER.clear()
+        LAST_RENDER.update({"ok": False, "error": None, "scene": scene.name, "frame": scene.frame_current})
+        try:
+            self.update_stats("", "Blinn-Phong: converting the scene")
+            converted = convert.scene_from_depsgraph(depsgraph)
+            if self.test_break():
+                raise RenderCancelled
+
+            def progress(stage: str, fraction: float) -> None:
+                self.update_progress(float(fraction))
+                self.update_stats("", f"Blinn-Phong: {stage}")
+                if self.test_break():
+                    raise RenderCancelled
+
+            result, choices = render_converted(converted, progress)
+            self._write(converted, result)
+        except RenderCancelled:
+            LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
+            return
+        except Exception as error:
+            self._fail(scene, full_w, full_h, error, started)
+            return
+        LAST_RENDER.update(
+            {
+                "ok": True,
+                "seconds": time.perf_counter() - started,
+                "choices": choices,
+                "notes": converted.notes,
+                "size": [full_w, full_h],
+                "stats": result.stats.seconds,
+                "triangles": result.stats.triangles,
+            }
+        )
+        self.update_stats("", f"Blinn-Phong: done in {LAST_RENDER['seconds']:.2f} s")
+        for note in converted.notes:
+            self.report({"WARNING"}, note)
+
+    # ----------------------------------------------------------------- result
+
+    def _write(self, converted: convert.ConvertedScene, result: Any) -> None:
+        x0, y0, x1, y1 = converted.region
+        width, height = x1 - x0, y1 - y0
+        self.add_pass("Depth", 1, "Z")
+        for name, _key in LIGHT_PASSES:
+            self.add_pass(name, 3, "RGB")
+        # begin_result takes the full frame; with a border Blender clips it to the border itself.
+        render_result = self.begin_result(0, 0, converted.width, converted.height)
+        try:
+            layer = render_result.layers[0]
+            got = (render_result.resolution_x, render_result.resolution_y)
+            if got != (width, height):
+                raise RuntimeError(
+                    f"render result is {got[0]}×{got[1]} but the converted region is {width}×{height}"
+                )
+            depth = mapping.window_depth_to_distance(result.depth, converted.scene.camera.projection)
+            buffers = {"Combined": result.rgba, "Depth": depth[..., None]}
+            for name, key in LIGHT_PASSES:
+                buffers[name] = result.passes[key]
+            for name, image in buffers.items():
+                render_pass = layer.passes.get(name)
+                if render_pass is None:
+                    continue
+                flat = np.ascontiguousarray(image[::-1], dtype=np.float32).ravel()
+                render_pass.rect.foreach_set(flat)
+        except Exception:
+            self.end_result(render_result, cancel=True)
+            raise
+        self.end_result(render_result)
+
+    def _fail(
+        self, scene: bpy.types.Scene, width: int, height: int, error: Exception, started: float
+    ) -> None:
+        message = f"Blinn-Phong render failed: {type(error).__name__}: {error}"
+        details = traceback.format_exc()
+        LAST_RENDER.update(
+            {"ok": False, "error": message, "traceback": details, "seconds": time.perf_counter() - started}
+        )
+        print(details, file=sys.stderr, flush=True)
+        print(message, file=sys.stderr, flush=True)
+        self.report({"ERROR"}, message)
+        self.error_set(message)
+        try:
+            render_result = self.begin_result(0, 0, width, height)
+            combined = render_result.layers[0].passes["Combined"]
+            pattern = error_pattern(render_result.resolution_y, render_result.resolution_x)
+            combined.rect.foreach_set(pattern.ravel())
+            self.end_result(render_result)
+        except Exception as secondary:
+            print(f"Blinn-Phong: could not write the error image: {secondary}", file=sys.stderr, flush=True)
+        settings = getattr(scene, "blinn_phong", None)
+        if bpy.app.background and (settings is None or settings.abort_on_error):
+            print(
+                "Blinn-Phong: exiting with code 1 (Scene.blinn_phong.abort_on_error)",
+                file=sys.stderr,
+                flush=True,
+            )
+            sys.stdout.flush()
+            os._exit(1)
+
+
+def last_render_json() -> str:
+    """:data:`LAST_RENDER` as JSON text (for logs and reports)."""
+    return json.dumps(LAST_RENDER, default=str)
+
+
+classes = (BlinnPhongRenderEngine,)
+
+
+def register() -> None:
+    """Register the engine class."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the engine.
+
+    A RenderEngine left registered at interpreter exit crashes bpy 4.2 and hangs 4.5, so callers
+    that register it by hand must call this (Blender calls the add-on's ``unregister`` at exit).
+    """
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
