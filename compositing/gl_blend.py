@@ -110,7 +110,11 @@ def _as_constant(constant: object) -> np.ndarray:
 
 def _quantise_unorm8(x: np.ndarray) -> np.ndarray:
     """Clamp to [0, 1] and round to the nearest multiple of 1/255 (a UNORM8 store), same dtype."""
-    return np.rint(np.clip(x, 0.0, 1.0) * _UNORM8_MAX) / x.dtype.type(_UNORM8_MAX)
+    q = np.clip(x, 0.0, 1.0)  # a new array, so the rest can work in place
+    q *= _UNORM8_MAX
+    np.rint(q, out=q)
+    q /= _UNORM8_MAX
+    return q
 
 
 def _factor(name: str, src: np.ndarray, dst: np.ndarray, constant: np.ndarray) -> np.ndarray | float:
@@ -164,13 +168,23 @@ def _equation(name: str, s: np.ndarray, d: np.ndarray, s_factor, d_factor) -> np
         return np.maximum(s, d)
     sw = _weighted(s, s_factor)
     dw = _weighted(d, d_factor)
+    shape = np.broadcast_shapes(s.shape, d.shape)
+    # Write into a product we own when it already has the full shape (saves one allocation).
     if name == "FUNC_ADD":
-        out = sw + dw
+        own = next((w for w in (sw, dw) if _is_scratch(w, shape, s, d)), None)
+        out = sw + dw if own is None else np.add(sw, dw, out=own)
     elif name == "FUNC_SUBTRACT":
-        out = sw - dw
+        out = np.subtract(sw, dw, out=sw) if _is_scratch(sw, shape, s, d) else sw - dw
     else:  # FUNC_REVERSE_SUBTRACT
-        out = dw - sw
-    return np.broadcast_to(out, np.broadcast_shapes(s.shape, d.shape))
+        out = np.subtract(dw, sw, out=dw) if _is_scratch(dw, shape, s, d) else dw - sw
+    return out if np.shape(out) == shape else np.broadcast_to(out, shape)
+
+
+def _is_scratch(x: np.ndarray | float, shape: tuple[int, ...], *inputs: np.ndarray) -> bool:
+    """True for a temporary array of the full shape that is none of the inputs (safe to overwrite)."""
+    return (
+        isinstance(x, np.ndarray) and x.shape == shape and x.base is None and all(x is not i for i in inputs)
+    )
 
 
 def gl_blend(
@@ -244,8 +258,9 @@ def gl_blend(
         s, d, c = _quantise_unorm8(s), _quantise_unorm8(d), _quantise_unorm8(c)
 
     with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below, not warned
-        out = _blend(s, d, c, sf, df, eq, sfa, dfa, eqa)
-    out = np.array(np.broadcast_to(out, shape), dtype=dtype)  # own, writable, right dtype
+        out = _blend(s, d, c, (sf, df, eq), (sfa, dfa, eqa))
+    if not (_is_scratch(out, shape, s, d) and out.dtype == dtype):
+        out = np.array(np.broadcast_to(out, shape), dtype=dtype)  # own, writable, right dtype
     if unorm8:
         return _quantise_unorm8(out)
     overflow = np.count_nonzero(~np.isfinite(out))
@@ -256,21 +271,39 @@ def gl_blend(
     return out
 
 
-def _blend(s, d, c, sf, df, eq, sfa, dfa, eqa) -> np.ndarray:
-    """The blend equations on validated arrays; RGB state on all four channels, then alpha if separate."""
-    rgb_factors = (_factor(sf, s, d, c), _factor(df, s, d, c))
-    out = _equation(eq, s, d, *rgb_factors)
-    if (sfa, dfa, eqa) != (sf, df, eq):
-        # Separate alpha state: only the alpha component of the alpha factors and equation matters.
-        alpha_factors = tuple(
-            f if isinstance(f, float) else f[..., -1:] for f in (_factor(sfa, s, d, c), _factor(dfa, s, d, c))
-        )
-        alpha = _equation(eqa, s[..., 3:], d[..., 3:], *alpha_factors)
-        pixels = np.broadcast_shapes(s.shape, d.shape)[:-1]
-        out = np.concatenate(
-            [np.broadcast_to(out[..., :3], (*pixels, 3)), np.broadcast_to(alpha, (*pixels, 1))], axis=-1
-        )
+def _blend(
+    s: np.ndarray,
+    d: np.ndarray,
+    c: np.ndarray,
+    rgb_state: tuple[str, str, str],
+    alpha_state: tuple[str, str, str],
+) -> np.ndarray:
+    """The blend on validated arrays: one pass for a shared state, RGB and alpha apart otherwise."""
+    sf, df, eq = rgb_state
+    if alpha_state == rgb_state:
+        return _equation(eq, s, d, _factor(sf, s, d, c), _factor(df, s, d, c))
+    sfa, dfa, eqa = alpha_state
+    pixels = np.broadcast_shapes(s.shape, d.shape)[:-1]
+    out = np.empty((*pixels, 4), dtype=np.result_type(s, d))
+    rgb, alpha = slice(0, 3), slice(3, 4)
+    out[..., rgb] = _equation(
+        eq, s[..., rgb], d[..., rgb], _part(_factor(sf, s, d, c), rgb), _part(_factor(df, s, d, c), rgb)
+    )
+    out[..., alpha] = _equation(
+        eqa,
+        s[..., alpha],
+        d[..., alpha],
+        _part(_factor(sfa, s, d, c), alpha),
+        _part(_factor(dfa, s, d, c), alpha),
+    )
     return out
+
+
+def _part(factor: np.ndarray | float, channels: slice) -> np.ndarray | float:
+    """The RGB or alpha part of a factor; scalars and single-channel (replicated) factors as they are."""
+    if isinstance(factor, float) or factor.shape[-1] == 1:
+        return factor
+    return factor[..., channels]
 
 
 def gl_factors(op: str) -> tuple[str, str]:
