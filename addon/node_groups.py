@@ -21,10 +21,13 @@ from compositing.factors import ALL_OPERATORS, OPERATORS, OperatorSpec
 from . import compat
 from .factor_graph import CHANNELS, Operand, plan_operator
 
-__all__ = ["ARTIST_OPERATORS", "GENERATOR_VERSION", "ensure_group", "group_name"]
+__all__ = ["ALPHA_OVER_MODE_OPERATORS", "ARTIST_OPERATORS", "GENERATOR_VERSION", "ensure_group", "group_name"]
 
 #: The operators offered in the Add menu: the twelve Porter-Duff operators and ``plus``.
 ARTIST_OPERATORS: tuple[str, ...] = (*OPERATORS, "plus")
+
+#: Blender 5.0's Alpha Over modes as groups, offered too: Blender 4.2 and 4.5 lack them.
+ALPHA_OVER_MODE_OPERATORS: tuple[str, ...] = ("disjoint_over", "conjoint_over")
 
 #: Bumped whenever the generated graph changes, so stale groups in old files are rebuilt.
 GENERATOR_VERSION = 1

@@ -8,16 +8,17 @@ __all__ = ["NODE_OT_porter_duff_add", "NODE_OT_porter_duff_add_groups", "classes
 
 
 class NODE_OT_porter_duff_add_groups(bpy.types.Operator):  # noqa: N801 (Blender naming rule)
-    """Add every Porter-Duff node group (the twelve operators and plus) to the current file"""
+    """Add every Porter-Duff node group (12 operators, plus, disjoint and conjoint over) to the file"""
 
     bl_idname = "node.porter_duff_add_groups"
     bl_label = "Add Porter-Duff Node Groups"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
 
     def execute(self, context: bpy.types.Context) -> set[str]:
-        for operator in node_groups.ARTIST_OPERATORS:
+        names = (*node_groups.ARTIST_OPERATORS, *node_groups.ALPHA_OVER_MODE_OPERATORS)
+        for operator in names:
             node_groups.ensure_group(operator)
-        self.report({"INFO"}, f"{len(node_groups.ARTIST_OPERATORS)} Porter-Duff node groups ready")
+        self.report({"INFO"}, f"{len(names)} Porter-Duff node groups ready")
         return {"FINISHED"}
 
 
@@ -42,7 +43,7 @@ class NODE_OT_porter_duff_add(bpy.types.Operator):  # noqa: N801 (Blender naming
         )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
-        if self.operator not in node_groups.ARTIST_OPERATORS:
+        if self.operator not in (*node_groups.ARTIST_OPERATORS, *node_groups.ALPHA_OVER_MODE_OPERATORS):
             self.report({"ERROR"}, f"Unknown Porter-Duff operator {self.operator!r}")
             return {"CANCELLED"}
         tree = context.space_data.edit_tree

@@ -17,10 +17,11 @@ class NODE_MT_porter_duff(bpy.types.Menu):  # noqa: N801 (Blender naming rule)
 
     def draw(self, context: bpy.types.Context) -> None:
         layout = self.layout
-        for name in node_groups.ARTIST_OPERATORS:
-            props = layout.operator("node.porter_duff_add", text=node_groups.group_name(name))
-            props.operator = name
-        layout.separator()
+        for names in (node_groups.ARTIST_OPERATORS, node_groups.ALPHA_OVER_MODE_OPERATORS):
+            for name in names:
+                props = layout.operator("node.porter_duff_add", text=node_groups.group_name(name))
+                props.operator = name
+            layout.separator()
         layout.operator("node.porter_duff_add_groups")
 
 

@@ -81,10 +81,17 @@ def test_blender_reports_its_version_and_modes(matrix) -> None:
 
 def test_operator_adds_the_artist_groups_to_the_file(matrix) -> None:
     _, report = matrix
-    titles = {"src": "A", "dst": "B", "clear": "clear", "plus": "A plus B", "src_over": "A over B"}
-    for name in ("src", "dst", "clear", "plus", "src_over"):
-        assert f"Porter-Duff · {titles[name]}" in report["groups_in_file"]
-    assert len(report["groups_in_file"]) == 13
+    titles = {
+        "src": "A",
+        "dst": "B",
+        "clear": "clear",
+        "plus": "A plus B",
+        "src_over": "A over B",
+        "disjoint_over": "A disjoint-over B",
+    }
+    for title in titles.values():
+        assert f"Porter-Duff · {title}" in report["groups_in_file"]
+    assert len(report["groups_in_file"]) == 15  # 12 Porter-Duff operators, plus, disjoint/conjoint over
 
 
 def test_images_pass_through_unchanged(matrix, images) -> None:
