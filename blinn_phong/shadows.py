@@ -394,30 +394,24 @@ def planar_shadow_mask(
     p = _points("points", points)
     m = planar_shadow_matrix(plane, light)
     proj = _homogeneous(tris.reshape(-1, 3)) @ m.T
-    flat = (proj[:, :3] / proj[:, 3:4]).reshape(-1, 3, 3)
-    # 2-D point-in-triangle in the plane's own frame
+    w = proj[:, 3].reshape(-1, 3)
+    # a vertex level with a point light projects to infinity: such triangles are dropped
+    finite = np.all(
+        np.abs(w) > 1e-12 * np.abs(proj[:, :3]).reshape(-1, 9).max(axis=1, initial=1.0)[:, None], axis=1
+    )
+    proj = proj.reshape(-1, 3, 4)[finite]
+    flat = proj[:, :, :3] / proj[:, :, 3:4]
+    # point-in-triangle for every point at once: a short ray across the plane through the
+    # flattened triangles, answered by Embree's BVH (edge-on, zero-area triangles never hit)
+    from .raytrace import RayScene
+
     nrm = np.asarray(plane, dtype=np.float64)[:3]
     nrm = nrm / np.linalg.norm(nrm)
-    u = np.cross(nrm, [1.0, 0.0, 0.0] if abs(nrm[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(nrm, u)
-    t2 = np.stack([flat @ u, flat @ v], axis=-1)  # (n, 3, 2)
-    p2 = np.stack([p @ u, p @ v], axis=-1)  # (m, 2)
-    shadowed = np.zeros(len(p), dtype=bool)
-    chunk = max(1, 2_000_000 // max(len(t2), 1))
-    for s in range(0, len(p2), chunk):
-        q = p2[s : s + chunk, None, :]  # (c, 1, 2)
-        e = []
-        for i in range(3):
-            a, b = t2[None, :, i], t2[None, :, (i + 1) % 3]
-            e.append(
-                (b[..., 0] - a[..., 0]) * (q[..., 1] - a[..., 1])
-                - (b[..., 1] - a[..., 1]) * (q[..., 0] - a[..., 0])
-            )
-        e0, e1, e2 = e
-        inside = ((e0 >= 0) & (e1 >= 0) & (e2 >= 0)) | ((e0 <= 0) & (e1 <= 0) & (e2 <= 0))
-        degenerate = np.abs(e0 + e1 + e2) == 0
-        shadowed[s : s + chunk] = np.any(inside & ~degenerate, axis=1)
+    if len(flat) == 0 or len(p) == 0:
+        return np.ones(len(p))
+    scale = max(float(np.abs(np.concatenate([flat.reshape(-1, 3), p])).max()), 1.0)
+    h = 1e-3 * scale
+    shadowed = RayScene(flat).occluded(p + h * nrm, np.broadcast_to(-nrm, p.shape), 2 * h)
     return 1.0 - shadowed.astype(np.float64)
 
 
