@@ -442,17 +442,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if (args.src is None) != (args.dst is None):
         parser.error("--src and --dst go together")
-    if args.src:
-        src, dst = _read_image(args.src), _read_image(args.dst)
-    else:
-        src, dst = sample_images(height=args.size[1], width=args.size[0])
-    if args.all:
-        probe = run_blender(src, dst, [Case("alpha_over", "src_over")], python=args.python)
-        cases = standard_cases(tuple(probe.report["alpha_over_modes"]))
-    elif args.op:
-        cases = [Case(args.via, args.op, args.factor, args.straight_alpha)]
-    else:
+    if not args.all and not args.op:
         parser.error("give --op OPERATOR or --all")
+    try:
+        if args.src:
+            src, dst = _checked_images(_read_image(args.src), _read_image(args.dst))
+        else:
+            src, dst = sample_images(height=args.size[1], width=args.size[0])
+        if args.all:
+            probe = run_blender(src, dst, [Case("alpha_over", "src_over")], python=args.python)
+            cases = standard_cases(tuple(probe.report["alpha_over_modes"]))
+        else:
+            cases = [Case(args.via, args.op, args.factor, args.straight_alpha)]
+    except (OSError, ValueError, TypeError) as error:
+        parser.error(str(error))
     results, report = verify_cases(src, dst, cases, python=args.python)
     print(f"Blender {report['blender_version']}, {src.shape[1]}x{src.shape[0]}, {len(results)} case(s)")
     print(f"{'case':48s} {'max abs error':>14s} {'mean abs error':>15s}")
