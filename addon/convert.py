@@ -44,7 +44,9 @@ __all__ = [
     "ConvertedScene",
     "RenderOptions",
     "camera_from_object",
+    "derived_light_values",
     "light_from_object",
+    "light_radius",
     "material_from_blender",
     "mesh_arrays",
     "principled_inputs",
@@ -220,13 +222,38 @@ def material_from_blender(
 # --------------------------------------------------------------------------- lights
 
 
-def _light_falloff(light: bpy.types.Light, radius: float) -> tuple[float, float, float, float | None]:
-    """``(kc, kl, kq, spot exponent or None)`` from the light's settings."""
+def light_radius(light: bpy.types.Light) -> float:
+    """Radius of a Blender light for the softened inverse-square falloff (``point_light_attenuation``).
+
+    Point and spot: ``shadow_soft_size``; area: the radius of the disc of equal area.
+    """
+    if light.type != "AREA":
+        return float(light.shadow_soft_size)
+    sx = light.size
+    sy = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+    area = sx * sy * (math.pi / 4.0 if light.shape in ("DISK", "ELLIPSE") else 1.0)
+    return math.sqrt(area / math.pi)
+
+
+def derived_light_values(light: bpy.types.Light) -> dict[str, float]:
+    """kc, kl, kq and spot exponent derived from a Blender light's own values (``mapping``).
+
+    Spot: exponent from Spot Size and Spot Blend; area: 1 (the Lambertian ``cos θ`` lobe); else 0.
+    """
+    kc, kl, kq = mapping.point_light_attenuation(light_radius(light))
+    exponent = {"SPOT": None, "AREA": 1.0}.get(light.type, 0.0)
+    if exponent is None:
+        exponent = mapping.spot_exponent(light.spot_size, light.spot_blend)
+    return {"constant": kc, "linear": kl, "quadratic": kq, "spot_exponent": exponent}
+
+
+def _light_falloff(light: bpy.types.Light) -> tuple[float, float, float, float]:
+    """``(kc, kl, kq, spot exponent)``: custom values, or the derived ones."""
     settings = getattr(light, "blinn_phong", None)
     if settings is not None and settings.source == "CUSTOM":
         return settings.constant, settings.linear, settings.quadratic, settings.spot_exponent
-    kc, kl, kq = mapping.point_light_attenuation(radius)
-    return kc, kl, kq, None
+    values = derived_light_values(light)
+    return values["constant"], values["linear"], values["quadratic"], values["spot_exponent"]
 
 
 def light_from_object(
@@ -248,8 +275,8 @@ def light_from_object(
         return DirectionalLight(
             direction=axis, color=color, intensity=mapping.sun_light_intensity(light.energy) * scale
         )
+    kc, kl, kq, exponent = _light_falloff(light)
     if light.type == "POINT":
-        kc, kl, kq, _ = _light_falloff(light, light.shadow_soft_size)
         return PointLight(
             position=position,
             color=color,
@@ -259,9 +286,6 @@ def light_from_object(
             quadratic=kq,
         )
     if light.type == "SPOT":
-        kc, kl, kq, exponent = _light_falloff(light, light.shadow_soft_size)
-        if exponent is None:
-            exponent = mapping.spot_exponent(light.spot_size, light.spot_blend)
         return SpotLight(
             position=position,
             direction=axis,
@@ -274,15 +298,11 @@ def light_from_object(
             quadratic=kq,
         )
     if light.type == "AREA":
-        sx = light.size
-        sy = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
-        area = sx * sy * (math.pi / 4.0 if light.shape in ("DISK", "ELLIPSE") else 1.0)
-        kc, kl, kq, exponent = _light_falloff(light, math.sqrt(area / math.pi))
         return SpotLight(
             position=position,
             direction=axis,
             cutoff=90.0,
-            exponent=1.0 if exponent is None else exponent,
+            exponent=exponent,
             color=color,
             intensity=mapping.area_light_intensity(light.energy) * scale,
             constant=kc,
