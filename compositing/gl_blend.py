@@ -278,24 +278,29 @@ def _blend(
     rgb_state: tuple[str, str, str],
     alpha_state: tuple[str, str, str],
 ) -> np.ndarray:
-    """The blend on validated arrays: one pass for a shared state, RGB and alpha apart otherwise."""
+    """The blend on validated arrays.
+
+    With separate state the RGB and alpha parts of each factor are merged into one RGBA factor
+    first, so the products run over whole contiguous pixels; only a different alpha equation
+    needs a second (alpha-only) pass.
+    """
     sf, df, eq = rgb_state
-    if alpha_state == rgb_state:
-        return _equation(eq, s, d, _factor(sf, s, d, c), _factor(df, s, d, c))
     sfa, dfa, eqa = alpha_state
-    pixels = np.broadcast_shapes(s.shape, d.shape)[:-1]
-    out = np.empty((*pixels, 4), dtype=np.result_type(s, d))
-    rgb, alpha = slice(0, 3), slice(3, 4)
-    out[..., rgb] = _equation(
-        eq, s[..., rgb], d[..., rgb], _part(_factor(sf, s, d, c), rgb), _part(_factor(df, s, d, c), rgb)
-    )
-    out[..., alpha] = _equation(
-        eqa,
-        s[..., alpha],
-        d[..., alpha],
-        _part(_factor(sfa, s, d, c), alpha),
-        _part(_factor(dfa, s, d, c), alpha),
-    )
+    s_factor = _factor(sf, s, d, c)
+    if sfa != sf:
+        s_factor = _merge(s_factor, _factor(sfa, s, d, c), s.dtype)
+    d_factor = _factor(df, s, d, c)
+    if dfa != df:
+        d_factor = _merge(d_factor, _factor(dfa, s, d, c), s.dtype)
+    out = _equation(eq, s, d, s_factor, d_factor)
+    if eqa != eq:
+        shape = np.broadcast_shapes(s.shape, d.shape)
+        if not _is_scratch(out, shape, s, d):
+            out = np.array(np.broadcast_to(out, shape))
+        alpha = slice(3, 4)
+        out[..., alpha] = _equation(
+            eqa, s[..., alpha], d[..., alpha], _part(s_factor, alpha), _part(d_factor, alpha)
+        )
     return out
 
 
@@ -304,6 +309,17 @@ def _part(factor: np.ndarray | float, channels: slice) -> np.ndarray | float:
     if isinstance(factor, float) or factor.shape[-1] == 1:
         return factor
     return factor[..., channels]
+
+
+def _merge(rgb: np.ndarray | float, alpha: np.ndarray | float, dtype: np.dtype) -> np.ndarray | float:
+    """One RGBA factor from the RGB part of ``rgb`` and the alpha part of ``alpha``."""
+    if isinstance(rgb, float) and isinstance(alpha, float):
+        return rgb if rgb == alpha else np.array([rgb, rgb, rgb, alpha], dtype=dtype)
+    pixels = np.broadcast_shapes(*(np.shape(f)[:-1] for f in (rgb, alpha) if not isinstance(f, float)))
+    merged = np.empty((*pixels, 4), dtype=dtype)
+    merged[..., :3] = _part(rgb, slice(0, 3))
+    merged[..., 3:] = _part(alpha, slice(3, 4))
+    return merged
 
 
 def gl_factors(op: str) -> tuple[str, str]:

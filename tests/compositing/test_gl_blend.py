@@ -384,3 +384,40 @@ def test_overflow_is_an_error_not_inf():
     big = np.full((1, 4), 3e38, np.float32)
     with pytest.raises(ValueError, match=r"overflowed float32 in 4 value"):
         gl_blend(big, big, "ONE", "ONE")
+
+
+@pytest.mark.parametrize("target", ["float32", "unorm8"])
+def test_inputs_are_never_modified_and_the_output_is_a_new_array(target):
+    rng = np.random.default_rng(13)
+    src = rng.uniform(0, 1, (6, 4)).astype(np.float32)
+    dst = rng.uniform(0, 1, (6, 4)).astype(np.float32)
+    src_copy, dst_copy = src.copy(), dst.copy()
+    for (sf, df, eq), (sfa, dfa, eqa) in itertools.product(
+        itertools.product(
+            ["ZERO", "ONE", "SRC_COLOR", "SRC_ALPHA_SATURATE"], ["ONE", "DST_COLOR"], EQUATION_NAMES
+        ),
+        [(None, None, None), ("ONE", "ZERO", "FUNC_ADD")],
+    ):
+        out = gl_blend(
+            src,
+            dst,
+            sf,
+            df,
+            eq,
+            src_factor_alpha=sfa,
+            dst_factor_alpha=dfa,
+            equation_alpha=eqa,
+            target=target,
+        )
+        assert not np.shares_memory(out, src) and not np.shares_memory(out, dst)
+        assert out.flags.writeable
+        np.testing.assert_array_equal(src, src_copy)
+        np.testing.assert_array_equal(dst, dst_copy)
+
+
+def test_dtypes_are_kept():
+    s32, d32 = SRC.astype(np.float32), DST.astype(np.float32)
+    assert gl_blend(s32, d32, "SRC_ALPHA", "ONE_MINUS_SRC_ALPHA").dtype == np.float32
+    assert gl_blend(SRC, DST, "SRC_ALPHA", "ONE_MINUS_SRC_ALPHA").dtype == np.float64
+    assert gl_blend(s32, DST, "ONE", "ZERO").dtype == np.float64
+    assert gl_blend(s32, d32, "ONE", "ZERO", target="unorm8").dtype == np.float32
