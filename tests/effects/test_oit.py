@@ -219,3 +219,27 @@ def test_bad_fragments_are_rejected():
         resolve_a_buffer(np.array([0]), np.array([np.nan]), np.ones((1, 4)), 5)
     with pytest.raises(TypeError, match="pixel"):
         resolve_a_buffer(np.array([0.0]), np.array([0.1]), np.ones((1, 4)), 5)
+
+
+def test_a_buffer_on_rasterized_interpenetrating_quads_matches_the_plane_equations():
+    from blinn_phong.scene import AmbientLight, Scene
+
+    from .scenes import horizontal_quad, ortho_camera, quad, render_transparency
+
+    size = 48
+    red, blue = (1.0, 0.0, 0.0), (0.0, 0.0, 1.0)
+    tilted = quad([[-1.5, -1.5, -0.8], [1.5, -1.5, 0.8], [1.5, 1.5, 0.8], [-1.5, 1.5, -0.8]], red, 0.6)
+    flat = horizontal_quad(0.0, colour=blue, opacity=0.5)
+    for meshes in ((tilted, flat), (flat, tilted)):
+        scene = Scene(meshes, (AmbientLight((1, 1, 1), 1.0),), ortho_camera(), ambient=(0.0, 0.0, 0.0))
+        img = render_transparency(scene, "a_buffer", size=size).reshape(size, size, 4)
+        # pixel centres in world units (top view, x right, y up, row 0 at the top)
+        x = -2 + (np.arange(size) + 0.5) * 4 / size
+        inside = np.abs(x) < 1.5
+        red_front = analytic_stack([red, blue], [0.6, 0.5], np.zeros(4))
+        blue_front = analytic_stack([blue, red], [0.5, 0.6], np.zeros(4))
+        # the tilted quad's height is 0.8·x/1.5: above the flat one (nearer the eye) for x > 0
+        expected = np.where((x > 0)[:, None], red_front, blue_front)
+        row = img[size // 2]
+        np.testing.assert_allclose(row[inside], expected[inside], atol=1e-12)
+        np.testing.assert_array_equal(row[~inside], 0.0)
