@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import os
 
-import colour
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the name OpenImageIO documents)
 
@@ -32,6 +31,13 @@ from .alpha import premultiply, unpremultiply
 from .validate import as_rgba, check_alpha_range
 
 __all__ = ["FLOAT_EXTENSIONS", "INTEGER_EXTENSIONS", "read_image", "write_image"]
+
+
+def _srgb():
+    """colour-science's sRGB EOTF and inverse, imported on first use (the package is slow to import)."""
+    from colour.models import eotf_inverse_sRGB, eotf_sRGB
+
+    return eotf_sRGB, eotf_inverse_sRGB
 
 #: Extensions written as linear premultiplied float.
 FLOAT_EXTENSIONS = (".exr", ".hdr")
@@ -82,7 +88,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     rgba, _ = _to_rgba(pixels, spec.alpha_channel, path)
     if spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE):
         return as_rgba(rgba, f"pixels of {path}")
-    rgba[..., :3] = colour.models.eotf_sRGB(rgba[..., :3])
+    rgba[..., :3] = _srgb()[0](rgba[..., :3])
     return premultiply(rgba)
 
 
@@ -159,7 +165,7 @@ def write_image(
                 "file cannot hold; pass clip=True to clip"
             )
         straight[..., :3] = np.clip(colour_part, 0.0, 1.0)
-    straight[..., :3] = colour.models.eotf_inverse_sRGB(straight[..., :3])
+    straight[..., :3] = _srgb()[1](straight[..., :3])
     scale = 255 if bits == 8 else 65535
     dtype, fmt = (np.uint8, oiio.UINT8) if bits == 8 else (np.uint16, oiio.UINT16)
     quantised = np.rint(straight * scale).astype(dtype)
