@@ -160,8 +160,10 @@ def _weighted(colour: np.ndarray, factor: np.ndarray | float) -> np.ndarray | fl
     return colour * factor
 
 
-def _equation(name: str, s: np.ndarray, d: np.ndarray, s_factor, d_factor) -> np.ndarray:
-    """One blend equation (table 17.1) on whole RGBA arrays."""
+def _equation(
+    name: str, s: np.ndarray, d: np.ndarray, s_factor: np.ndarray | float, d_factor: np.ndarray | float
+) -> np.ndarray:
+    """One blend equation (table 17.1), component-wise on arrays of matching channels."""
     if name == "MIN":
         return np.minimum(s, d)
     if name == "MAX":
@@ -227,7 +229,8 @@ def gl_blend(
     Raises:
         TypeError: a colour is not a float array, or a name is not a string.
         ValueError: the last axis is not 4, the shapes do not broadcast, a value is NaN/Inf,
-            a factor/equation/target name is unknown (the message lists the valid ones).
+            a factor/equation/target name is unknown (the message lists the valid ones), the
+            constant is not four numbers, or a float32/float64 result overflows.
     """
     names = {
         "src_factor": src_factor,

@@ -263,3 +263,25 @@ def test_mesa_accepts_src_alpha_saturate_as_dfactor(mesa, float_run):
     assert not mesa.mesa_accepts_blend_func("ONE", "FUNC_ADD")  # not a factor: GL_INVALID_ENUM
     states = float_run[0]
     assert any(s.dst_factor == "SRC_ALPHA_SATURATE" for s in states)
+
+
+def test_rgba8_quantises_fragment_and_constant_as_the_model(mesa):
+    """The two 8-bit conversions of the model, checked densely: the fragment colour stored by
+    (ONE, ZERO), and the blend colour applied to a white fragment by (CONSTANT_COLOR, ZERO)."""
+    values = np.linspace(-0.1, 1.1, 4 * 30001, dtype=np.float32).reshape(1, -1, 4)
+    copy = mesa.BlendState("ONE", "ZERO")
+    got = mesa.mesa_blend(values, np.zeros(values.shape, np.uint8), [copy], "unorm8")
+    model = gl_blend(values[0], np.zeros(4, np.float32), "ONE", "ZERO", target="unorm8")
+    np.testing.assert_array_equal(got[0], np.rint(model * 255))
+
+    constants = np.linspace(-0.05, 1.05, 4 * 300).reshape(-1, 4)
+    states = [mesa.BlendState("CONSTANT_COLOR", "ZERO", constant=tuple(c)) for c in constants]
+    white = np.ones((len(states), 1, 4), np.float32)
+    got = mesa.mesa_blend(white, np.zeros(white.shape, np.uint8), states, "unorm8")[:, 0]
+    model = np.stack(
+        [
+            gl_blend(white[0, 0], np.zeros(4), "CONSTANT_COLOR", "ZERO", constant=c, target="unorm8")
+            for c in constants
+        ]
+    )
+    np.testing.assert_array_equal(got, np.rint(model * 255))
