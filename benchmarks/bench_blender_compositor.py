@@ -53,6 +53,7 @@ def _median_time(fn, repeat: int) -> float:
 
 def run(out_dir: str | os.PathLike, *, repeat: int = 5, python: str | None = None) -> dict:
     """Run the benchmark, write ``blender_compositor.json`` into ``out_dir`` and return its content."""
+    load_before = os.getloadavg()
     src, dst = sample_images(HEIGHT, WIDTH, seed=1)
     cases: dict[str, dict] = {"copy": {"kind": "copy"}}
     for op in ALPHA_OVER_OPERATORS:
@@ -131,6 +132,8 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 5, python: str | None = Non
             "platform": platform.platform(),
             "python": platform.python_version(),
             "numpy": np.__version__,
+            # Other processes share the cores: 1-minute load average before and after the run.
+            "load_average_1min": [load_before[0], os.getloadavg()[0]],
         },
         "rows": rows,
     }
