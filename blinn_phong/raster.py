@@ -42,7 +42,15 @@ import numpy as np
 
 from blinn_phong._checks import float_array
 
-__all__ = ["SUBPIXEL_BITS", "Fragments", "interpolate", "rasterize", "resolve_nearest", "sample_offsets"]
+__all__ = [
+    "SUBPIXEL_BITS",
+    "Fragments",
+    "interpolate",
+    "rasterize",
+    "resolve_nearest",
+    "sample_offsets",
+    "visible_fragments",
+]
 
 #: Vertex window coordinates are snapped to 1/2**SUBPIXEL_BITS pixel.
 SUBPIXEL_BITS = 8
@@ -218,6 +226,54 @@ def rasterize(
         ValueError/TypeError: wrong shapes, non-finite positions, indices out of range,
             non-positive size, samples not a perfect square.
     """
+    setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+    jobs = _tile_jobs(setup.selected, setup.x0, setup.x1, setup.y0, setup.y1)
+    pieces: list[tuple[np.ndarray, ...]] = []
+    for size, (job_tri, job_x, job_y) in jobs.items():
+        batch = max(1, _BATCH_ELEMENTS // (size * size))
+        for start in range(0, len(job_tri), batch):
+            stop = start + batch
+            pieces.append(_cover(job_tri[start:stop], job_x[start:stop], job_y[start:stop], size, setup))
+    if pieces:
+        frag_sub = np.concatenate([p[0] for p in pieces])
+        fx = np.concatenate([p[1] for p in pieces])
+        fy = np.concatenate([p[2] for p in pieces])
+    else:
+        frag_sub = np.zeros(0, np.int64)
+        fx = fy = np.zeros(0, np.int64)
+    return _fragments_from_hits(setup, frag_sub, fx, fy)
+
+
+@dataclass(frozen=True, eq=False)
+class _TriangleSetup:
+    """Per (near-clipped) sub-triangle data shared by the numpy and compiled rasterizers."""
+
+    width: int
+    height: int
+    k: int  # samples = k²; the fine grid is (k·width, k·height)
+    source: np.ndarray  # (S,) input triangle index
+    weights: np.ndarray  # (S, 3, 3) sub-vertex weights on the source triangle's vertices
+    w: np.ndarray  # (S, 3) clip w
+    x_exact: np.ndarray  # (S, 3) fine-grid window x (unsnapped)
+    y_exact: np.ndarray  # (S, 3) fine-grid rows from the top (unsnapped)
+    z: np.ndarray  # (S, 3) window depth
+    area: np.ndarray  # (S,) signed area of the snapped triangle, y-down frame
+    front: np.ndarray  # (S,) bool
+    selected: np.ndarray  # indices of sub-triangles to rasterize, in draw order
+    x0: np.ndarray  # (S,) bounding box in fine pixels (inclusive)
+    x1: np.ndarray
+    y0: np.ndarray
+    y1: np.ndarray
+    a: np.ndarray  # (S, 3) edge functions E_i = a·x + b·y + c (snapped, interior positive)
+    b: np.ndarray
+    c: np.ndarray
+    top_left: np.ndarray  # (S, 3) bool, edge owns samples exactly on it
+
+
+def _setup_triangles(
+    clip_xyzw: np.ndarray, triangles: np.ndarray, width: int, height: int, samples: int, cull_backfaces: bool
+) -> _TriangleSetup:
+    """Validate, clip against the near plane, map to the (fine) window grid, build edge functions."""
     clip = float_array(clip_xyzw, "clip_xyzw", (None, 4))
     tri = _check_triangles(triangles, len(clip))
     width = _check_size(width, "width")
@@ -246,22 +302,20 @@ def rasterize(
     if cull_backfaces:
         keep &= front
     # Screen bounding boxes in (fine) pixel indices: first/last pixel whose centre lies inside.
-    x0 = np.maximum(np.ceil(x.min(axis=1) - 0.5), 0)
-    x1 = np.minimum(np.floor(x.max(axis=1) - 0.5), fine_w - 1)
-    y0 = np.maximum(np.ceil(y.min(axis=1) - 0.5), 0)
-    y1 = np.minimum(np.floor(y.max(axis=1) - 0.5), fine_h - 1)
+    x0 = np.maximum(np.ceil(x.min(axis=1) - 0.5), 0).astype(np.int64)
+    x1 = np.minimum(np.floor(x.max(axis=1) - 0.5), fine_w - 1).astype(np.int64)
+    y0 = np.maximum(np.ceil(y.min(axis=1) - 0.5), 0).astype(np.int64)
+    y1 = np.minimum(np.floor(y.max(axis=1) - 0.5), fine_h - 1).astype(np.int64)
     keep &= (x0 <= x1) & (y0 <= y1)
-    sel = np.flatnonzero(keep)
 
     # Edge functions E_i(p) = a_i·px + b_i·py + c_i for the edge opposite vertex i, signed so the
-    # interior is positive; E_i / |area| is the screen-space barycentric of vertex i.
+    # interior is positive. With positions on the 1/256 grid every value is exact in float64.
     sign = np.where(area < 0, -1.0, 1.0)
-    j_of, k_of = (1, 2, 0), (2, 0, 1)
     a = np.empty((len(area), 3))
     b = np.empty((len(area), 3))
     c = np.empty((len(area), 3))
-    for i in range(3):
-        xj, yj, xk, yk = x[:, j_of[i]], y[:, j_of[i]], x[:, k_of[i]], y[:, k_of[i]]
+    for i, (j, kk) in enumerate(((1, 2), (2, 0), (0, 1))):
+        xj, yj, xk, yk = x[:, j], y[:, j], x[:, kk], y[:, kk]
         a[:, i] = -(yk - yj) * sign
         b[:, i] = (xk - xj) * sign
         c[:, i] = ((yk - yj) * xj - (xk - xj) * yj) * sign
@@ -270,39 +324,43 @@ def rasterize(
     # (a > 0); a horizontal edge counts when the interior has larger y_w, i.e. lies above it in
     # the returned top-row-first image (inward normal points up in rows: a == 0, b < 0).
     top_left = (a > 0) | ((a == 0) & (b < 0))
+    return _TriangleSetup(
+        width,
+        height,
+        k,
+        sub_source,
+        sub_weights,
+        w,
+        x_exact,
+        y_exact,
+        z,
+        area,
+        front,
+        np.flatnonzero(keep),
+        x0,
+        x1,
+        y0,
+        y1,
+        a,
+        b,
+        c,
+        top_left,
+    )
 
-    jobs = _tile_jobs(sel, x0, x1, y0, y1)
-    pieces: list[tuple[np.ndarray, ...]] = []
-    for size, (job_tri, job_x, job_y) in jobs.items():
-        batch = max(1, _BATCH_ELEMENTS // (size * size))
-        for start in range(0, len(job_tri), batch):
-            pieces.append(
-                _cover(
-                    job_tri[start : start + batch],
-                    job_x[start : start + batch],
-                    job_y[start : start + batch],
-                    size,
-                    x1,
-                    y1,
-                    a,
-                    b,
-                    c,
-                    top_left,
-                )
-            )
-    if pieces:
-        frag_sub = np.concatenate([p[0] for p in pieces])
-        fx = np.concatenate([p[1] for p in pieces])
-        fy = np.concatenate([p[2] for p in pieces])
-        edge = np.concatenate([p[3] for p in pieces])
-    else:
-        frag_sub = np.zeros(0, np.int64)
-        fx = fy = np.zeros(0, np.int64)
-        edge = np.zeros((0, 3))
 
-    lam = _exact_barycentrics(x_exact, y_exact, frag_sub, fx + 0.5, fy + 0.5, area, edge)
-    depth = np.einsum("ni,ni->n", lam, z[frag_sub])
-    in_range = depth <= 1.0
+def _fragments_from_hits(
+    setup: _TriangleSetup, frag_sub: np.ndarray, fx: np.ndarray, fy: np.ndarray
+) -> Fragments:
+    """Barycentrics, depth and pixel/sample indices of covered fine-grid samples (fx, fy) of sub-triangles."""
+    px, py = fx + 0.5, fy + 0.5
+    edge = (
+        setup.a[frag_sub] * px[:, None] + setup.b[frag_sub] * py[:, None] + setup.c[frag_sub]
+        if len(frag_sub)
+        else np.zeros((0, 3))
+    )
+    lam = _exact_barycentrics(setup.x_exact, setup.y_exact, frag_sub, px, py, setup.area, edge)
+    depth = np.einsum("ni,ni->n", lam, setup.z[frag_sub])
+    in_range = depth <= 1.0  # beyond the far plane: clipped
     if not in_range.all():
         frag_sub, fx, fy, lam, depth = (
             frag_sub[in_range],
@@ -312,22 +370,20 @@ def rasterize(
             depth[in_range],
         )
     depth = np.maximum(depth, 0.0)  # the near plane itself, up to rounding of the clipped vertices
-    q = lam / w[frag_sub]
+    q = lam / setup.w[frag_sub]
     persp = q / q.sum(axis=1, keepdims=True)
-    bary = np.einsum("nj,njm->nm", persp, sub_weights[frag_sub])
-
-    pixel = (fy // k) * width + fx // k
-    sample = (fy % k) * k + fx % k
+    bary = np.einsum("nj,njm->nm", persp, setup.weights[frag_sub])
+    k = setup.k
     return Fragments(
-        width=width,
-        height=height,
+        width=setup.width,
+        height=setup.height,
         samples=k * k,
-        pixel=pixel.astype(np.int64),
-        sample=sample.astype(np.int64),
+        pixel=((fy // k) * setup.width + fx // k).astype(np.int64),
+        sample=((fy % k) * k + fx % k).astype(np.int64),
         depth=depth,
-        triangle=sub_source[frag_sub],
+        triangle=setup.source[frag_sub],
         bary=bary,
-        front_facing=front[frag_sub],
+        front_facing=setup.front[frag_sub],
     )
 
 
@@ -394,36 +450,26 @@ def _tile_jobs(
 
 
 def _cover(
-    tri: np.ndarray,
-    px0: np.ndarray,
-    py0: np.ndarray,
-    size: int,
-    x1: np.ndarray,
-    y1: np.ndarray,
-    a: np.ndarray,
-    b: np.ndarray,
-    c: np.ndarray,
-    top_left: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    tri: np.ndarray, px0: np.ndarray, py0: np.ndarray, size: int, setup: _TriangleSetup
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Evaluate the edge functions of a batch of triangles on size×size pixel blocks.
 
-    Returns (triangle, x, y, edge values (n, 3)) of the covered (fine) pixels.
+    Returns (sub-triangle, x, y) of the covered (fine) pixels.
     """
     d = np.arange(size)
     px = px0[:, None] + d[None, :]  # (B, S)
     py = py0[:, None] + d[None, :]
     cx = px + 0.5
     cy = py + 0.5
-    mask = (px <= x1[tri][:, None])[:, None, :] & (py <= y1[tri][:, None])[:, :, None]
-    edges = []
+    mask = (px <= setup.x1[tri][:, None])[:, None, :] & (py <= setup.y1[tri][:, None])[:, :, None]
     for i in range(3):
-        e = (a[tri, i][:, None] * cx)[:, None, :] + (b[tri, i][:, None] * cy + c[tri, i][:, None])[:, :, None]
-        tl = top_left[tri, i][:, None, None]
-        mask &= (e > 0) | ((e == 0) & tl)
-        edges.append(e)
+        a = setup.a[tri, i][:, None]
+        b = setup.b[tri, i][:, None]
+        c = setup.c[tri, i][:, None]
+        e = (a * cx)[:, None, :] + (b * cy + c)[:, :, None]
+        mask &= (e > 0) | ((e == 0) & setup.top_left[tri, i][:, None, None])
     bi, yi, xi = np.nonzero(mask)
-    edge_vals = np.stack([e[bi, yi, xi] for e in edges], axis=1)
-    return tri[bi], px[bi, xi], py[bi, yi], edge_vals
+    return tri[bi], px[bi, xi], py[bi, yi]
 
 
 # --------------------------------------------------------------------------- resolve and interpolation
@@ -452,6 +498,39 @@ def resolve_nearest(fragments: Fragments) -> np.ndarray:
     chosen = nearest[fragments.triangle[nearest] == first_tri[key[nearest]]]
     winner[key[chosen]] = chosen
     return winner
+
+
+def visible_fragments(
+    clip_xyzw: np.ndarray,
+    triangles: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    samples: int = 1,
+    cull_backfaces: bool = False,
+    engine: str = "numpy",
+) -> Fragments:
+    """The nearest fragment of every covered sample (a z-buffer pass), ordered by ``sample_key``.
+
+    ``engine="numpy"`` is :func:`rasterize` + :func:`resolve_nearest` (the reference);
+    ``engine="numba"`` runs the compiled loop of :mod:`blinn_phong.fast`, which never
+    materialises hidden fragments; ``"auto"`` picks numba when it imports. Arguments
+    as for :func:`rasterize`.
+    """
+    if engine not in ("numpy", "numba", "auto"):
+        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    if engine != "numpy":
+        from blinn_phong.fast import numba_available, visible_fragments_compiled
+
+        if numba_available():
+            return visible_fragments_compiled(
+                clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
+            )
+        if engine == "numba":
+            raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    frags = rasterize(clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces)
+    winner = resolve_nearest(frags)
+    return frags.subset(winner[winner >= 0])
 
 
 def interpolate(fragments: Fragments, triangles: np.ndarray, attribute: np.ndarray) -> np.ndarray:

@@ -4,8 +4,9 @@ Each stage is a public function so other passes (transparency, shadows, fog) can
 reuse or replace one of them:
 
 * :func:`prepare_scene` — every mesh to eye and clip space, normals, lights in eye space;
-* :func:`blinn_phong.raster.rasterize` — all fragments;
-* :func:`blinn_phong.raster.resolve_nearest` — the z-buffer test (visibility before shading);
+* :func:`blinn_phong.raster.visible_fragments` — the z-buffer pass: all fragments
+  (:func:`~blinn_phong.raster.rasterize`) resolved to the nearest per sample
+  (:func:`~blinn_phong.raster.resolve_nearest`), i.e. visibility before shading;
 * :func:`shade_fragments` — the lighting equation at any set of fragments, at the
   mesh's shading frequency (flat / Gouraud / Phong);
 * :func:`resolve_samples` — the box filter over the k×k samples of each pixel, giving
@@ -36,7 +37,7 @@ import numpy as np
 
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
 from blinn_phong.normals import face_normals, normalize, transform_normals, vertex_normals
-from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
+from blinn_phong.raster import Fragments, interpolate, visible_fragments
 from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
 
 __all__ = [
@@ -169,6 +170,7 @@ def shade_fragments(
     shading: str = "phong",
     gl_compat: bool = False,
     visibility: np.ndarray | None = None,
+    engine: str = "numpy",
 ) -> FragmentShading:
     """Shade any set of fragments of ``prepared`` (e.g. the nearest ones, or all of them).
 
@@ -182,6 +184,8 @@ def shade_fragments(
             scene without AmbientLights). With Gouraud/flat shading the per-light terms
             are interpolated and then multiplied, which has no per-vertex clamp, so it
             cannot be combined with ``gl_compat``.
+        engine: ``"numpy"`` (reference), ``"numba"`` or ``"auto"`` for the lighting
+            evaluation (:func:`blinn_phong.lighting.shade`).
     """
     shading = _check_shading(shading)
     count = len(fragments)
@@ -222,7 +226,7 @@ def shade_fragments(
                 continue
             f = fragments.subset(idx)
             vis = None if visibility is None else visibility[idx]
-            result = _shade_side(prepared, m, mesh, f, mode, front, material, gl_compat, vis)
+            result = _shade_side(prepared, m, mesh, f, mode, front, material, gl_compat, vis, engine)
             for k, v in result.items():
                 if k == "alpha":
                     alpha[idx] = v
@@ -259,6 +263,7 @@ def _shade_side(
     material: Material,
     gl_compat: bool,
     vis: np.ndarray | None,
+    engine: str,
 ) -> dict[str, np.ndarray]:
     scene = prepared.scene
     model = scene.light_model
@@ -270,7 +275,7 @@ def _shade_side(
     if mode == "phong":
         points = interpolate(f, tris, prepared.eye_position)
         normals = sign * normalize(interpolate(f, tris, prepared.eye_normal))
-        terms = shade(points, normals, material, prepared.lights, visibility=vis, **common)
+        terms = shade(points, normals, material, prepared.lights, visibility=vis, engine=engine, **common)
         if gl_compat:
             primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
             rgb = np.clip(primary + secondary, 0.0, 1.0)
@@ -368,7 +373,8 @@ def resolve_samples(values: np.ndarray, width: int, height: int, samples: int) -
         samples: samples per pixel.
 
     Returns:
-        (height, width, C) float64 means (row 0 at the top).
+        (height, width, C) means (row 0 at the top), in the dtype of ``values``
+        (accumulated in float64).
     """
     values = np.asarray(values)
     if values.ndim != 2 or values.shape[0] != width * height * samples:
@@ -376,7 +382,10 @@ def resolve_samples(values: np.ndarray, width: int, height: int, samples: int) -
             f"values: expected shape ({width * height * samples}, C) for {height}×{width}×{samples} samples, "
             f"got {values.shape}"
         )
-    return values.reshape(height, width, samples, -1).mean(axis=2)
+    grid = values.reshape(height, width, samples, -1)
+    if samples == 1:
+        return grid[:, :, 0]
+    return grid.mean(axis=2, dtype=np.float64).astype(values.dtype, copy=False)
 
 
 @dataclass(frozen=True)
@@ -384,15 +393,14 @@ class RenderStats:
     """Timing and counts of one render.
 
     Attributes:
-        seconds: wall time per stage (``prepare``, ``rasterize``, ``resolve``, ``shade``,
-            ``resolve_samples``) in seconds.
-        triangles: input triangles; fragments: rasterized fragments (all depths);
-        shaded: fragments shaded (visible samples).
+        seconds: wall time per stage (``prepare``, ``visibility`` — rasterization and
+            depth resolve —, ``shade``, ``resolve_samples``) in seconds.
+        triangles: input triangles.
+        shaded: samples shaded (visible samples; each shaded once).
     """
 
     seconds: dict[str, float] = field(default_factory=dict)
     triangles: int = 0
-    fragments: int = 0
     shaded: int = 0
 
     @property
@@ -432,6 +440,7 @@ def render(
     samples: int = 1,
     gl_compat: bool = False,
     cull_backfaces: bool = False,
+    engine: str = "auto",
     progress: ProgressCallback | None = None,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting.
@@ -445,12 +454,17 @@ def render(
             alpha is the covered fraction.
         gl_compat: the OpenGL 2.1 fixed-function preset (see the module docstring).
         cull_backfaces: discard clockwise (back-facing) triangles.
+        engine: ``"numpy"`` — the reference implementation; ``"numba"`` — the compiled
+            visibility pass and lighting kernel (same results to ~1e-12); ``"auto"`` —
+            numba when it can be imported, else numpy.
         progress: optional ``callback(stage, fraction_done)`` called as stages finish.
 
     Returns:
         :class:`RenderResult`.
     """
     shading = _check_shading(shading)
+    if engine not in ("numpy", "numba", "auto"):
+        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     seconds: dict[str, float] = {}
 
     def report(stage: str, fraction: float) -> None:
@@ -463,51 +477,48 @@ def render(
     report("prepare", 0.05)
 
     t = time.perf_counter()
-    fragments = rasterize(
-        prepared.clip, prepared.triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
+    visible = visible_fragments(
+        prepared.clip,
+        prepared.triangles,
+        width,
+        height,
+        samples=samples,
+        cull_backfaces=cull_backfaces,
+        engine=engine,
     )
-    seconds["rasterize"] = time.perf_counter() - t
-    report("rasterize", 0.5)
+    seconds["visibility"] = time.perf_counter() - t
+    report("visibility", 0.5)
 
     t = time.perf_counter()
-    winner = resolve_nearest(fragments)
-    covered = np.flatnonzero(winner >= 0)
-    visible = fragments.subset(winner[covered])
-    seconds["resolve"] = time.perf_counter() - t
-    report("resolve", 0.6)
-
-    t = time.perf_counter()
-    shaded = shade_fragments(prepared, visible, shading=shading, gl_compat=gl_compat)
+    shaded = shade_fragments(prepared, visible, shading=shading, gl_compat=gl_compat, engine=engine)
     seconds["shade"] = time.perf_counter() - t
     report("shade", 0.9)
 
     t = time.perf_counter()
-    n_keys = len(winner)
-    k = fragments.samples
-
-    def per_sample(values: np.ndarray) -> np.ndarray:
-        buf = np.zeros((n_keys, values.shape[1]))
-        buf[covered] = values
-        return buf
-
+    k = visible.samples
+    covered = visible.sample_key
+    # One scatter of every per-sample channel into a float32 buffer, then the box filter.
     a = shaded.alpha[:, None]
-    rgba = resolve_samples(per_sample(np.c_[shaded.rgb * a, a]), width, height, k)
-    passes = {
-        name: resolve_samples(per_sample(getattr(shaded, name) * a), width, height, k).astype(np.float32)
-        for name in ("ambient", "diffuse", "specular")
-    }
-    depth_buf = np.ones(n_keys)
+    channels = np.concatenate(
+        [shaded.rgb * a, a, shaded.ambient * a, shaded.diffuse * a, shaded.specular * a, shaded.normal],
+        axis=1,
+    ).astype(np.float32)
+    buf = np.zeros((width * height * k, channels.shape[1]), np.float32)
+    buf[covered] = channels
+    pixels = resolve_samples(buf, width, height, k)
+    depth_buf = np.ones(width * height * k, np.float32)
     depth_buf[covered] = visible.depth
     depth = depth_buf.reshape(height, width, k).min(axis=2)
-    normal = normalize(resolve_samples(per_sample(shaded.normal), width, height, k))
+    normal = normalize(pixels[..., 13:16])
+    passes = {"ambient": pixels[..., 4:7], "diffuse": pixels[..., 7:10], "specular": pixels[..., 10:13]}
     seconds["resolve_samples"] = time.perf_counter() - t
     report("done", 1.0)
 
-    stats = RenderStats(seconds, len(prepared.triangles), len(fragments), len(visible))
+    stats = RenderStats(seconds, len(prepared.triangles), len(visible))
     return RenderResult(
-        rgba=rgba.astype(np.float32),
-        depth=depth.astype(np.float32),
+        rgba=np.ascontiguousarray(pixels[..., 0:4]),
+        depth=depth,
         normal=normal.astype(np.float32),
-        passes=passes,
+        passes={name: np.ascontiguousarray(v) for name, v in passes.items()},
         stats=stats,
     )

@@ -217,23 +217,52 @@ def _set_material(gl, face, material) -> None:
     gl.glMaterialf(face, gl.GL_SHININESS, material.shininess)
 
 
-def _draw_meshes(gl, scene: Scene) -> None:
-    gl.glEnableClientState(gl.GL_VERTEX_ARRAY)
-    gl.glEnableClientState(gl.GL_NORMAL_ARRAY)
-    for mesh in scene.meshes:
-        _set_material(gl, gl.GL_FRONT_AND_BACK, mesh.material)
-        if mesh.back_material is not None:
-            _set_material(gl, gl.GL_BACK, mesh.back_material)
-        gl.glMatrixMode(gl.GL_MODELVIEW)
-        gl.glLoadMatrixd(np.ascontiguousarray((scene.camera.view @ mesh.transform).T))
-        positions = np.ascontiguousarray(mesh.positions, dtype=np.float64)
-        normals = np.ascontiguousarray(_mesh_normals(mesh), dtype=np.float64)
-        indices = np.ascontiguousarray(mesh.triangles, dtype=np.uint32)
-        gl.glVertexPointer(3, gl.GL_DOUBLE, 0, positions)
-        gl.glNormalPointer(gl.GL_DOUBLE, 0, normals)
-        gl.glDrawElements(gl.GL_TRIANGLES, indices.size, gl.GL_UNSIGNED_INT, indices)
-    gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
-    gl.glDisableClientState(gl.GL_NORMAL_ARRAY)
+class _MeshBuffers:
+    """Each mesh's positions, normals (float32) and indices (uint32) in GPU buffer objects."""
+
+    def __init__(self, gl: object, scene: Scene) -> None:
+        self.gl = gl
+        self.items = []
+        for mesh in scene.meshes:
+            ids = gl.glGenBuffers(3)
+            arrays = (
+                np.ascontiguousarray(mesh.positions, dtype=np.float32),
+                np.ascontiguousarray(_mesh_normals(mesh), dtype=np.float32),
+                np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+            )
+            for buffer, array, target in zip(
+                ids, arrays, (gl.GL_ARRAY_BUFFER, gl.GL_ARRAY_BUFFER, gl.GL_ELEMENT_ARRAY_BUFFER), strict=True
+            ):
+                gl.glBindBuffer(target, buffer)
+                gl.glBufferData(target, array.nbytes, array, gl.GL_STATIC_DRAW)
+            self.items.append((mesh, ids, arrays[2].size))
+        gl.glBindBuffer(gl.GL_ARRAY_BUFFER, 0)
+        gl.glBindBuffer(gl.GL_ELEMENT_ARRAY_BUFFER, 0)
+
+    def draw(self, scene: Scene) -> None:
+        gl = self.gl
+        gl.glEnableClientState(gl.GL_VERTEX_ARRAY)
+        gl.glEnableClientState(gl.GL_NORMAL_ARRAY)
+        for mesh, (vbo, nbo, ibo), count in self.items:
+            _set_material(gl, gl.GL_FRONT_AND_BACK, mesh.material)
+            if mesh.back_material is not None:
+                _set_material(gl, gl.GL_BACK, mesh.back_material)
+            gl.glMatrixMode(gl.GL_MODELVIEW)
+            gl.glLoadMatrixd(np.ascontiguousarray((scene.camera.view @ mesh.transform).T))
+            gl.glBindBuffer(gl.GL_ARRAY_BUFFER, vbo)
+            gl.glVertexPointer(3, gl.GL_FLOAT, 0, None)
+            gl.glBindBuffer(gl.GL_ARRAY_BUFFER, nbo)
+            gl.glNormalPointer(gl.GL_FLOAT, 0, None)
+            gl.glBindBuffer(gl.GL_ELEMENT_ARRAY_BUFFER, ibo)
+            gl.glDrawElements(gl.GL_TRIANGLES, count, gl.GL_UNSIGNED_INT, None)
+        gl.glBindBuffer(gl.GL_ARRAY_BUFFER, 0)
+        gl.glBindBuffer(gl.GL_ELEMENT_ARRAY_BUFFER, 0)
+        gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
+        gl.glDisableClientState(gl.GL_NORMAL_ARRAY)
+
+    def delete(self) -> None:
+        for _, ids, _ in self.items:
+            self.gl.glDeleteBuffers(3, ids)
 
 
 def render_fixed_function(scene: Scene, width: int, height: int, *, flat: bool = False) -> GLRender:
@@ -251,8 +280,10 @@ def render_fixed_function(scene: Scene, width: int, height: int, *, flat: bool =
     try:
         start = time.perf_counter()
         _set_state(gl, scene, flat=flat)
-        _draw_meshes(gl, scene)
+        buffers = _MeshBuffers(gl, scene)
+        buffers.draw(scene)
         gl.glFinish()
+        buffers.delete()
         seconds = time.perf_counter() - start
         return GLRender(fb.read(), seconds, info.renderer)
     finally:
@@ -283,8 +314,9 @@ def _program(gl) -> int:
 def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1) -> GLRender:
     """Render ``scene`` with the per-pixel Blinn-Phong GLSL program (same state as the fixed function).
 
-    ``repeats`` > 1 draws the frame that many times and reports the mean time per frame
-    (for benchmarks; the first draw also compiles the shader variant and is excluded).
+    Geometry is uploaded once to buffer objects (float32 positions and normals). ``repeats``
+    sets how many frames are drawn and timed after one untimed warm-up frame (shader
+    variant compilation, upload); ``seconds`` is the mean per frame, including ``glFinish``.
     """
     info = gl_context()
     from OpenGL import GL
@@ -299,14 +331,16 @@ def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1
         gl.glUniform1i(gl.glGetUniformLocation(program, "n_lights"), n)
         gl.glUniform1i(gl.glGetUniformLocation(program, "local_viewer"), int(scene.light_model.local_viewer))
         gl.glUniform1i(gl.glGetUniformLocation(program, "two_sided"), int(scene.light_model.two_sided))
-        _draw_meshes(gl, scene)
+        buffers = _MeshBuffers(gl, scene)
+        buffers.draw(scene)  # warm-up: shader variant compilation, buffer upload
         gl.glFinish()
         start = time.perf_counter()
         for _ in range(max(repeats, 1)):
             gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
-            _draw_meshes(gl, scene)
+            buffers.draw(scene)
             gl.glFinish()
         seconds = (time.perf_counter() - start) / max(repeats, 1)
+        buffers.delete()
         image = fb.read()
         gl.glUseProgram(0)
         return GLRender(image, seconds, info.renderer)

@@ -33,6 +33,7 @@ from oracles.egl import EGLUnavailable, gl_context
 pytestmark = pytest.mark.mesa
 
 SIZE = 128
+ENGINES = ["numpy", "numba"]  # the reference and the compiled fast path
 
 
 @pytest.fixture(scope="module")
@@ -190,9 +191,10 @@ PHONG_CASES = [
 
 
 @pytest.mark.parametrize("case", GOURAUD_CASES)
-def test_gouraud_matches_fixed_function_smooth(gl, case: str) -> None:
+@pytest.mark.parametrize("engine", ENGINES)
+def test_gouraud_matches_fixed_function_smooth(gl, case: str, engine: str) -> None:
     scene = SCENES[case]()
-    ours = bp.render(scene, SIZE, SIZE, shading="gouraud", gl_compat=True).rgba
+    ours = bp.render(scene, SIZE, SIZE, shading="gouraud", gl_compat=True, engine=engine).rgba
     theirs = gl.render_fixed_function(scene, SIZE, SIZE).rgba
     mismatch, max_diff, n = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
     assert n > 2000
@@ -201,9 +203,10 @@ def test_gouraud_matches_fixed_function_smooth(gl, case: str) -> None:
 
 
 @pytest.mark.parametrize("case", FLAT_CASES)
-def test_flat_matches_fixed_function_provoking_vertex(gl, case: str) -> None:
+@pytest.mark.parametrize("engine", ENGINES)
+def test_flat_matches_fixed_function_provoking_vertex(gl, case: str, engine: str) -> None:
     scene = SCENES[case]()
-    ours = bp.render(scene, SIZE, SIZE, shading="flat", gl_compat=True).rgba
+    ours = bp.render(scene, SIZE, SIZE, shading="flat", gl_compat=True, engine=engine).rgba
     theirs = gl.render_fixed_function(scene, SIZE, SIZE, flat=True).rgba
     mismatch, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
     assert mismatch == 0
@@ -211,9 +214,10 @@ def test_flat_matches_fixed_function_provoking_vertex(gl, case: str) -> None:
 
 
 @pytest.mark.parametrize("case", PHONG_CASES)
-def test_phong_matches_glsl_per_pixel_shader(gl, case: str) -> None:
+@pytest.mark.parametrize("engine", ENGINES)
+def test_phong_matches_glsl_per_pixel_shader(gl, case: str, engine: str) -> None:
     scene = SCENES[case]()
-    ours = bp.render(scene, SIZE, SIZE, shading="phong", gl_compat=True).rgba
+    ours = bp.render(scene, SIZE, SIZE, shading="phong", gl_compat=True, engine=engine).rgba
     theirs = gl.render_glsl_phong(scene, SIZE, SIZE).rgba
     mismatch, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
     assert mismatch == 0
