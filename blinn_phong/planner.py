@@ -59,11 +59,16 @@ _EPS = 1e-9
 
 @dataclass(frozen=True)
 class Choice:
-    """One decision: ``method``, its ``params`` (e.g. layers, resolution) and the ``reason``."""
+    """One decision: ``method``, its ``params`` and the ``reason``.
+
+    ``params`` are keyword arguments of the function that carries the method out:
+    ``layers`` for :func:`blinn_phong.oit.resolve_transparency`, ``plane`` or ``resolution``
+    for :func:`blinn_phong.shadows.light_visibility`.
+    """
 
     method: str
     reason: str
-    params: dict[str, float | int] = field(default_factory=dict)
+    params: dict[str, object] = field(default_factory=dict)
 
     def __str__(self) -> str:
         extra = ", ".join(f"{k}={v}" for k, v in self.params.items())
@@ -332,12 +337,7 @@ def _plan_shadow(scene: Scene, facts: list[_MeshFacts], index: int, tolerance: f
                     "planar",
                     f"only the plane of mesh {min(receivers)} receives shadows and every caster lies between "
                     "it and the light: projected (fake) shadows are exact",
-                    {
-                        "a": float(oriented[0]),
-                        "b": float(oriented[1]),
-                        "c": float(oriented[2]),
-                        "d": float(oriented[3]),
-                    },
+                    {"plane": tuple(float(v) for v in oriented)},
                 )
     a, b = pairs[0]
     what = f"mesh {a} can shade itself" if a == b else f"mesh {a} can shadow mesh {b}"

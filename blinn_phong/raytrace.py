@@ -28,6 +28,7 @@ __all__ = [
     "area_light_visibility",
     "directional_light_visibility",
     "point_light_visibility",
+    "world_triangles",
 ]
 
 #: Embree reports "no hit" with a very large t; anything beyond this counts as a miss.
@@ -142,6 +143,29 @@ class RayScene:
         tm = np.minimum(tm, 1e37).astype(np.float32)
         res = self._scene.run(o.astype(np.float32), d.astype(np.float32), dists=tm.copy(), query="OCCLUDED")
         return np.asarray(res) >= 0
+
+
+def world_triangles(scene: object) -> tuple[np.ndarray, np.ndarray]:
+    """Every triangle of a :class:`blinn_phong.scene.Scene` in world space.
+
+    Args:
+        scene: the scene (meshes with ``positions``, ``triangles`` and a model ``transform``).
+
+    Returns:
+        ``(triangles (T, 3, 3), mesh_index (T,))`` in scene order, the order of
+        :func:`blinn_phong.render.prepare_scene`.
+    """
+    meshes = getattr(scene, "meshes", None)
+    if meshes is None:
+        raise TypeError(f"scene must be a blinn_phong.Scene, got {type(scene).__name__}")
+    tris, owner = [], []
+    for i, mesh in enumerate(meshes):
+        world = (np.c_[mesh.positions, np.ones(len(mesh.positions))] @ mesh.transform.T)[:, :3]
+        tris.append(world[mesh.triangles])
+        owner.append(np.full(len(mesh.triangles), i, dtype=np.int64))
+    if not tris:
+        return np.zeros((0, 3, 3)), np.zeros(0, dtype=np.int64)
+    return np.concatenate(tris), np.concatenate(owner)
 
 
 def _offset_origins(

@@ -119,13 +119,7 @@ def shadow_agreement(scene, choice, light_index=0):
     facing = np.einsum("ij,ij->i", normals, np.broadcast_to(to_light, points.shape)) > 0
     points, normals = points[facing], normals[facing]
     tris = world_triangles(scene)
-    params = dict(choice.params)
-    kwargs = {}
-    if choice.method == "planar":
-        kwargs["plane"] = (params["a"], params["b"], params["c"], params["d"])
-    if choice.method == "shadow_map":
-        kwargs["resolution"] = params["resolution"]
-    cheap = light_visibility(choice.method, light, tris, points, normals, **kwargs)
+    cheap = light_visibility(choice.method, light, tris, points, normals, **choice.params)
     exact = light_visibility("ray_traced", light, tris, points, normals)
     return cheap, exact
 
