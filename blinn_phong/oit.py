@@ -35,6 +35,8 @@ the "depth-tested but not written" rule for transparent geometry.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from compositing import composite
@@ -50,6 +52,7 @@ __all__ = [
     "resolve_in_draw_order",
     "resolve_transparency",
     "resolve_weighted_blended",
+    "transparency_pass",
     "triangle_draw_order",
     "wboit_weights",
 ]
@@ -456,3 +459,85 @@ def resolve_transparency(
     if method == "sort_triangles":
         return resolve_in_draw_order(pixel, triangle_draw_order(tri, dist), rgba, n_pixels, background)
     raise ValueError(f"method must be one of {TRANSPARENCY_METHODS}, got {method!r}")
+
+
+def transparency_pass(
+    fragments: object,
+    opaque: np.ndarray,
+    shade: Callable[[np.ndarray], np.ndarray],
+    method: str,
+    *,
+    triangle_mesh: np.ndarray,
+    triangle_eye_distance: np.ndarray,
+    layers: int | None = None,
+    wboit_equation: str = "eq10",
+) -> tuple[np.ndarray, np.ndarray]:
+    """Opaque fragments through a z-buffer, then transparent ones resolved by ``method``.
+
+    The order of the issue: opaque geometry first with depth writes; transparent geometry
+    after, depth-tested against the opaque depth but not writing it, then resolved by
+    :func:`resolve_transparency` over the opaque image. Only the fragments that can be seen
+    are shaded: the nearest opaque one per sample and the transparent ones in front of it.
+
+    Args:
+        fragments: :class:`blinn_phong.raster.Fragments` of every triangle.
+        opaque: (N,) bool, True for fragments of opaque materials (opacity 1).
+        shade: ``shade(index) -> (len(index), 4)`` premultiplied linear RGBA of the
+            fragments ``index`` (e.g. from :func:`blinn_phong.render.shade_fragments`).
+        method: ``zbuffer`` or one of :data:`TRANSPARENCY_METHODS`.
+        triangle_mesh: (T,) mesh of each triangle (``PreparedScene.triangle_mesh``).
+        triangle_eye_distance: (T,) eye distance of each triangle's centroid
+            (``-PreparedScene.face_eye_centroid[:, 2]``).
+        layers: passes for ``depth_peeling``.
+        wboit_equation: weight function for ``weighted_blended`` (window-depth ``eq10`` by
+            default, since fragments carry window depth).
+
+    Returns:
+        ``(rgba, depth)``: (width·height·samples, 4) premultiplied RGBA per sample (index
+        ``Fragments.sample_key``) and (width·height·samples,) opaque window depth (1 = empty).
+    """
+    n_keys = int(fragments.width * fragments.height * fragments.samples)  # type: ignore[attr-defined]
+    key = np.asarray(fragments.sample_key)  # type: ignore[attr-defined]
+    frag_depth = np.asarray(fragments.depth)  # type: ignore[attr-defined]
+    frag_tri = np.asarray(fragments.triangle)  # type: ignore[attr-defined]
+    op = np.asarray(opaque, dtype=bool)
+    if op.shape != key.shape:
+        raise ValueError(f"opaque must have one flag per fragment, shape {key.shape}, got {op.shape}")
+    if method != "zbuffer" and method not in TRANSPARENCY_METHODS:
+        raise ValueError(f"method must be 'zbuffer' or one of {TRANSPARENCY_METHODS}, got {method!r}")
+    # opaque pass: nearest depth per sample, ties to the earlier triangle (GL_LESS in draw order)
+    op_idx = np.flatnonzero(op)
+    depth = np.ones(n_keys)
+    np.minimum.at(depth, key[op_idx], frag_depth[op_idx])
+    nearest = op_idx[frag_depth[op_idx] == depth[key[op_idx]]]
+    first = np.full(n_keys, np.iinfo(np.int64).max)
+    np.minimum.at(first, key[nearest], frag_tri[nearest])
+    winners = nearest[frag_tri[nearest] == first[key[nearest]]]
+    winners = winners[np.unique(key[winners], return_index=True)[1]]
+    image = np.zeros((n_keys, 4))
+    if len(winners):
+        image[key[winners]] = shade(winners)
+    if method == "zbuffer":
+        return image, depth
+    tr_idx = np.flatnonzero(~op)
+    tr_idx = tr_idx[frag_depth[tr_idx] < depth[key[tr_idx]]]
+    if len(tr_idx) == 0:
+        return image, depth
+    rgba = np.asarray(shade(tr_idx))
+    weights = None
+    if method == "weighted_blended":
+        weights = wboit_weights(rgba[:, 3], wboit_equation, window_depth=frag_depth[tr_idx])
+    out = resolve_transparency(
+        method,
+        key[tr_idx],
+        frag_depth[tr_idx],
+        rgba,
+        n_keys,
+        triangle=frag_tri[tr_idx],
+        triangle_mesh=triangle_mesh,
+        triangle_eye_distance=triangle_eye_distance,
+        background=image.astype(rgba.dtype),
+        layers=layers,
+        weights=weights,
+    )
+    return out, depth

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.oit import depth_test, resolve_transparency
+from blinn_phong.oit import transparency_pass
 from blinn_phong.primitives import uv_sphere
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.render import prepare_scene, shade_fragments
@@ -82,32 +82,22 @@ def render_transparency(scene: Scene, method: str, size: int = 48, layers: int |
     """Opaque pass with a z-buffer, then transparent fragments resolved by ``method``: (size², 4)."""
     prepared = prepare_scene(scene)
     frags = rasterize(prepared.clip, prepared.triangles, size, size)
-    shaded = shade_fragments(prepared, frags, shading="flat")
-    a = shaded.alpha
-    rgba = np.c_[shaded.rgb * a[:, None], a]
-    n_pix = size * size
-    opaque = a >= 1.0
-    op = frags.subset(opaque)
-    win = resolve_nearest(op)
-    background = np.zeros((n_pix, 4))
-    depth = np.ones(n_pix)
-    hit = win >= 0
-    background[hit] = rgba[opaque][win[hit]]
-    depth[hit] = op.depth[win[hit]]
-    t = np.flatnonzero(~opaque)
-    idx = t[depth_test(frags.pixel[t], frags.depth[t], depth)]
-    return resolve_transparency(
+    opacity = np.array([m.material.opacity for m in scene.meshes])[prepared.triangle_mesh]
+
+    def shade(index):
+        shaded = shade_fragments(prepared, frags.subset(index), shading="flat")
+        return np.c_[shaded.rgb * shaded.alpha[:, None], shaded.alpha]
+
+    rgba, _ = transparency_pass(
+        frags,
+        opacity[frags.triangle] >= 1.0,
+        shade,
         method,
-        frags.pixel[idx],
-        frags.depth[idx],
-        rgba[idx],
-        n_pix,
-        triangle=frags.triangle[idx],
         triangle_mesh=prepared.triangle_mesh,
         triangle_eye_distance=-prepared.face_eye_centroid[:, 2],
-        background=background,
         layers=layers,
     )
+    return rgba
 
 
 def visible_surface_points(scene: Scene, size: int = 96) -> tuple[np.ndarray, np.ndarray]:

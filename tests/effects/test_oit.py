@@ -4,6 +4,8 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from blinn_phong.oit import (
     depth_complexity,
@@ -243,3 +245,48 @@ def test_a_buffer_on_rasterized_interpenetrating_quads_matches_the_plane_equatio
         row = img[size // 2]
         np.testing.assert_allclose(row[inside], expected[inside], atol=1e-12)
         np.testing.assert_array_equal(row[~inside], 0.0)
+
+
+def _scalar_over_stack(fragments, background):
+    """Per pixel, nearest first: C = Σ cᵢ Π_{j<i}(1 − αⱼ) + T·bg (premultiplied), with Python floats."""
+    out = []
+    for frags, bg in zip(fragments, background, strict=True):
+        acc = [0.0, 0.0, 0.0, 0.0]
+        t = 1.0
+        for _, rgba in sorted(frags, key=lambda f: f[0]):
+            acc = [a + t * c for a, c in zip(acc, rgba, strict=True)]
+            t *= 1.0 - rgba[3]
+        out.append([a + t * b for a, b in zip(acc, bg, strict=True)])
+    return np.array(out)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    data=st.lists(
+        st.tuples(
+            st.integers(0, 5),
+            st.floats(0.0, 1.0),
+            st.floats(0.0, 1.0),
+            st.floats(0.0, 1.0),
+            st.floats(0.0, 2.0),
+        ),
+        max_size=30,
+    ),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_a_buffer_equals_a_scalar_sorted_over_stack_for_random_fragments(data, seed):
+    n_pix = 6
+    rng = np.random.default_rng(seed)
+    depths = rng.permutation(len(data)) / max(len(data), 1)  # distinct depths, random order
+    pix = np.array([d[0] for d in data], dtype=np.int64)
+    alpha = np.array([d[1] for d in data])
+    colour = np.array([[d[2], d[3], d[4]] for d in data]).reshape(-1, 3)
+    rgba = np.c_[colour * alpha[:, None], alpha] if len(data) else np.zeros((0, 4))
+    bg = rng.uniform(0, 1, (n_pix, 4))
+    per_pixel = [
+        [(depths[i], rgba[i].tolist()) for i in range(len(data)) if pix[i] == p] for p in range(n_pix)
+    ]
+    expected = _scalar_over_stack(per_pixel, bg)
+    np.testing.assert_allclose(resolve_a_buffer(pix, depths, rgba, n_pix, bg), expected, atol=1e-12)
+    # with enough layers depth peeling is the same
+    np.testing.assert_allclose(resolve_depth_peeling(pix, depths, rgba, n_pix, 30, bg), expected, atol=1e-12)
