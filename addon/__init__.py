@@ -12,24 +12,25 @@ import ``bpy``: the verification CLI
 
 from __future__ import annotations
 
+import importlib
+from types import ModuleType
+
+#: Sub-modules with their own ``register()``/``unregister()``, registered in this order and
+#: unregistered in reverse (the pattern of ``bpy.utils.register_submodule_factory``).
+SUBMODULES: tuple[str, ...] = ("operators", "ui")
+
+
+def _submodules() -> list[ModuleType]:
+    return [importlib.import_module(f".{name}", __name__) for name in SUBMODULES]
+
 
 def register() -> None:
-    """Register the operators and the Add-menu entry."""
-    import bpy
-
-    from . import operators, ui
-
-    for cls in (*operators.classes, *ui.classes):
-        bpy.utils.register_class(cls)
-    bpy.types.NODE_MT_add.append(ui.draw_add_menu)
+    """Register every sub-module in :data:`SUBMODULES`."""
+    for module in _submodules():
+        module.register()
 
 
 def unregister() -> None:
-    """Remove everything :func:`register` added, in reverse order."""
-    import bpy
-
-    from . import operators, ui
-
-    bpy.types.NODE_MT_add.remove(ui.draw_add_menu)
-    for cls in reversed((*operators.classes, *ui.classes)):
-        bpy.utils.unregister_class(cls)
+    """Unregister every sub-module in :data:`SUBMODULES`, in reverse order."""
+    for module in reversed(_submodules()):
+        module.unregister()

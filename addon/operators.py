@@ -4,7 +4,7 @@ import bpy
 
 from . import node_groups
 
-__all__ = ["NODE_OT_porter_duff_add", "NODE_OT_porter_duff_add_groups", "classes"]
+__all__ = ["NODE_OT_porter_duff_add", "NODE_OT_porter_duff_add_groups", "classes", "register", "unregister"]
 
 
 class NODE_OT_porter_duff_add_groups(bpy.types.Operator):  # noqa: N801 (Blender naming rule)
@@ -58,3 +58,15 @@ class NODE_OT_porter_duff_add(bpy.types.Operator):  # noqa: N801 (Blender naming
 
 
 classes = (NODE_OT_porter_duff_add_groups, NODE_OT_porter_duff_add)
+
+
+def register() -> None:
+    """Register the operators."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the operators, in reverse order."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -6,7 +6,7 @@ import bpy
 
 from . import node_groups
 
-__all__ = ["NODE_MT_porter_duff", "classes", "draw_add_menu"]
+__all__ = ["NODE_MT_porter_duff", "classes", "draw_add_menu", "register", "unregister"]
 
 
 class NODE_MT_porter_duff(bpy.types.Menu):  # noqa: N801 (Blender naming rule)
@@ -33,3 +33,17 @@ def draw_add_menu(self: bpy.types.Menu, context: bpy.types.Context) -> None:
 
 
 classes = (NODE_MT_porter_duff,)
+
+
+def register() -> None:
+    """Register the menu and hook it into the node editor's Add menu."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.NODE_MT_add.append(draw_add_menu)
+
+
+def unregister() -> None:
+    """Remove the Add-menu hook and the menu."""
+    bpy.types.NODE_MT_add.remove(draw_add_menu)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
