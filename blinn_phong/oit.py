@@ -269,14 +269,25 @@ def triangle_draw_order(triangle: np.ndarray, triangle_depth: np.ndarray) -> np.
     return rank[tri]
 
 
-def object_draw_order(obj: np.ndarray, triangle: np.ndarray, object_depth: np.ndarray) -> np.ndarray:
-    """Per-fragment draw order for objects sorted back to front, triangles in mesh order inside.
+def object_draw_order(
+    obj: np.ndarray,
+    triangle: np.ndarray,
+    object_depth: np.ndarray,
+    front_facing: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per-fragment draw order for objects sorted back to front.
+
+    Inside an object, back-facing triangles are drawn before front-facing ones when
+    ``front_facing`` is given (two passes, culling front then back faces), then in mesh
+    order. For a convex closed object every back face lies behind every front face on
+    any ray, so this order is exact; for a planar one any order is.
 
     Args:
         obj: (n,) object index of each fragment.
         triangle: (n,) triangle index of each fragment (the order within an object).
         object_depth: (n_objects,) sort depth of each object, larger = farther
             (e.g. the eye distance of its centre).
+        front_facing: optional (n,) bool, True for fragments of front-facing triangles.
 
     Returns:
         (n,) int64 drawing position (comparable between fragments).
@@ -288,10 +299,18 @@ def object_draw_order(obj: np.ndarray, triangle: np.ndarray, object_depth: np.nd
         raise TypeError("obj and triangle must be integer arrays of one shape, object_depth a 1-D array")
     if len(ob) and (ob.min() < 0 or ob.max() >= len(od)):
         raise ValueError(f"object indices must lie in [0, {len(od)}), got [{ob.min()}, {ob.max()}]")
+    facing = np.zeros(len(ob), dtype=np.int64)
+    if front_facing is not None:
+        ff = np.asarray(front_facing)
+        if ff.shape != ob.shape or ff.dtype != bool:
+            raise ValueError(
+                f"front_facing must be a bool array of shape {ob.shape}, got {ff.dtype} {ff.shape}"
+            )
+        facing = ff.astype(np.int64)
     rank = np.empty(len(od), dtype=np.int64)
     rank[np.lexsort((np.arange(len(od)), -od))] = np.arange(len(od))
     n_tri = int(tri.max()) + 1 if len(tri) else 1
-    return rank[ob] * n_tri + tri
+    return (rank[ob] * 2 + facing) * n_tri + tri
 
 
 def wboit_weights(
@@ -413,14 +432,16 @@ def resolve_transparency(
     background: np.ndarray | None = None,
     layers: int | None = None,
     weights: np.ndarray | None = None,
+    front_facing: np.ndarray | None = None,
 ) -> np.ndarray:
     """Resolve transparent fragments with a named method (a planner choice).
 
     Args:
         method: one of :data:`TRANSPARENCY_METHODS`. ``draw_last`` and ``sort_objects`` draw
             meshes back to front by the mean eye distance of their triangles' centroids,
-            triangles in mesh order inside; ``sort_triangles`` sorts triangles by their
-            centroids' eye distance.
+            inside a mesh back faces before front faces (with ``front_facing``), then in
+            mesh order (:func:`object_draw_order`); ``sort_triangles`` sorts triangles by
+            their centroids' eye distance.
         pixel: (n,) flat pixel (or sample) index of each transparent fragment (already
             depth-tested against the opaque pass, see :func:`depth_test`).
         depth: (n,) window depth of each fragment.
@@ -432,6 +453,7 @@ def resolve_transparency(
         background: the opaque image, (n_pixels, 4) premultiplied RGBA.
         layers: passes for ``depth_peeling``.
         weights: (n,) weights for ``weighted_blended`` (:func:`wboit_weights`).
+        front_facing: (n,) bool per fragment, for ``draw_last`` and ``sort_objects``.
 
     Returns:
         (n_pixels, 4) premultiplied RGBA in the dtype of ``rgba``.
@@ -454,7 +476,7 @@ def resolve_transparency(
         mesh_dist = np.bincount(owner, weights=dist, minlength=n_mesh) / np.maximum(
             np.bincount(owner, minlength=n_mesh), 1
         )
-        order = object_draw_order(owner[tri], tri, mesh_dist)
+        order = object_draw_order(owner[tri], tri, mesh_dist, front_facing)
         return resolve_in_draw_order(pixel, order, rgba, n_pixels, background)
     if method == "sort_triangles":
         return resolve_in_draw_order(pixel, triangle_draw_order(tri, dist), rgba, n_pixels, background)
@@ -539,5 +561,6 @@ def transparency_pass(
         background=image.astype(rgba.dtype),
         layers=layers,
         weights=weights,
+        front_facing=np.asarray(fragments.front_facing)[tr_idx],  # type: ignore[attr-defined]
     )
     return out, depth

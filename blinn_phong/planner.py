@@ -8,13 +8,12 @@ shading frequency. It renders nothing; all tests are conservative geometric fact
 Transparency (methods of :mod:`blinn_phong.oit`):
 
 * ``zbuffer`` — no material has opacity < 1.
-* ``draw_last`` — one transparent mesh that cannot overlap itself on screen (all its
-  triangles lie in one plane): draw it after the opaque ones.
-* ``sort_triangles`` — one transparent convex mesh: triangles sorted back to front are
-  exact, since along any view ray its back faces lie behind its front faces.
-* ``sort_objects`` — several transparent meshes, each planar, and every pair whose screen
-  rectangles overlap is separated in eye depth: the per-object order is the per-pixel
-  order everywhere.
+* ``draw_last`` — one transparent mesh, planar or convex: drawn after the opaque ones,
+  back faces first, then front faces; along any view ray a convex mesh's back face lies
+  behind its front face, and a planar mesh never overlaps itself.
+* ``sort_objects`` — several transparent meshes, each planar or convex, and every pair
+  whose screen rectangles overlap is separated in eye depth: drawing them back to front
+  (each as in ``draw_last``) follows the per-pixel order everywhere.
 * ``depth_peeling`` — with a tolerance: ``k`` layers such that what lies behind them,
   at most ``(1 − α_min)^k`` of the brightest transparent radiance, is below the tolerance.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
@@ -226,31 +225,27 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float) 
     transparent = [i for i, m in enumerate(scene.meshes) if m.material.opacity < 1.0 and len(m.triangles)]
     if not transparent:
         return Choice("zbuffer", "no transparent objects: a plain z-buffer is exact")
-    if len(transparent) == 1:
+    simple = all(facts[i].planar or facts[i].convex for i in transparent)
+    if len(transparent) == 1 and simple:
         i = transparent[0]
-        if facts[i].planar:
-            return Choice(
-                "draw_last", f"one transparent object (mesh {i}), planar: drawn after the opaque ones"
-            )
-        if facts[i].convex:
-            return Choice(
-                "sort_triangles",
-                f"one transparent object (mesh {i}), convex: its back faces lie behind its front faces "
-                "on every ray, so triangles sorted back to front are exact",
-            )
+        shape = "planar" if facts[i].planar else "convex"
+        return Choice(
+            "draw_last",
+            f"one transparent object (mesh {i}), {shape}: drawn after the opaque ones, back faces "
+            "then front faces, is exact",
+        )
     rects = {i: _screen_rect_and_depth(facts[i], scene) for i in transparent}
-    all_planar = all(facts[i].planar for i in transparent)
     conflicts = []
     for a_pos, a in enumerate(transparent):
         for b in transparent[a_pos + 1 :]:
             (ra, (na, fa)), (rb, (nb, fb)) = rects[a], rects[b]
             if _rects_overlap(ra, rb) and not (fa < nb or fb < na):
                 conflicts.append((a, b))
-    if all_planar and not conflicts:
+    if simple and not conflicts:
         return Choice(
             "sort_objects",
-            f"{len(transparent)} transparent planar objects that never overlap in depth where they "
-            "overlap on screen: sorting them back to front is exact",
+            f"{len(transparent)} transparent planar or convex objects that never overlap in depth where "
+            "they overlap on screen: sorting them back to front is exact",
         )
     why = (
         f"transparent meshes {conflicts[0][0]} and {conflicts[0][1]} overlap on screen and in depth "
