@@ -11,7 +11,7 @@ tests check that.
 
 Each call splits the pixels into one range per core and runs the compiled loop
 on a small thread pool (the loop releases the GIL). The same pass flags
-suspicious input (non-finite values, alpha outside [0, 1] or NaN) so the caller
+suspicious input or output (non-finite values, alpha outside [0, 1] or NaN) so the caller
 need not read the images again; the exact checks of :mod:`compositing.validate`
 then run only when the flag is raised.
 """
@@ -108,9 +108,9 @@ def kernel(s, d, o, keep, mix, lerp, lo, hi):
             m2 = d2 * keep + m2 * mix
             m3 = d3 * keep + m3 * mix
         o[i] = m0; o[i + 1] = m1; o[i + 2] = m2; o[i + 3] = m3
-        # Flag, without a branch: z is non-finite iff some input is non-finite (or the sum
-        # overflows, a false alarm the exact checks clear); alpha outside [0, 1].
-        z = ((s0 + s1) + (s2 + s3)) + ((d0 + d1) + (d2 + d3))
+        # Flag, without a branch: z is non-finite iff some input or output is non-finite (or
+        # the sum overflows, a false alarm the exact checks clear); alpha outside [0, 1].
+        z = (((s0 + s1) + (s2 + s3)) + ((d0 + d1) + (d2 + d3))) + ((m0 + m1) + (m2 + m3))
         bad |= np.int32((z - z != {k0}) | (min(sa, da) < {k0}) | (max(sa, da) > {k1}))
     return bad != 0
 """

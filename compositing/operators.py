@@ -168,9 +168,22 @@ def composite(
             for arr, name in ((src, "src"), (dst, "dst")):
                 check_finite(arr, name)
                 check_alpha_range(arr, name)
+            _check_overflow(out)
         return out
 
     for arr, name in ((src, "src"), (dst, "dst")):
         check_finite(arr, name)
         check_alpha_range(arr, name)
-    return _composite_numpy(spec, src, dst, mix, shape)
+    with np.errstate(over="ignore", invalid="ignore"):  # reported below, not warned
+        out = _composite_numpy(spec, src, dst, mix, shape)
+    _check_overflow(out)
+    return out
+
+
+def _check_overflow(out: np.ndarray) -> None:
+    """Finite inputs can still overflow (HDR values near the dtype's maximum): raise, never return Inf."""
+    if not np.isfinite(out).all():
+        n = int(np.count_nonzero(~np.isfinite(out)))
+        raise ValueError(
+            f"the result overflowed {out.dtype} in {n} values; src/dst colours are too large for this dtype"
+        )

@@ -148,3 +148,11 @@ def test_nothing_writes_nan_at_zero_alpha():
     for op in ("disjoint_over", "conjoint_over", "conjoint_xor", "disjoint_src_atop"):
         assert np.isfinite(composite(x, x, op)).all()
     assert np.isfinite(unpremultiply(x)).all()
+
+
+@pytest.mark.parametrize("engine", ["numpy", "numba"])
+def test_overflow_is_reported_not_written(engine):
+    big = np.zeros((300, 300, 4), np.float32)
+    big[..., 0] = 3e38  # finite, but 3e38 + 3e38 is not
+    with pytest.raises(ValueError, match=r"the result overflowed float32 in 90000 values"):
+        composite(big, big, "plus", engine=engine)
