@@ -7,7 +7,7 @@ conventions: float32 premultiplied linear RGBA, row 0 at the top.
 """
 
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
-from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
+from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest, visible_fragments
 from blinn_phong.render import (
     FragmentShading,
     PreparedScene,
@@ -63,4 +63,5 @@ __all__ = [
     "resolve_samples",
     "shade",
     "shade_fragments",
+    "visible_fragments",
 ]

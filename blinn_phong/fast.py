@@ -5,8 +5,8 @@ runs the same triangle setup (:func:`blinn_phong.raster._setup_triangles`: the
 same clipping, snapping, edge functions and fill rule) through a compiled
 scan-conversion loop that keeps only the nearest fragment per sample, so no
 array of all fragments is ever built. Barycentrics and depths of the winners are
-then computed by the same numpy code as the reference
-(:func:`blinn_phong.raster._fragments_from_hits`).
+then computed by a compiled twin of :func:`blinn_phong.raster._fragments_from_hits`
+(tests/blinn_phong/test_engines_agree.py checks both against the reference).
 
 The depth test is ``GL_LESS`` in draw order, as :func:`blinn_phong.raster.resolve_nearest`:
 smaller depth wins, equal depths go to the lower triangle index. The image is
@@ -21,9 +21,9 @@ import os
 
 import numpy as np
 
-from blinn_phong.raster import Fragments, _fragments_from_hits, _setup_triangles
+from blinn_phong.raster import Fragments, _setup_triangles
 
-__all__ = ["numba_available", "visible_fragments_compiled"]
+__all__ = ["numba_available", "surface_at_fragments_compiled", "visible_fragments_compiled"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -104,7 +104,66 @@ def _kernel() -> object:  # a numba dispatcher
                             winner[key] = t
         return winner
 
-    return zbuffer
+    @numba.njit(parallel=True, cache=True)
+    def finish(
+        fine_key,
+        sub,
+        fine_w,
+        k,
+        width,
+        xe,
+        ye,
+        area,
+        a,
+        b,
+        c,
+        z,
+        w,
+        weights,
+        depth_out,
+        bary_out,
+        pixel,
+        sample,
+    ):  # pragma: no cover - compiled
+        # The compiled twin of raster._fragments_from_hits for the winners (already depth-tested).
+        for i in numba.prange(fine_key.shape[0]):
+            t = sub[i]
+            fx = fine_key[i] % fine_w
+            fy = fine_key[i] // fine_w
+            cx = fx + 0.5
+            cy = fy + 0.5
+            ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+                ye[t, 1] - ye[t, 0]
+            )
+            if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+                l0 = (
+                    (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
+                ) / ex_area
+                l1 = (
+                    (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
+                ) / ex_area
+                l2 = (
+                    (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
+                ) / ex_area
+            else:
+                aa = abs(area[t])
+                l0 = (a[t, 0] * cx + b[t, 0] * cy + c[t, 0]) / aa
+                l1 = (a[t, 1] * cx + b[t, 1] * cy + c[t, 1]) / aa
+                l2 = (a[t, 2] * cx + b[t, 2] * cy + c[t, 2]) / aa
+            depth_out[i] = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
+            q0 = l0 / w[t, 0]
+            q1 = l1 / w[t, 1]
+            q2 = l2 / w[t, 2]
+            qs = q0 + q1 + q2
+            q0 /= qs
+            q1 /= qs
+            q2 /= qs
+            for m in range(3):
+                bary_out[i, m] = q0 * weights[t, 0, m] + q1 * weights[t, 1, m] + q2 * weights[t, 2, m]
+            pixel[i] = (fy // k) * width + fx // k
+            sample[i] = (fy % k) * k + fx % k
+
+    return zbuffer, finish
 
 
 def visible_fragments_compiled(
@@ -127,7 +186,8 @@ def visible_fragments_compiled(
     fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
     threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
     n_bands = max(1, min(fine_h, 4 * threads))
-    winner = _kernel()(
+    zbuffer, finish = _kernel()
+    winner = zbuffer(
         n_bands,
         fine_w,
         fine_h,
@@ -147,6 +207,104 @@ def visible_fragments_compiled(
         setup.source,
     )
     fine_key = np.flatnonzero(winner >= 0)
-    frags = _fragments_from_hits(setup, winner[fine_key], fine_key % fine_w, fine_key // fine_w)
-    order = np.argsort(frags.sample_key, kind="stable")
-    return frags.subset(order)
+    sub = winner[fine_key]
+    n = len(fine_key)
+    depth = np.empty(n)
+    bary = np.empty((n, 3))
+    pixel = np.empty(n, np.int64)
+    sample = np.empty(n, np.int64)
+    finish(
+        fine_key,
+        sub,
+        fine_w,
+        setup.k,
+        setup.width,
+        setup.x_exact,
+        setup.y_exact,
+        setup.area,
+        setup.a,
+        setup.b,
+        setup.c,
+        setup.z,
+        setup.w,
+        setup.weights,
+        depth,
+        bary,
+        pixel,
+        sample,
+    )
+    frags = Fragments(
+        setup.width,
+        setup.height,
+        setup.k * setup.k,
+        pixel,
+        sample,
+        depth,
+        setup.source[sub],
+        bary,
+        setup.front[sub],
+    )
+    if setup.k == 1:
+        return frags  # fine keys are already sample keys, in increasing order
+    return frags.subset(np.argsort(frags.sample_key, kind="stable"))
+
+
+@functools.lru_cache(maxsize=1)
+def _surface_kernel() -> object:  # a numba dispatcher
+    import math
+
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def surface(
+        tri_ids, bary, triangles, eye_pos, eye_n, world_n, flip, out_p, out_n, out_w
+    ):  # pragma: no cover
+        for i in numba.prange(tri_ids.shape[0]):
+            t = tri_ids[i]
+            v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+            b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
+            for ch in range(3):
+                out_p[i, ch] = b0 * eye_pos[v0, ch] + b1 * eye_pos[v1, ch] + b2 * eye_pos[v2, ch]
+            nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+            ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+            nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+            length = math.sqrt(nx * nx + ny * ny + nz * nz)
+            scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if flip[i] else 1.0)
+            out_n[i, 0], out_n[i, 1], out_n[i, 2] = nx * scale, ny * scale, nz * scale
+            wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+            wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+            wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+            length = math.sqrt(wx * wx + wy * wy + wz * wz)
+            scale = 1.0 / length if length > 0 else 0.0
+            out_w[i, 0], out_w[i, 1], out_w[i, 2] = wx * scale, wy * scale, wz * scale
+
+    return surface
+
+
+def surface_at_fragments_compiled(
+    triangle: np.ndarray,
+    bary: np.ndarray,
+    triangles: np.ndarray,
+    eye_position: np.ndarray,
+    eye_normal: np.ndarray,
+    world_normal: np.ndarray,
+    flip: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Compiled twin of :func:`blinn_phong.render.surface_at_fragments` (same formulas)."""
+    n = len(triangle)
+    out_p = np.empty((n, 3))
+    out_n = np.empty((n, 3))
+    out_w = np.empty((n, 3))
+    _surface_kernel()(
+        np.ascontiguousarray(triangle, dtype=np.int64),
+        np.ascontiguousarray(bary),
+        np.ascontiguousarray(triangles, dtype=np.int64),
+        np.ascontiguousarray(eye_position),
+        np.ascontiguousarray(eye_normal),
+        np.ascontiguousarray(world_normal),
+        np.ascontiguousarray(flip, dtype=np.bool_),
+        out_p,
+        out_n,
+        out_w,
+    )
+    return out_p, out_n, out_w

@@ -48,7 +48,7 @@ from blinn_phong.scene import (
     SpotLight,
 )
 
-__all__ = ["EyeLights", "ShadingTerms", "gl_clamp", "lights_in_eye_space", "shade"]
+__all__ = ["EyeLights", "ShadingTerms", "gl_clamp", "lights_in_eye_space", "shade", "shade_many"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,8 +211,9 @@ def shade(
         from blinn_phong.fast import numba_available
 
         if numba_available():
+            ids = np.zeros(count, np.int64)
             return _shade_compiled(
-                p, n, material, lights, global_ambient, model, None if visibility is None else vis
+                p, n, ids, [material], lights, global_ambient, model, None if visibility is None else vis
             )
         if engine == "numba":
             raise ValueError("engine: 'numba' requested but numba cannot be imported")
@@ -272,20 +273,97 @@ def shade(
     return ShadingTerms(ambient, diffuse, specular, alpha, dpl, spl)
 
 
+def shade_many(
+    points: np.ndarray,
+    normals: np.ndarray,
+    material_ids: np.ndarray,
+    materials: Sequence[Material],
+    lights: EyeLights,
+    *,
+    global_ambient: Sequence[float] | np.ndarray = (0.2, 0.2, 0.2),
+    model: LightModel | None = None,
+    visibility: np.ndarray | None = None,
+    engine: str = "numpy",
+) -> ShadingTerms:
+    """:func:`shade` for points with different materials: point i uses ``materials[material_ids[i]]``.
+
+    Arguments as for :func:`shade`, plus ``material_ids`` (N,) integer indices into
+    ``materials``. The numpy engine calls :func:`shade` once per material; the numba
+    engine evaluates all points in one compiled pass.
+    """
+    model = LightModel() if model is None else model
+    ids = np.asarray(material_ids)
+    p = np.asarray(points, dtype=np.float64)
+    if ids.shape != (len(p),) or (ids.size and ids.dtype.kind not in "iu"):
+        raise ValueError(
+            f"material_ids: expected ({len(p)},) integers, got shape {ids.shape} dtype {ids.dtype}"
+        )
+    if ids.size and (ids.min() < 0 or ids.max() >= len(materials)):
+        raise ValueError(
+            f"material_ids: expected indices in [0, {len(materials) - 1}], got [{ids.min()}, {ids.max()}]"
+        )
+    if engine not in ("numpy", "numba", "auto"):
+        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    if engine != "numpy":
+        from blinn_phong.fast import numba_available
+
+        if numba_available():
+            n = np.asarray(normals, dtype=np.float64)
+            if n.shape != p.shape or p.ndim != 2 or p.shape[1] != 3:
+                raise ValueError(
+                    f"points and normals: expected two (N, 3) arrays, got {p.shape} and {n.shape}"
+                )
+            vis = None
+            if visibility is not None:
+                vis = np.asarray(visibility, dtype=np.float64)
+                if (
+                    vis.shape != (len(p), len(lights))
+                    or not np.isfinite(vis).all()
+                    or (vis < 0).any()
+                    or (vis > 1).any()
+                ):
+                    raise ValueError(
+                        f"visibility: expected ({len(p)}, {len(lights)}) finite values in [0, 1]"
+                    )
+            return _shade_compiled(
+                p, n, ids.astype(np.int64), list(materials), lights, global_ambient, model, vis
+            )
+        if engine == "numba":
+            raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    out = {k: np.zeros((len(p), 3)) for k in ("ambient", "diffuse", "specular")}
+    alpha = np.zeros(len(p))
+    for mid in np.unique(ids):
+        sel = np.flatnonzero(ids == mid)
+        terms = shade(
+            p[sel],
+            np.asarray(normals)[sel],
+            materials[int(mid)],
+            lights,
+            global_ambient=global_ambient,
+            model=model,
+            visibility=None if visibility is None else np.asarray(visibility)[sel],
+        )
+        out["ambient"][sel] = terms.ambient
+        out["diffuse"][sel] = terms.diffuse
+        out["specular"][sel] = terms.specular
+        alpha[sel] = terms.alpha
+    return ShadingTerms(out["ambient"], out["diffuse"], out["specular"], alpha)
+
+
 def _shade_compiled(
     p: np.ndarray,
     n: np.ndarray,
-    material: Material,
+    ids: np.ndarray,
+    materials: list[Material],
     lights: EyeLights,
     global_ambient: Sequence[float] | np.ndarray,
     model: LightModel,
     vis: np.ndarray | None,
 ) -> ShadingTerms:
-    """:func:`shade` through the compiled kernel (same equation, same argument meaning)."""
-    a_cm = np.asarray(material.ambient, dtype=np.float64)
-    base = np.asarray(material.emission) + a_cm * (
-        np.asarray(global_ambient, dtype=np.float64) + lights.ambient_lights
-    )
+    """:func:`shade_many` through the compiled kernel (same equation, same argument meaning)."""
+    a_cm = np.array([m.ambient for m in materials], dtype=np.float64).reshape(-1, 3)
+    emission = np.array([m.emission for m in materials], dtype=np.float64).reshape(-1, 3)
+    base = emission + a_cm * (np.asarray(global_ambient, dtype=np.float64) + lights.ambient_lights)
     count = len(p)
     ambient = np.empty((count, 3))
     diffuse = np.empty((count, 3))
@@ -293,11 +371,12 @@ def _shade_compiled(
     _kernel()(
         np.ascontiguousarray(p),
         np.ascontiguousarray(n),
+        ids,
         base,
         a_cm,
-        np.asarray(material.diffuse, dtype=np.float64),
-        np.asarray(material.specular, dtype=np.float64),
-        float(material.shininess),
+        np.array([m.diffuse for m in materials], dtype=np.float64).reshape(-1, 3),
+        np.array([m.specular for m in materials], dtype=np.float64).reshape(-1, 3),
+        np.array([m.shininess for m in materials], dtype=np.float64),
         lights.position,
         lights.spot_direction,
         lights.cos_cutoff,
@@ -313,7 +392,8 @@ def _shade_compiled(
         diffuse,
         specular,
     )
-    return ShadingTerms(ambient, diffuse, specular, np.full(count, material.opacity))
+    opacity = np.array([m.opacity for m in materials], dtype=np.float64)
+    return ShadingTerms(ambient, diffuse, specular, opacity[ids])
 
 
 @functools.lru_cache(maxsize=1)
@@ -327,11 +407,12 @@ def _kernel() -> object:  # a numba dispatcher
     def kernel(
         p,
         n,
-        base,
-        a_cm,
-        d_cm,
-        s_cm,
-        shininess,
+        ids,
+        bases,
+        a_cms,
+        d_cms,
+        s_cms,
+        shininesses,
         pos,
         spot_dir,
         cos_cut,
@@ -353,6 +434,12 @@ def _kernel() -> object:  # a numba dispatcher
         for q in numba.prange(count):
             px, py, pz = p[q, 0], p[q, 1], p[q, 2]
             nx, ny, nz = n[q, 0], n[q, 1], n[q, 2]
+            mid = ids[q]
+            base = bases[mid]
+            a_cm = a_cms[mid]
+            d_cm = d_cms[mid]
+            s_cm = s_cms[mid]
+            shininess = shininesses[mid]
             if local_viewer:
                 vl = math.sqrt(px * px + py * py + pz * pz)
                 if vl > 0:

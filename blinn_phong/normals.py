@@ -82,7 +82,12 @@ def normal_matrix(matrix: np.ndarray) -> np.ndarray:
     m = np.asarray(matrix, dtype=np.float64)
     if m.shape != (4, 4):
         raise ValueError(f"matrix: expected a 4×4 matrix, got shape {m.shape}")
-    return np.linalg.inv(m[:3, :3]).T
+    r0, r1, r2 = m[0, :3], m[1, :3], m[2, :3]
+    cofactor = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)])  # (M⁻¹)ᵀ · det M
+    det = float(np.dot(r0, cofactor[0]))
+    if det == 0.0:
+        raise ValueError("matrix: the upper 3×3 is singular; normals cannot be transformed")
+    return cofactor / det
 
 
 def transform_normals(normals: np.ndarray, matrix: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
+from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import face_normals, normalize, transform_normals, vertex_normals
 from blinn_phong.raster import Fragments, interpolate, visible_fragments
 from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
@@ -49,6 +49,7 @@ __all__ = [
     "render",
     "resolve_samples",
     "shade_fragments",
+    "surface_at_fragments",
 ]
 
 ProgressCallback = Callable[[str, float], None]
@@ -199,15 +200,32 @@ def shade_fragments(
             )
     scene = prepared.scene
     model = scene.light_model
+    mesh_of = prepared.triangle_mesh[fragments.triangle]
+    modes = [mesh.shading or shading for mesh in scene.meshes]
+    phong = np.array([mode == "phong" for mode in modes], bool)
+    if count and phong.all():  # the common case: every fragment shaded per pixel, no scatter
+        return _shade_phong(prepared, fragments, mesh_of, gl_compat, visibility, engine)
+
     out = {k: np.zeros((count, 3)) for k in ("rgb", "ambient", "diffuse", "specular", "normal")}
     alpha = np.zeros(count)
-    mesh_of = prepared.triangle_mesh[fragments.triangle]
+
+    def store(idx: np.ndarray, result: FragmentShading) -> None:
+        alpha[idx] = result.alpha
+        for k in out:
+            out[k][idx] = getattr(result, k)
+
+    if count and phong.any():
+        idx = np.flatnonzero(phong[mesh_of])
+        vis = None if visibility is None else visibility[idx]
+        store(idx, _shade_phong(prepared, fragments.subset(idx), mesh_of[idx], gl_compat, vis, engine))
     for m, mesh in enumerate(scene.meshes):
+        if phong[m]:
+            continue
         in_mesh = np.flatnonzero(mesh_of == m)
         if len(in_mesh) == 0:
             continue
-        mode = mesh.shading or shading
-        if visibility is not None and gl_compat and mode != "phong":
+        mode = modes[m]
+        if visibility is not None and gl_compat:
             raise ValueError(
                 f"visibility: cannot be combined with gl_compat and {mode!r} shading "
                 "(OpenGL clamps per vertex before any per-fragment factor); use phong shading"
@@ -227,12 +245,75 @@ def shade_fragments(
             f = fragments.subset(idx)
             vis = None if visibility is None else visibility[idx]
             result = _shade_side(prepared, m, mesh, f, mode, front, material, gl_compat, vis, engine)
-            for k, v in result.items():
-                if k == "alpha":
-                    alpha[idx] = v
-                else:
-                    out[k][idx] = v
+            alpha[idx] = result["alpha"]
+            for k in out:
+                out[k][idx] = result[k]
     return FragmentShading(out["rgb"], alpha, out["ambient"], out["diffuse"], out["specular"], out["normal"])
+
+
+def _shade_phong(
+    prepared: PreparedScene,
+    f: Fragments,
+    mesh_of: np.ndarray,
+    gl_compat: bool,
+    vis: np.ndarray | None,
+    engine: str,
+) -> FragmentShading:
+    """Per-fragment lighting of fragments of phong-shaded meshes (any mix of meshes and sides)."""
+    scene = prepared.scene
+    model = scene.light_model
+    back = ~f.front_facing if model.two_sided else np.zeros(len(f), bool)
+    materials = [mat for mesh in scene.meshes for mat in (mesh.material, mesh.back_material or mesh.material)]
+    material_ids = 2 * mesh_of + back
+    points, normals, world_n = surface_at_fragments(prepared, f, back, engine=engine)
+    terms = shade_many(
+        points,
+        normals,
+        material_ids,
+        materials,
+        prepared.lights,
+        global_ambient=scene.ambient,
+        model=model,
+        visibility=vis,
+        engine=engine,
+    )
+    if gl_compat:
+        primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
+        rgb = np.clip(primary + secondary, 0.0, 1.0)
+    else:
+        rgb = terms.color
+    return FragmentShading(rgb, terms.alpha, terms.ambient, terms.diffuse, terms.specular, world_n)
+
+
+def surface_at_fragments(
+    prepared: PreparedScene, fragments: Fragments, flip: np.ndarray, *, engine: str = "numpy"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Interpolated eye-space position, unit eye-space normal and unit world normal at fragments.
+
+    Perspective-correct interpolation of the vertex attributes (:func:`~blinn_phong.raster.interpolate`),
+    normals renormalised after interpolation (Phong 1975); where ``flip`` (N,) is True the
+    eye-space normal is negated (back faces under two-sided lighting). Zero-length
+    normals stay zero.
+    """
+    if engine != "numpy":
+        from blinn_phong.fast import numba_available, surface_at_fragments_compiled
+
+        if numba_available():
+            return surface_at_fragments_compiled(
+                fragments.triangle,
+                fragments.bary,
+                prepared.triangles,
+                prepared.eye_position,
+                prepared.eye_normal,
+                prepared.world_normal,
+                flip,
+            )
+    tris = prepared.triangles
+    points = interpolate(fragments, tris, prepared.eye_position)
+    sign = np.where(flip, -1.0, 1.0)[:, None]
+    normals = sign * normalize(interpolate(fragments, tris, prepared.eye_normal))
+    world_n = normalize(interpolate(fragments, tris, prepared.world_normal))
+    return points, normals, world_n
 
 
 def _terms_at_fragments(
@@ -271,17 +352,6 @@ def _shade_side(
     tris = prepared.triangles
     world_n = normalize(interpolate(f, tris, prepared.world_normal))
     common = {"global_ambient": scene.ambient, "model": model}
-
-    if mode == "phong":
-        points = interpolate(f, tris, prepared.eye_position)
-        normals = sign * normalize(interpolate(f, tris, prepared.eye_normal))
-        terms = shade(points, normals, material, prepared.lights, visibility=vis, engine=engine, **common)
-        if gl_compat:
-            primary, secondary = gl_clamp(terms, separate_specular=model.separate_specular)
-            rgb = np.clip(primary + secondary, 0.0, 1.0)
-        else:
-            rgb = terms.color
-        return _pack(rgb, terms.ambient, terms.diffuse, terms.specular, terms.alpha, world_n)
 
     if mode == "flat" and not gl_compat:
         # One evaluation per face: face normal at the centroid, carried to every fragment of the face.
@@ -497,28 +567,25 @@ def render(
     t = time.perf_counter()
     k = visible.samples
     covered = visible.sample_key
-    # One scatter of every per-sample channel into a float32 buffer, then the box filter.
+    # Scatter each per-sample quantity into a float32 sample buffer, then the box filter.
+    n_keys = width * height * k
     a = shaded.alpha[:, None]
-    channels = np.concatenate(
-        [shaded.rgb * a, a, shaded.ambient * a, shaded.diffuse * a, shaded.specular * a, shaded.normal],
-        axis=1,
-    ).astype(np.float32)
-    buf = np.zeros((width * height * k, channels.shape[1]), np.float32)
-    buf[covered] = channels
-    pixels = resolve_samples(buf, width, height, k)
-    depth_buf = np.ones(width * height * k, np.float32)
+
+    def to_pixels(values: np.ndarray, channels: int) -> np.ndarray:
+        buf = np.zeros((n_keys, channels), np.float32)
+        buf[covered] = values
+        return resolve_samples(buf, width, height, k)
+
+    rgba = to_pixels(np.concatenate([shaded.rgb * a, a], axis=1), 4)
+    passes = {name: to_pixels(getattr(shaded, name) * a, 3) for name in ("ambient", "diffuse", "specular")}
+    normal = to_pixels(shaded.normal, 3)
+    if k > 1:
+        normal = normalize(normal)  # the mean of unit normals; one sample is unit already
+    depth_buf = np.ones(n_keys, np.float32)
     depth_buf[covered] = visible.depth
     depth = depth_buf.reshape(height, width, k).min(axis=2)
-    normal = normalize(pixels[..., 13:16])
-    passes = {"ambient": pixels[..., 4:7], "diffuse": pixels[..., 7:10], "specular": pixels[..., 10:13]}
     seconds["resolve_samples"] = time.perf_counter() - t
     report("done", 1.0)
 
     stats = RenderStats(seconds, len(prepared.triangles), len(visible))
-    return RenderResult(
-        rgba=np.ascontiguousarray(pixels[..., 0:4]),
-        depth=depth,
-        normal=normal.astype(np.float32),
-        passes={name: np.ascontiguousarray(v) for name, v in passes.items()},
-        stats=stats,
-    )
+    return RenderResult(rgba=rgba, depth=depth, normal=normal, passes=passes, stats=stats)
