@@ -39,6 +39,7 @@ def _srgb():
 
     return eotf_sRGB, eotf_inverse_sRGB
 
+
 #: Extensions written as linear premultiplied float.
 FLOAT_EXTENSIONS = (".exr", ".hdr")
 #: Extensions written as sRGB-encoded straight alpha, 8 or 16 bits.
