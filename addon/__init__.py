@@ -1,13 +1,14 @@
-"""Blender extension: Porter-Duff compositing node groups and checks against Blender's compositor.
+"""Blender extension: the Blinn-Phong render engine and Porter-Duff compositor node groups.
 
-Layout (after Blender's Cycles add-on and glTF-Blender-IO): ``operators`` and ``ui``
-hold the Blender classes, ``node_groups`` builds the groups, ``compat`` holds every
-difference between Blender 4.2, 4.5 and 5.0, ``factor_graph`` plans node graphs
-without Blender, ``verify`` compares Blender's compositor with :mod:`compositing`.
+Layout (after Blender's Cycles add-on and glTF-Blender-IO): ``properties``, ``engine`` and
+``render_ui`` hold the render engine; ``operators`` and ``ui`` the Porter-Duff node groups
+(built by ``node_groups``); ``compat`` holds every difference between Blender 4.2, 4.5 and
+5.0; ``mapping`` and ``factor_graph`` are pure logic without ``bpy``; ``verify`` compares
+Blender's compositor with :mod:`compositing`.
 
 The extension's metadata lives in ``blender_manifest.toml``. Importing this package does not
-import ``bpy``: the verification CLI
-(``python -m addon.verify``) runs in a plain Python and starts Blender itself.
+import ``bpy``: the verification CLI (``python -m addon.verify``) runs in a plain Python and
+starts Blender itself.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from types import ModuleType
 
 #: Sub-modules with their own ``register()``/``unregister()``, registered in this order and
 #: unregistered in reverse (the pattern of ``bpy.utils.register_submodule_factory``).
-SUBMODULES: tuple[str, ...] = ("operators", "ui")
+SUBMODULES: tuple[str, ...] = ("properties", "engine", "render_ui", "operators", "ui")
 
 
 def _submodules() -> list[ModuleType]:
