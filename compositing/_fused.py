@@ -131,6 +131,10 @@ def _pool() -> ThreadPoolExecutor:
     return ThreadPoolExecutor(max_workers=THREADS, thread_name_prefix="compositing")
 
 
+if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: start afresh
+    os.register_at_fork(after_in_child=_pool.cache_clear)
+
+
 def composite_fused(
     spec: OperatorSpec, src: np.ndarray, dst: np.ndarray, factor: float
 ) -> tuple[np.ndarray, bool]:
