@@ -424,10 +424,11 @@ if __name__ == "__main__":
     if __package__ in (None, ""):
         # Run as a script (``blender -b file.blend -P addon/batch.py -- ...``): import the package
         # version of this module so that relative imports and worker pickling work as with ``-m``.
-        sys.path.insert(0, str(REPO_ROOT))
-        from addon.batch import main as package_main
+        import importlib
 
-        code = package_main()
+        sys.path.insert(0, str(REPO_ROOT))
+        package_module = importlib.import_module(f"{Path(__file__).resolve().parent.name}.batch")
+        code = package_module.main()
     else:
         code = main()
     sys.stdout.flush()

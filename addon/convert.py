@@ -87,6 +87,8 @@ class ConvertedScene:
         mesh_names: ``"<object>/<material>"`` for each mesh in ``scene.meshes``.
         extras: per mesh, the material settings the core ``Material`` does not hold (transparency
             model and Kay parameters).
+        light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
+            for soft shadows.
         notes: things that were skipped or approximated, for the log and the Render panel.
     """
 
@@ -98,6 +100,7 @@ class ConvertedScene:
     mesh_names: list[str] = field(default_factory=list)
     extras: list[dict[str, object]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    light_radii: list[float] = field(default_factory=list)
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -424,6 +427,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     extras: list[dict[str, object]] = []
     notes: list[str] = []
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
+    light_radii: list[float] = []
     geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
 
     for instance in depsgraph.object_instances:
@@ -431,6 +435,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
         matrix = np.array(instance.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
+            light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
             continue
         if obj.type not in ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"):
             continue
@@ -482,4 +487,4 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     scene = Scene(
         meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
     )
-    return ConvertedScene(scene, width, height, region, options, names, extras, notes)
+    return ConvertedScene(scene, width, height, region, options, names, extras, notes, light_radii)

@@ -1,12 +1,16 @@
 """The "Blinn-Phong" render engine: F12, ``bpy.ops.render.render`` and command-line renders.
 
-``render()`` converts the evaluated depsgraph (``addon/convert.py``), renders it with
-``blinn_phong.render`` and writes the passes into Blender's render result:
+``render()`` converts the evaluated depsgraph (``addon/convert.py``), renders it through
+``addon/pipeline.py`` (the planner, then ``blinn_phong.render`` or the effects recipe) and writes
+the passes into Blender's render result:
 
 * Combined: premultiplied linear RGBA with coverage alpha;
-* Depth: distance along the view axis (1e10 where empty, as Cycles/EEVEE);
-* Ambient, Diffuse, Specular: the lighting equation's terms (premultiplied RGB; they sum to
-  Combined's RGB), registered in ``update_render_passes`` so they appear on the Render Layers node.
+* Depth: distance along the view axis to the nearest opaque surface (1e10 where empty, as
+  Cycles/EEVEE);
+* Ambient, Diffuse, Specular: the lighting equation's terms (premultiplied RGB; without
+  transparency and fog they sum to Combined's RGB); Shadow: mean light visibility (1 lit, 0 in
+  shadow) times coverage. All are registered in ``update_render_passes`` so they appear on the
+  Render Layers node.
 
 Pixels go in with ``foreach_set`` on flat float32 arrays, bottom row first (Blender's order).
 ``bl_use_postprocess`` lets Blender's compositor run on the result.
@@ -31,9 +35,7 @@ from typing import Any
 import bpy
 import numpy as np
 
-from blinn_phong.render import render as render_core
-
-from . import convert, mapping
+from . import convert, mapping, pipeline
 
 __all__ = [
     "ENGINE_ID",
@@ -83,37 +85,34 @@ def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
     return out
 
 
-def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> tuple[Any, dict[str, Any]]:
-    """Render a converted scene with the core renderer over its region.
-
-    Returns:
-        The ``blinn_phong.RenderResult`` and a dict of the choices made and why (shown in the
-        Render panel and in batch reports).
-    """
-    options = converted.options
-    width, height = converted.region_size
-    choices: dict[str, Any] = {
-        "shading": options.shading,
-        "samples": options.samples,
-        "region": list(converted.region),
-    }
-    reasons = []
-    if options.transparency not in ("AUTO", "OPAQUE"):
-        reasons.append(
-            f"transparency '{options.transparency}' is not available in this build; "
-            "surfaces blend over the nearest opaque hit by their opacity"
-        )
-    if options.shadows not in ("AUTO", "NONE"):
-        reasons.append(
-            f"shadows '{options.shadows}' are not available in this build; rendered without shadows"
-        )
-    if options.fog != "NONE":
-        reasons.append(f"fog '{options.fog}' is not available in this build; rendered without fog")
-    choices["reasons"] = reasons
-    result = render_core(
-        converted.scene, width, height, shading=options.shading, samples=options.samples, progress=progress
+def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> pipeline.FrameResult:
+    """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``)."""
+    o = converted.options
+    options = pipeline.EffectOptions(
+        transparency=o.transparency,
+        peel_layers=o.peel_layers,
+        shadows=o.shadows,
+        shadow_samples=o.shadow_samples,
+        shadow_bias=o.shadow_bias,
+        light_radii=tuple(converted.light_radii),
+        fog=o.fog,
+        fog_color=o.fog_color,
+        fog_density=o.fog_density,
+        fog_start=o.fog_start,
+        fog_end=o.fog_end,
     )
-    return result, choices
+    width, height = converted.region_size
+    result = pipeline.render_frame(
+        converted.scene,
+        width,
+        height,
+        shading=o.shading,
+        samples=o.samples,
+        options=options,
+        progress=progress,
+    )
+    result.choices["region"] = list(converted.region)
+    return result
 
 
 class BlinnPhongRenderEngine(bpy.types.RenderEngine):
@@ -137,6 +136,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Depth", 1, "Z", "VALUE")
         for name, _key in LIGHT_PASSES:
             self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+        self.register_pass(scene, renderlayer, "Shadow", 1, "X", "VALUE")
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """Render one view layer of ``depsgraph`` into a render result."""
@@ -160,7 +160,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 if self.test_break():
                     raise RenderCancelled
 
-            result, choices = render_converted(converted, progress)
+            result = render_converted(converted, progress)
             self._write(converted, result)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
@@ -172,11 +172,11 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             {
                 "ok": True,
                 "seconds": time.perf_counter() - started,
-                "choices": choices,
+                "choices": result.choices,
                 "notes": converted.notes,
                 "size": [full_w, full_h],
-                "stats": result.stats.seconds,
-                "triangles": result.stats.triangles,
+                "stats": result.seconds,
+                "triangles": result.triangles,
             }
         )
         self.update_stats("", f"Blinn-Phong: done in {LAST_RENDER['seconds']:.2f} s")
@@ -191,6 +191,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         self.add_pass("Depth", 1, "Z")
         for name, _key in LIGHT_PASSES:
             self.add_pass(name, 3, "RGB")
+        self.add_pass("Shadow", 1, "X")
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
         render_result = self.begin_result(0, 0, converted.width, converted.height)
         try:
@@ -204,6 +205,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             buffers = {"Combined": result.rgba, "Depth": depth[..., None]}
             for name, key in LIGHT_PASSES:
                 buffers[name] = result.passes[key]
+            buffers["Shadow"] = result.passes["shadow"]
             for name, image in buffers.items():
                 render_pass = layer.passes.get(name)
                 if render_pass is None:
