@@ -20,11 +20,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from blinn_phong.fog import apply_fog, eye_distance
+from blinn_phong.normals import normalize
 from blinn_phong.oit import transparency_pass
 from blinn_phong.planner import Choice, plan
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
@@ -32,6 +33,7 @@ from blinn_phong.raytrace import RayScene, area_light_visibility, world_triangle
 from blinn_phong.render import prepare_scene, render, resolve_samples, shade_fragments
 from blinn_phong.scene import AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import light_visibility
+from blinn_phong.transparency import kay_greenberg_transparency
 
 __all__ = ["TRANSPARENCY_SETTINGS", "EffectOptions", "FrameResult", "render_frame"]
 
@@ -66,6 +68,9 @@ class EffectOptions:
         fog_start: for LINEAR, eye distance where fog begins.
         fog_end: for LINEAR, eye distance of full fog.
         tolerance: the planner's tolerance (0: exact methods only).
+        kay: per entry of ``scene.meshes``, ``(t_min, t_max, power)`` for Kay-Greenberg glass
+            (``blinn_phong.transparency.kay_greenberg_transparency``: opacity ``1 − t`` varies with
+            the eye-space normal), or None for the material's constant opacity; empty = none.
     """
 
     transparency: str = "AUTO"
@@ -80,6 +85,7 @@ class EffectOptions:
     fog_start: float = 1.0
     fog_end: float = 50.0
     tolerance: float = 0.0
+    kay: tuple[tuple[float, float, float] | None, ...] = ()
 
     def __post_init__(self) -> None:
         if self.transparency not in TRANSPARENCY_SETTINGS:
@@ -113,9 +119,22 @@ class FrameResult:
     triangles: int = 0
 
 
+def _planning_scene(scene: Scene, kay: tuple[tuple[float, float, float] | None, ...]) -> Scene:
+    """``scene`` with each Kay-Greenberg mesh at its lowest opacity, ``1 − max(t_min, t_max)``."""
+    if not any(kay):
+        return scene
+    meshes = tuple(
+        m
+        if k is None
+        else replace(m, material=replace(m.material, opacity=min(m.material.opacity, 1 - max(k[:2]))))
+        for m, k in zip(scene.meshes, kay, strict=True)
+    )
+    return replace(scene, meshes=meshes)
+
+
 def _choices(scene: Scene, options: EffectOptions) -> tuple[Choice, list[Choice], list[str]]:
     """Transparency and per-light shadow choices: the planner's, overridden by the settings."""
-    the_plan = plan(scene, options.tolerance)
+    the_plan = plan(_planning_scene(scene, options.kay), options.tolerance)
     lines = []
     transparency = the_plan.transparency
     forced = TRANSPARENCY_SETTINGS[options.transparency]
@@ -191,6 +210,9 @@ def render_frame(
         :class:`FrameResult`; ``choices["reasons"]`` holds one line per decision.
     """
     options = options or EffectOptions()
+    kay = options.kay or (None,) * len(scene.meshes)
+    if len(kay) != len(scene.meshes):
+        raise ValueError(f"options.kay: expected one entry per mesh ({len(scene.meshes)}), got {len(kay)}")
     seconds: dict[str, float] = {}
     t = time.perf_counter()
     transparency, shadow_choices, reasons = _choices(scene, options)
@@ -203,7 +225,7 @@ def render_frame(
         "fog": options.fog,
         "reasons": reasons,
     }
-    has_transparent = any(m.material.opacity < 1.0 for m in scene.meshes)
+    has_transparent = any(m.material.opacity < 1.0 for m in scene.meshes) or any(kay)
     plain = (
         (transparency.method == "zbuffer" or not has_transparent)
         and all(c.method == "none" for c in shadow_choices)
@@ -231,6 +253,7 @@ def render_frame(
     non_ambient = [i for i, light in enumerate(scene.lights) if not isinstance(light, AmbientLight)]
     lit = [(scene.lights[i], c, radii[i]) for i, c in zip(non_ambient, shadow_choices, strict=True)]
     inv_view = np.linalg.inv(scene.camera.view)
+    kay_mesh = np.array([k is not None for k in kay], dtype=bool)
     cache: dict[str, RayScene] = {}
     known = np.zeros(len(fragments), dtype=bool)
     visibility_all = np.ones((len(fragments), len(lit)))
@@ -263,7 +286,21 @@ def render_frame(
         f = fragments.subset(index)
         vis, eye = visibility_of(index)
         s = shade_fragments(prepared, f, shading=shading, visibility=vis)
-        rgba = np.c_[s.rgb * s.alpha[:, None], s.alpha]
+        alpha = s.alpha
+        glass = kay_mesh[prepared.triangle_mesh[f.triangle]]
+        if glass.any():
+            alpha = alpha.copy()
+            normal_z = normalize(
+                interpolate(f.subset(np.flatnonzero(glass)), prepared.triangles, prepared.eye_normal)
+            )[:, 2]
+            owner = prepared.triangle_mesh[f.triangle[glass]]
+            for m in np.unique(owner):
+                t_min, t_max, power = kay[m]
+                here = owner == m
+                alpha[np.flatnonzero(glass)[here]] = 1.0 - kay_greenberg_transparency(
+                    np.clip(normal_z[here], -1.0, 1.0), t_min, t_max, power
+                )
+        rgba = np.c_[s.rgb * alpha[:, None], alpha]
         if options.fog != "NONE":
             rgba = apply_fog(
                 rgba,
@@ -278,7 +315,7 @@ def render_frame(
 
     t = time.perf_counter()
     opacity = np.array([m.material.opacity for m in scene.meshes])[prepared.triangle_mesh]
-    opaque = opacity[fragments.triangle] >= 1.0
+    opaque = (opacity[fragments.triangle] >= 1.0) & ~kay_mesh[prepared.triangle_mesh[fragments.triangle]]
     per_sample, depth_samples = transparency_pass(
         fragments,
         opaque,

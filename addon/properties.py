@@ -179,10 +179,10 @@ class BLINN_PHONG_MaterialSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blen
     )
     kay_exponent: FloatProperty(
         name="Exponent",
-        min=0.0,
+        min=0.1,
         soft_max=8.0,
-        default=1.0,
-        description="Power of n·v in the Kay-Greenberg interpolation",
+        default=2.0,
+        description="p in t = t_min + (t_max - t_min)·(1 - (1 - |n_z|)^p) (Kay-Greenberg)",
     )
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -146,3 +147,24 @@ def test_bad_options_are_named() -> None:
         EffectOptions(transparency="MAGIC")
     with pytest.raises(ValueError, match="fog"):
         EffectOptions(fog="SMOKE")
+
+
+@pytest.mark.parametrize("tilt_degrees", [0.0, 60.0])
+def test_kay_greenberg_glass_opacity_follows_the_eye_normal(tilt_degrees: float) -> None:
+    # Kay & Greenberg: t = t_min + (t_max - t_min)·(1 - (1 - |N_z|)^p); the glass has α = 1 - t.
+    c, s = math.cos(math.radians(tilt_degrees)), math.sin(math.radians(tilt_degrees))
+    rotate = np.array([[1, 0, 0, 0], [0, c, -s, 0], [0, s, c, 1.0], [0, 0, 0, 1]])  # about x, lifted to z = 1
+    glass = replace(
+        _quad(0.0, 1.0, Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0.0, 0.0, 1.0))),
+        transform=rotate,
+    )
+    floor = _quad(0.0, 5.0, Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.0, 0.0)))
+    scene = Scene((floor, glass), (), _top_camera(), ambient=(0, 0, 0))
+    t_min, t_max, power = 0.1, 0.8, 2.0
+    got = render_frame(scene, 40, 40, options=EffectOptions(kay=(None, (t_min, t_max, power))))
+    t = t_min + (t_max - t_min) * (1 - (1 - c) ** power)
+    alpha = 1 - t
+    centre = got.rgba[18:22, 18:22]  # inside the glass's footprint for both tilts
+    np.testing.assert_allclose(centre[..., 2], alpha, atol=1e-6)
+    np.testing.assert_allclose(centre[..., 0], 1 - alpha, atol=1e-6)
+    assert got.choices["transparency"] != "zbuffer"
