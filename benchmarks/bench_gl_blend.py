@@ -8,8 +8,9 @@ RGBA8 / ``"unorm8"``) this times
 * :func:`oracles.gl_blend.mesa_blend` on the same pixels: texture upload, one draw, readback
   (the shader for the state is compiled in a warm-up call first, so compilation is not timed).
 
-Each is the best of ``--repeat`` runs (the least disturbed by other processes). The ratio is
-``gl_blend time / Mesa time`` (< 1: numpy is faster). The JSON also records the agreement of
+Each is the best of ``--repeat`` runs (the least disturbed by other processes), the two
+alternating so that both see the same machine load. The ratio is ``gl_blend time / Mesa
+time`` (< 1: numpy is faster). The JSON also records the agreement of
 the two on that frame: max abs difference (float32) and the share of values one step apart
 (unorm8). Usage::
 
@@ -50,14 +51,18 @@ STATES = {
 }
 
 
-def _best_time(fn: Callable[[], object], repeat: int) -> float:
-    fn()  # warm-up: caches, shader compilation
-    times = []
+def _paired_best_times(
+    first: Callable[[], object], second: Callable[[], object], repeat: int
+) -> tuple[float, float]:
+    """Best wall-clock time of each, the two run alternately so both see the same machine load."""
+    first(), second()  # warm-up: caches, shader compilation
+    times: tuple[list[float], list[float]] = ([], [])
     for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+        for fn, log in zip((first, second), times, strict=True):
+            start = time.perf_counter()
+            fn()
+            log.append(time.perf_counter() - start)
+    return min(times[0]), min(times[1])
 
 
 def _frame(rng: np.random.Generator) -> np.ndarray:
@@ -95,8 +100,11 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 5) -> dict:
         for target in ("float32", "unorm8"):
             mesa_dst = dst_list if target == "float32" else dst_bytes
             ours_dst = dst if target == "float32" else dst_unorm
-            t_ours = _best_time(lambda s=state, t=target, d=ours_dst: _ours(src, d, s, t), repeat)
-            t_mesa = _best_time(lambda s=state, t=target, d=mesa_dst: mesa_blend(src_list, d, [s], t), repeat)
+            t_ours, t_mesa = _paired_best_times(
+                lambda s=state, t=target, d=ours_dst: _ours(src, d, s, t),
+                lambda s=state, t=target, d=mesa_dst: mesa_blend(src_list, d, [s], t),
+                repeat,
+            )
             model = _ours(src, ours_dst, state, target).reshape(1, -1, 4)
             got = mesa_blend(src_list, mesa_dst, [state], target)
             if target == "float32":
