@@ -23,7 +23,12 @@ import numpy as np
 
 from blinn_phong.raster import Fragments, _setup_triangles
 
-__all__ = ["numba_available", "surface_at_fragments_compiled", "visible_fragments_compiled"]
+__all__ = [
+    "numba_available",
+    "scatter_samples_compiled",
+    "surface_at_fragments_compiled",
+    "visible_fragments_compiled",
+]
 
 
 @functools.lru_cache(maxsize=1)
@@ -308,3 +313,54 @@ def surface_at_fragments_compiled(
         out_w,
     )
     return out_p, out_n, out_w
+
+
+@functools.lru_cache(maxsize=1)
+def _scatter_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def scatter(
+        keys, rgb, alpha, ambient, diffuse, specular, normal, depth, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_z
+    ):  # pragma: no cover
+        for i in numba.prange(keys.shape[0]):
+            key = keys[i]
+            a = alpha[i]
+            for ch in range(3):
+                o_rgba[key, ch] = rgb[i, ch] * a
+                o_amb[key, ch] = ambient[i, ch] * a
+                o_dif[key, ch] = diffuse[i, ch] * a
+                o_spe[key, ch] = specular[i, ch] * a
+                o_nrm[key, ch] = normal[i, ch]
+            o_rgba[key, 3] = a
+            o_z[key] = depth[i]
+
+    return scatter
+
+
+def scatter_samples_compiled(
+    n_keys: int,
+    keys: np.ndarray,
+    rgb: np.ndarray,
+    alpha: np.ndarray,
+    ambient: np.ndarray,
+    diffuse: np.ndarray,
+    specular: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """Per-sample float32 buffers: premultiplied rgba, ambient, diffuse, specular; normal; depth.
+
+    The compiled twin of the numpy scatter in :func:`blinn_phong.render.render`: samples
+    not in ``keys`` hold 0 (depth 1, the OpenGL clear value).
+    """
+    out = (
+        np.zeros((n_keys, 4), np.float32),
+        np.zeros((n_keys, 3), np.float32),
+        np.zeros((n_keys, 3), np.float32),
+        np.zeros((n_keys, 3), np.float32),
+        np.zeros((n_keys, 3), np.float32),
+        np.ones(n_keys, np.float32),
+    )
+    _scatter_kernel()(keys, rgb, alpha, ambient, diffuse, specular, normal, depth, *out)
+    return out

@@ -458,6 +458,43 @@ def resolve_samples(values: np.ndarray, width: int, height: int, samples: int) -
     return grid.mean(axis=2, dtype=np.float64).astype(values.dtype, copy=False)
 
 
+def _scatter_samples(
+    n_keys: int, keys: np.ndarray, shaded: FragmentShading, depth: np.ndarray, engine: str
+) -> tuple[np.ndarray, ...]:
+    """Float32 per-sample buffers: premultiplied rgba, ambient, diffuse, specular; normal; depth (1 empty)."""
+    if engine != "numpy":
+        from blinn_phong.fast import numba_available, scatter_samples_compiled
+
+        if numba_available():
+            return scatter_samples_compiled(
+                n_keys,
+                keys,
+                shaded.rgb,
+                shaded.alpha,
+                shaded.ambient,
+                shaded.diffuse,
+                shaded.specular,
+                shaded.normal,
+                depth,
+            )
+    a = shaded.alpha[:, None]
+    out = []
+    for values, channels in (
+        (np.concatenate([shaded.rgb * a, a], axis=1), 4),
+        (shaded.ambient * a, 3),
+        (shaded.diffuse * a, 3),
+        (shaded.specular * a, 3),
+        (shaded.normal, 3),
+    ):
+        buf = np.zeros((n_keys, channels), np.float32)
+        buf[keys] = values
+        out.append(buf)
+    depth_buf = np.ones(n_keys, np.float32)
+    depth_buf[keys] = depth
+    out.append(depth_buf)
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class RenderStats:
     """Timing and counts of one render.
@@ -569,20 +606,12 @@ def render(
     covered = visible.sample_key
     # Scatter each per-sample quantity into a float32 sample buffer, then the box filter.
     n_keys = width * height * k
-    a = shaded.alpha[:, None]
-
-    def to_pixels(values: np.ndarray, channels: int) -> np.ndarray:
-        buf = np.zeros((n_keys, channels), np.float32)
-        buf[covered] = values
-        return resolve_samples(buf, width, height, k)
-
-    rgba = to_pixels(np.concatenate([shaded.rgb * a, a], axis=1), 4)
-    passes = {name: to_pixels(getattr(shaded, name) * a, 3) for name in ("ambient", "diffuse", "specular")}
-    normal = to_pixels(shaded.normal, 3)
+    buffers = _scatter_samples(n_keys, covered, shaded, visible.depth, engine)
+    rgba, ambient, diffuse, specular, normal = (resolve_samples(b, width, height, k) for b in buffers[:5])
+    passes = {"ambient": ambient, "diffuse": diffuse, "specular": specular}
     if k > 1:
         normal = normalize(normal)  # the mean of unit normals; one sample is unit already
-    depth_buf = np.ones(n_keys, np.float32)
-    depth_buf[covered] = visible.depth
+    depth_buf = buffers[5]
     depth = depth_buf.reshape(height, width, k).min(axis=2)
     seconds["resolve_samples"] = time.perf_counter() - t
     report("done", 1.0)
