@@ -45,6 +45,7 @@ __all__ = [
     "PreparedScene",
     "RenderResult",
     "RenderStats",
+    "check_gl_ranges",
     "prepare_scene",
     "render",
     "resolve_samples",
@@ -458,6 +459,29 @@ def resolve_samples(values: np.ndarray, width: int, height: int, samples: int) -
     return grid.mean(axis=2, dtype=np.float64).astype(values.dtype, copy=False)
 
 
+def check_gl_ranges(scene: Scene) -> None:
+    """Raise ValueError where the scene leaves OpenGL 2.1's parameter ranges (§2.14.2, table 2.10).
+
+    ``glMaterial`` accepts shininess in [0, 128] and ``glLight`` a spot exponent in
+    [0, 128]; outside them OpenGL raises GL_INVALID_VALUE, so the GL-compatibility
+    preset refuses them instead of rendering something OpenGL never would.
+    """
+    for i, mesh in enumerate(scene.meshes):
+        for label, material in (("material", mesh.material), ("back_material", mesh.back_material)):
+            if material is not None and material.shininess > 128.0:
+                raise ValueError(
+                    f"scene.meshes[{i}].{label}.shininess: OpenGL accepts [0, 128] (gl_compat=True), "
+                    f"got {material.shininess}"
+                )
+    for i, light in enumerate(scene.lights):
+        exponent = getattr(light, "exponent", 0.0)
+        if exponent > 128.0:
+            raise ValueError(
+                f"scene.lights[{i}].exponent: OpenGL accepts a spot exponent in [0, 128] (gl_compat=True), "
+                f"got {exponent}"
+            )
+
+
 def _scatter_samples(
     n_keys: int, keys: np.ndarray, shaded: FragmentShading, depth: np.ndarray, engine: str
 ) -> tuple[np.ndarray, ...]:
@@ -572,6 +596,8 @@ def render(
     shading = _check_shading(shading)
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    if gl_compat:
+        check_gl_ranges(scene)
     seconds: dict[str, float] = {}
 
     def report(stage: str, fraction: float) -> None:

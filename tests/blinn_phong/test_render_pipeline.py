@@ -133,6 +133,11 @@ def test_bad_scenes_are_rejected_with_clear_messages() -> None:
         bp.SpotLight(cutoff=120.0)
     with pytest.raises(ValueError, match="shading"):
         bp.render(bp.Scene([bp.Mesh(pos, tris)], [], cam), 4, 4, shading="toon")
+    glossy = bp.Mesh(pos, tris, material=bp.Material(shininess=200.0))
+    with pytest.raises(ValueError, match=r"shininess: OpenGL accepts \[0, 128\]"):
+        bp.render(bp.Scene([glossy], [], cam), 4, 4, gl_compat=True)
+    with pytest.raises(ValueError, match="engine"):
+        bp.render(bp.Scene([bp.Mesh(pos, tris)], [], cam), 4, 4, engine="cuda")
     with pytest.raises(TypeError, match=r"Scene\.lights"):
         bp.Scene([bp.Mesh(pos, tris)], ["sun"], cam)
 
