@@ -186,6 +186,8 @@ def trace_refraction(
         :class:`RefractedRays`.
     """
     o = np.array(origins, dtype=np.float64)
+    if not np.all(np.isfinite(o)):
+        raise ValueError("origins must be finite, got NaN or Inf")
     d = _unit_vectors("directions", directions)
     if o.shape != d.shape or o.ndim != 2:
         raise ValueError(f"origins and directions must both be (n, 3), got {o.shape} and {d.shape}")
