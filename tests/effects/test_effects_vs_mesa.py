@@ -27,6 +27,12 @@ def gl():
         pytest.skip(f"Mesa EGL unavailable: {exc}")
     from OpenGL import GL
 
+    # the context is shared with other Mesa tests: save every piece of state we touch
+    GL.glPushAttrib(GL.GL_ALL_ATTRIB_BITS)
+    for stack in (GL.GL_PROJECTION, GL.GL_MODELVIEW):
+        GL.glMatrixMode(stack)
+        GL.glPushMatrix()
+    previous_fbo = GL.glGetIntegerv(GL.GL_DRAW_FRAMEBUFFER_BINDING)
     fbo = GL.glGenFramebuffers(1)
     GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fbo)
     rbs = GL.glGenRenderbuffers(2)
@@ -42,9 +48,13 @@ def gl():
         GL.glDisable(cap)
     GL.glClampColor(GL.GL_CLAMP_READ_COLOR, GL.GL_FALSE)
     yield GL
-    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+    GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, int(previous_fbo))
     GL.glDeleteRenderbuffers(2, rbs)
     GL.glDeleteFramebuffers(1, [fbo])
+    for stack in (GL.GL_PROJECTION, GL.GL_MODELVIEW):
+        GL.glMatrixMode(stack)
+        GL.glPopMatrix()
+    GL.glPopAttrib()
 
 
 def _reset(GL, clear=(0.0, 0.0, 0.0, 0.0)):
