@@ -9,11 +9,12 @@ multiply-add), and writes the four outputs. The results are therefore bitwise
 equal to :func:`compositing.operators.composite` with ``engine="numpy"``; the
 tests check that.
 
-Each call splits the pixels into one range per core and runs the compiled loop
-on a small thread pool (the loop releases the GIL). The same pass flags
-suspicious input or output (non-finite values, alpha outside [0, 1] or NaN) so the caller
-need not read the images again; the exact checks of :mod:`compositing.validate`
-then run only when the flag is raised.
+Each call splits the pixels into a few ranges per core; the calling thread and a
+small pool of helper threads take ranges until none is left (the compiled loop
+releases the GIL), so a thread slowed down by another process does not hold up
+the rest. The same pass flags suspicious input or output (non-finite values,
+alpha outside [0, 1] or NaN) so the caller need not read the images again; the
+exact checks of :mod:`compositing.validate` then run only when the flag is raised.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from __future__ import annotations
 import functools
 import itertools
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
@@ -30,11 +32,15 @@ from .factors import Expr, OperatorSpec
 
 __all__ = ["composite_fused", "factor_source", "kernel_source"]
 
-#: Threads for one call (the kernel releases the GIL); one per core.
+#: Threads working on one call, the calling thread included (the kernel releases the GIL).
 THREADS = max(1, min(8, os.cpu_count() or 1))
 
-#: Below this many pixels a call runs on the calling thread only.
+#: Below this many pixels a call runs on the calling thread only; no range is smaller.
 MIN_PIXELS_PER_THREAD = 1 << 15
+
+#: Ranges per thread: more ranges than threads let an idle thread take over the work of one
+#: slowed down by another process (dynamic load balancing).
+RANGES_PER_THREAD = 8
 
 
 def _const_name(value: float) -> str:
@@ -128,7 +134,7 @@ def _compiled(name: str, spec: OperatorSpec, dtype_name: str):
 
 @functools.cache
 def _pool() -> ThreadPoolExecutor:
-    return ThreadPoolExecutor(max_workers=THREADS, thread_name_prefix="compositing")
+    return ThreadPoolExecutor(max_workers=max(1, THREADS - 1), thread_name_prefix="compositing")
 
 
 if hasattr(os, "register_at_fork"):  # a forked child has none of the parent's threads: start afresh
@@ -150,9 +156,23 @@ def composite_fused(
     t = src.dtype.type
     args = (src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor), factor != 1.0)
     n = src.size // 4
-    parts = max(1, min(THREADS, n // MIN_PIXELS_PER_THREAD))
+    parts = max(1, min(THREADS * RANGES_PER_THREAD, n // MIN_PIXELS_PER_THREAD))
     if parts == 1:
         return out, bool(kernel(*args, 0, n))
-    bounds = np.linspace(0, n, parts + 1).astype(np.int64)
-    futures = [_pool().submit(kernel, *args, int(lo), int(hi)) for lo, hi in itertools.pairwise(bounds)]
-    return out, any(f.result() for f in futures)
+    bounds = np.linspace(0, n, parts + 1).astype(np.int64).tolist()
+    ranges = iter(itertools.pairwise(bounds))
+    lock = threading.Lock()
+
+    def work() -> bool:
+        """Take ranges until none is left (the calling thread works too)."""
+        flagged = False
+        while True:
+            with lock:
+                pixel_range = next(ranges, None)
+            if pixel_range is None:
+                return flagged
+            flagged |= bool(kernel(*args, *pixel_range))
+
+    helpers = [_pool().submit(work) for _ in range(min(THREADS, parts) - 1)]
+    flagged = work()
+    return out, any([flagged] + [f.result() for f in helpers])
