@@ -113,6 +113,7 @@ def transparency_cases(size: int, repeat: int) -> list[dict]:
     eye_dist = -interpolate(frags.subset(idx), prepared.triangles, prepared.eye_position)[:, 2]
     complexity = np.bincount(pix, minlength=n_pix)
     common = {
+        "front_facing": frags.front_facing[idx],
         "triangle": tri,
         "triangle_mesh": prepared.triangle_mesh,
         "triangle_eye_distance": -prepared.face_eye_centroid[:, 2],
