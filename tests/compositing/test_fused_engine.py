@@ -57,8 +57,16 @@ def test_fused_equals_numpy_bitwise_float64(op):
 
 
 def test_auto_engine_uses_the_fused_pass_on_large_images():
-    a, b = image_pair((300, 260), seed=13)  # 78 000 pixels, above the threshold
+    a, b = image_pair((300, 260), seed=13)  # 78 000 pixels, above the threshold: 2 ranges
     np.testing.assert_array_equal(composite(a, b), composite(a, b, engine="numpy"))
+    a, b = image_pair((601, 599), seed=14)  # 11 uneven ranges shared by the threads
+    for factor in (1.0, 0.5):
+        np.testing.assert_array_equal(
+            composite(a, b, "xor", factor=factor), composite(a, b, "xor", factor=factor, engine="numpy")
+        )
+    a[600, 598, 3] = 2.0  # in the last range
+    with pytest.raises(ValueError, match=r"src: expected alpha \(last channel\) in \[0, 1\]; got 1 of"):
+        composite(a, b)
 
 
 @pytest.mark.parametrize(
