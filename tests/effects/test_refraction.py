@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from blinn_phong.raytrace import RayScene
 from blinn_phong.refraction import reflect, refract, trace_refraction, transmitted_highlight
@@ -138,3 +140,27 @@ def test_refract_rejects_bad_eta_and_zero_vectors():
         refract(np.array([0, 0, -1.0]), np.array([0, 0, 1.0]), -1.0)
     with pytest.raises(ValueError, match="incident"):
         refract(np.zeros(3), np.array([0, 0, 1.0]), 1.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    theta=st.floats(0.0, 1.55),
+    phi=st.floats(0.0, 6.28),
+    eta=st.floats(0.3, 3.0),
+)
+def test_refraction_obeys_snell_in_the_plane_of_incidence(theta, phi, eta):
+    n = np.array([0.0, 0.0, 1.0])
+    i = np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), -np.cos(theta)])
+    t, tir = refract(i, n, eta)
+    assert abs(np.linalg.norm(t) - 1) < 1e-12
+    s1 = np.sin(theta)
+    if eta * s1 > 1 + 1e-12:
+        assert tir
+        np.testing.assert_allclose(t, i * [1, 1, -1], atol=1e-12)  # mirrored
+    elif eta * s1 < 1 - 1e-12:
+        assert not tir
+        # η sin θ₁ = sin θ₂, same side of the tangent plane as the incident ray continues
+        assert np.hypot(t[0], t[1]) == pytest.approx(eta * s1, abs=1e-9)
+        assert t[2] <= 0
+        # coplanar with the incident ray and the normal
+        assert abs(np.dot(np.cross(i, n), t)) < 1e-9
