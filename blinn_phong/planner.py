@@ -14,8 +14,9 @@ Transparency (methods of :mod:`blinn_phong.oit`):
 * ``sort_objects`` — several transparent meshes, each planar or convex, and every pair
   whose screen rectangles overlap is separated in eye depth: drawing them back to front
   (each as in ``draw_last``) follows the per-pixel order everywhere.
-* ``depth_peeling`` — with a tolerance: ``k`` layers such that what lies behind them,
-  at most ``(1 − α_min)^k`` of the brightest transparent radiance, is below the tolerance.
+* ``depth_peeling`` — with a tolerance: ``k`` layers such that what the dropped layers
+  change, at most ``(1 − α_min)^k`` times the brightest radiance in the scene, is below
+  the tolerance.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
 Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
@@ -255,7 +256,8 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float) 
     )
     if tolerance > 0:
         alpha_min = min(scene.meshes[i].material.opacity for i in transparent)
-        brightest = max(_max_radiance(scene, scene.meshes[i]) for i in transparent)
+        # what the dropped layers hide is a mix of transparent and opaque colour behind them
+        brightest = max(_max_radiance(scene, m) for m in scene.meshes)
         layers_bound = sum(
             1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
         )
