@@ -1,0 +1,298 @@
+"""Pareto charts of the speed/accuracy measurements (matplotlib PNGs).
+
+Each tradeoff chart has three panels sharing the x axis — the time of a method as a ratio
+to a peer measured in the same run (the peer's median time is in the axis label) — and one
+error metric each: max absolute error and mean absolute error in 8-bit steps (log scale,
+lower is better) and PSNR in dB (higher is better). Points of one method are joined in
+order of its parameter (tessellation, resolution, samples, layers) and labelled with it.
+The grey dashed line is the Pareto front on the mean error: no method is both faster
+and more accurate than a point on it. Zero errors (exact results) are drawn at
+:data:`EXACT_FLOOR` steps and PSNR of exact results is left out (it is unbounded).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+__all__ = ["EXACT_FLOOR", "draw_all", "pareto_front", "tradeoff_chart"]
+
+#: Where an error of exactly 0 is drawn on the log-scale error axes (8-bit steps).
+EXACT_FLOOR = 1e-3
+DPI = 72
+MARKERS = "osD^v<>ph*X"
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The non-dominated points (cost, error), sorted by cost: each is cheaper or better than all others."""
+    front: list[tuple[float, float]] = []
+    for x, y in sorted(points):
+        if not front or y < front[-1][1]:
+            front.append((x, y))
+    return front
+
+
+def tradeoff_chart(
+    cases: list[dict],
+    *,
+    series: Callable[[dict], str],
+    x_key: str,
+    x_label: str,
+    point_label: Callable[[dict], str],
+    order: Callable[[dict], float],
+    title: str,
+    path: Path,
+    metrics_of: Callable[[dict], dict] = lambda c: c,
+) -> Path:
+    """Draw one three-panel Pareto chart (max, mean error in 8-bit steps; PSNR) and save it as PNG.
+
+    Args:
+        cases: measurement rows (see :mod:`benchmarks.tradeoffs`).
+        series: row → name of the line it belongs to (one per method).
+        x_key: row key of the cost (a time ratio to the peer).
+        x_label: x-axis label, naming the peer and its median time.
+        point_label: row → the short text written next to the point (its parameter).
+        order: row → the value that orders the points of a line.
+        title: figure title (scene and reference).
+        path: output PNG path.
+        metrics_of: row → the dict holding ``max_steps``, ``mean_steps``, ``psnr_db``.
+
+    Returns:
+        ``path``.
+    """
+    groups: dict[str, list[dict]] = {}
+    for case in cases:
+        groups.setdefault(series(case), []).append(case)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
+    colours = plt.get_cmap("tab20").colors
+    panels = (
+        ("max_steps", "max |error| (8-bit steps)", True),
+        ("mean_steps", "mean |error| (8-bit steps)", True),
+        ("psnr_db", "PSNR (dB, peak 1)", False),
+    )
+    for ax, (key, label, log) in zip(axes, panels, strict=True):
+        for i, (name, rows) in enumerate(groups.items()):
+            rows = sorted(rows, key=order)
+            xs, ys, texts = [], [], []
+            for row in rows:
+                value = metrics_of(row)[key]
+                if value is None:
+                    continue
+                xs.append(row[x_key])
+                ys.append(max(value, EXACT_FLOOR) if log else value)
+                texts.append(point_label(row))
+            if not xs:
+                continue
+            ax.plot(
+                xs,
+                ys,
+                marker=MARKERS[i % len(MARKERS)],
+                ms=4,
+                lw=1,
+                label=name,
+                color=colours[i % len(colours)],
+            )
+            for x, y, t in zip(xs, ys, texts, strict=True):
+                ax.annotate(t, (x, y), fontsize=6, xytext=(2, 2), textcoords="offset points")
+        if key == "mean_steps":
+            pts = [(c[x_key], max(metrics_of(c)[key], EXACT_FLOOR)) for c in cases]
+            front = pareto_front(pts)
+            ax.plot([p[0] for p in front], [p[1] for p in front], "--", color="grey", lw=1.5, zorder=0)
+        ax.set_xscale("log")
+        if log:
+            ax.set_yscale("log")
+            ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_xlabel(x_label, fontsize=8)
+        ax.set_ylabel(label, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, which="both", alpha=0.25)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _peer_time(cases: list[dict], x_key: str, method: str) -> str:
+    peers = [c["median_s"] / c[x_key] for c in cases if c.get(x_key)]
+    if not peers:
+        return method
+    peers.sort()
+    return f"{method}, median {1e3 * peers[len(peers) // 2]:.3g} ms"
+
+
+def _shading(data: dict, out: Path) -> list[Path]:
+    cases = data["cases"]
+    x_key = "ratio_to_mesa_glsl" if all("ratio_to_mesa_glsl" in c for c in cases) else "ratio_to_phong"
+    peer = "Mesa GLSL per-pixel" if x_key == "ratio_to_mesa_glsl" else "our phong"
+    return [
+        tradeoff_chart(
+            cases,
+            series=lambda c: c["method"],
+            x_key=x_key,
+            x_label=f"time ÷ time of {peer}, same tessellation ({_peer_time(cases, x_key, peer)})",
+            point_label=lambda c: str(c["segments"]),
+            order=lambda c: c["segments"],
+            metrics_of=lambda c: c["interior"],
+            title=f"Shading frequency × tessellation (labels: segments), interior pixels; reference: "
+            f"{data['reference']}; {data['size'][0]}² px",
+            path=out / "shading_tessellation.png",
+        )
+    ]
+
+
+def _antialiasing(data: dict, out: Path) -> list[Path]:
+    cases = data["cases"]
+    return [
+        tradeoff_chart(
+            cases,
+            series=lambda c: "ordered-grid supersampling",
+            x_key="ratio_to_1x1",
+            x_label=f"time / time at 1 sample ({_peer_time(cases, 'ratio_to_1x1', '1 sample')})",
+            point_label=lambda c: c["method"],
+            order=lambda c: c["samples_per_pixel"],
+            title=f"Antialiasing — against {data['reference']}; {data['scene']}, {data['size'][0]}² px",
+            path=out / "antialiasing.png",
+        )
+    ]
+
+
+def _shadows(data: dict, out: Path) -> list[Path]:
+    cases = [c for c in data["cases"] if c["method"] == "shadow_map"]
+    all_cases = data["cases"]
+    return [
+        tradeoff_chart(
+            cases,
+            series=lambda c: f"{c['kernel']}, {c['bias']}",
+            x_key="ratio_to_ray_traced",
+            x_label=f"time / time of Embree ray tracing "
+            f"({_peer_time(all_cases, 'ratio_to_ray_traced', 'Embree')})",
+            point_label=lambda c: str(c["resolution"]),
+            order=lambda c: c["resolution"],
+            title=f"Shadow maps: resolution (labels) × PCF kernel × bias — visibility error ×255 against "
+            f"ray-traced shadows, {data['points']} points",
+            path=out / "shadows.png",
+        )
+    ]
+
+
+def _transparency(data: dict, out: Path) -> list[Path]:
+    cases = [c for c in data["cases"] if c["label"] != "a_buffer"]
+    opacities = sorted({c["opacity"] for c in cases})
+    paths = [
+        tradeoff_chart(
+            cases,
+            series=lambda c: f"{c['label']}, α={c['opacity']}",
+            x_key="ratio_to_a_buffer",
+            x_label="time / time of the A-buffer "
+            f"({_peer_time(data['cases'], 'ratio_to_a_buffer', 'A-buffer')})",
+            point_label=lambda c: f"{c['layers']}",
+            order=lambda c: c["layers"],
+            title="Transparency against the A-buffer (labels: number of interpenetrating layers)",
+            path=out / "transparency.png",
+        )
+    ]
+    # Growth: error against the number of layers, one panel per opacity.
+    fig, axes = plt.subplots(1, len(opacities), figsize=(5 * len(opacities), 4.2), squeeze=False)
+    for ax, alpha in zip(axes[0], opacities, strict=True):
+        labels = sorted({c["label"] for c in cases if c["opacity"] == alpha})
+        for i, label in enumerate(labels):
+            rows = sorted(
+                (c for c in cases if c["opacity"] == alpha and c["label"] == label), key=lambda c: c["layers"]
+            )
+            line = ax.plot(
+                [r["layers"] for r in rows],
+                [max(r["max_steps"], EXACT_FLOOR) for r in rows],
+                marker=MARKERS[i % len(MARKERS)],
+                ms=4,
+                label=f"{label} (max)",
+            )[0]
+            ax.plot(
+                [r["layers"] for r in rows],
+                [max(r["mean_steps"], EXACT_FLOOR) for r in rows],
+                ls=":",
+                color=line.get_color(),
+            )
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_title(f"opacity α = {alpha}", fontsize=9)
+        ax.set_xlabel("interpenetrating layers", fontsize=8)
+        ax.set_ylabel("|error| in 8-bit steps (solid: max, dotted: mean)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, which="both", alpha=0.25)
+    axes[0][0].legend(fontsize=6)
+    fig.suptitle("Transparency error as layers and opacity grow (reference: A-buffer)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "transparency_growth.png", dpi=DPI)
+    plt.close(fig)
+    paths.append(out / "transparency_growth.png")
+    return paths
+
+
+def _compositing(data: dict, out: Path) -> list[Path]:
+    cases = [c for c in data["cases"] if c["method"] != "float64 premultiplied"]
+    return [
+        tradeoff_chart(
+            cases,
+            series=lambda c: c["method"],
+            x_key="ratio_to_oiio",
+            x_label=f"time / time of OpenImageIO over ({_peer_time(data['cases'], 'ratio_to_oiio', 'OIIO')})",
+            point_label=lambda c: str(c["layers"]),
+            order=lambda c: c["layers"],
+            title=f"Compositing precision — N-layer over stack (labels: N) against float64 premultiplied, "
+            f"{data['size'][0]}² px",
+            path=out / "compositing_precision.png",
+        )
+    ]
+
+
+def _scaling(data: dict, out: Path) -> list[Path]:
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, key, rows, label in (
+        (axes[0], "pixels", data["pixels"], "pixels (64-segment sphere)"),
+        (axes[1], "triangles", data["triangles"], "triangles (256² px)"),
+    ):
+        x = [r[key] for r in rows]
+        ax.plot(x, [r["ours_s"] for r in rows], "o-", label="blinn_phong.render (phong)")
+        if all("mesa_glsl_s" in r for r in rows):
+            ax.plot(x, [r["mesa_glsl_s"] for r in rows], "s-", label="Mesa llvmpipe GLSL")
+            for r in rows:
+                ax.annotate(f"×{r['ratio_to_mesa_glsl']:.0f}", (r[key], r["ours_s"]), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(label, fontsize=8)
+        ax.set_ylabel("median seconds per frame", fontsize=8)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=7)
+    fig.suptitle("Scaling (labels: our time as a multiple of Mesa's, same run)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "scaling.png", dpi=DPI)
+    plt.close(fig)
+    return [out / "scaling.png"]
+
+
+_DRAW: dict[str, Callable[[dict, Path], list[Path]]] = {
+    "shading": _shading,
+    "antialiasing": _antialiasing,
+    "shadows": _shadows,
+    "transparency": _transparency,
+    "compositing": _compositing,
+    "scaling": _scaling,
+}
+
+
+def draw_all(results: dict[str, dict], out_dir: Path) -> list[Path]:
+    """Draw the charts of every family present in ``results`` (``family → data``) into ``out_dir``."""
+    paths: list[Path] = []
+    for family, data in results.items():
+        if family in _DRAW:
+            paths += _DRAW[family](data, Path(out_dir))
+    return paths

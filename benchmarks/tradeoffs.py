@@ -1,0 +1,626 @@
+"""Speed against accuracy: time and error of every method family against its exact reference.
+
+Each family function renders (or composites) one scene with every method the toolkit
+offers for that concern, times it (median of interleaved rounds, :func:`time_interleaved`),
+and measures its error against a reference computed in the same run
+(:func:`benchmarks.tradeoff_metrics.error_metrics`: max and mean absolute error in 8-bit
+steps, PSNR). Where independent software does the same work (Mesa llvmpipe, OpenImageIO,
+Pillow) it is measured in the same run and every time is also given as a ratio to it.
+
+Families (key: what varies → reference):
+
+* ``shading`` — flat / Gouraud / Phong × sphere tessellation → Phong on a 384-segment
+  sphere; all at 2×2 supersampling so the comparison isolates shading and tessellation.
+  Peer: Mesa llvmpipe fixed function (Gouraud) and a GLSL per-pixel shader (1 sample).
+* ``antialiasing`` — samples per pixel (k×k ordered grid) → 8×8 samples.
+* ``shadows`` — shadow-map resolution × PCF kernel × depth bias → Embree ray tracing
+  (exact hard shadows); error of the light's visibility in 8-bit steps (a white receiver
+  lit by a unit light: one step per 1/255 of visibility).
+* ``transparency`` — sorted objects / sorted triangles / depth peeling k / weighted
+  blended OIT, for N interpenetrating layers of opacity α → the A-buffer (exact per-pixel
+  sort).
+* ``compositing`` — an N-layer ``over`` stack in float64 / float32 / float16 / unorm8,
+  premultiplied and straight → float64 premultiplied. Peers: OpenImageIO ``over``
+  (float32), Pillow ``alpha_composite`` (straight unorm8).
+* ``scaling`` — render time against pixel count and triangle count, with Mesa's GLSL
+  renderer at the same sizes.
+
+Every family returns a JSON-ready dict ``{"family", "reference", "cases": [...], ...}``;
+each case has ``method``, its parameters, ``median_s``, ``ratio_to_<peer>`` and the error
+metrics.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+import blinn_phong as bp
+from benchmarks._util import time_interleaved
+from benchmarks.tradeoff_metrics import error_metrics
+from blinn_phong.oit import resolve_transparency, wboit_weights
+from blinn_phong.primitives import grid_plane, uv_sphere
+from compositing import composite, premultiply, unpremultiply
+from compositing.gl_blend import gl_blend
+
+__all__ = [
+    "FAMILIES",
+    "antialiasing",
+    "compositing_precision",
+    "mesa_available",
+    "scaling",
+    "shading",
+    "shadows",
+    "sphere_scene",
+    "transparency",
+]
+
+SHINY = bp.Material(
+    ambient=(0.2, 0.2, 0.2), diffuse=(0.45, 0.4, 0.35), specular=(0.45, 0.45, 0.45), shininess=40.0
+)
+
+
+def mesa_available() -> str | None:
+    """``None`` if a Mesa EGL context can be made, else the reason it cannot."""
+    try:
+        from oracles.egl import EGLUnavailable, gl_context
+    except ImportError as exc:  # pragma: no cover - PyOpenGL missing
+        return str(exc)
+    try:
+        gl_context()
+    except EGLUnavailable as exc:
+        return str(exc)
+    return None
+
+
+def sphere_scene(segments: int, *, material: bp.Material = SHINY) -> bp.Scene:
+    """A unit sphere (``segments`` × ``segments/2``) seen in perspective, lit by a point light.
+
+    Radiance stays below 1 everywhere (ambient 0.2·0.15 + diffuse 0.45 + specular 0.45), so no
+    method is clamped and the errors are those of the method alone.
+    """
+    pos, tris, normals = uv_sphere(segments, max(segments // 2, 2))
+    camera = bp.Camera.perspective(34.0, 1.0, 1.0, 20.0, view=bp.look_at((0.0, 0.0, 4.0), (0.0, 0.0, 0.0)))
+    light = bp.PointLight((2.0, 2.5, 3.0))
+    return bp.Scene([bp.Mesh(pos, tris, normals, material=material)], [light], camera, ambient=(0.15,) * 3)
+
+
+def _mesa_rgba(image_u8: np.ndarray) -> np.ndarray:
+    """Mesa's 8-bit read-back (straight colour, coverage 0 or 255) as float premultiplied RGBA."""
+    x = image_u8.astype(np.float64) / 255.0
+    return premultiply(x)
+
+
+# --------------------------------------------------------------------------- shading × tessellation
+
+
+def shading(quick: bool = False, repeat: int = 3) -> dict:
+    """Flat, Gouraud and Phong shading × tessellation against a supersampled per-pixel reference."""
+    size = 128 if quick else 256
+    tessellations = (8, 16, 32, 64) if quick else (8, 12, 16, 24, 32, 48, 64, 96, 128)
+    samples = 4  # a 2×2 grid
+    ref_segments = 384
+    reference = bp.render(sphere_scene(ref_segments), size, size, shading="phong", samples=samples).rgba
+    interior = reference[..., 3] >= 1.0  # fully covered by the reference sphere: shading alone
+    mesa_reason = mesa_available()
+    cases: list[dict] = []
+    for segments in tessellations:
+        scene = sphere_scene(segments)
+        n_tris = len(scene.meshes[0].triangles)
+        runs: dict[str, Callable[[], object]] = {
+            shading_: (lambda s=shading_, sc=scene: bp.render(sc, size, size, shading=s, samples=samples))
+            for shading_ in ("flat", "gouraud", "phong")
+        }
+        times = time_interleaved(runs, repeat=repeat)
+        mesa_times: dict[str, float] = {}
+        mesa_images: dict[str, np.ndarray] = {}
+        if mesa_reason is None:
+            from oracles import gl_lighting
+
+            for name, fn in (
+                (
+                    "mesa_fixed_function_gouraud",
+                    lambda sc=scene: gl_lighting.render_fixed_function(sc, size, size),
+                ),
+                ("mesa_glsl_per_pixel", lambda sc=scene: gl_lighting.render_glsl_phong(sc, size, size)),
+            ):
+                fn()  # warm-up (program compile, buffers)
+                renders = [fn() for _ in range(repeat)]
+                mesa_times[name] = float(np.median([r.seconds for r in renders]))
+                mesa_images[name] = _mesa_rgba(renders[-1].rgba)
+        for method in ("flat", "gouraud", "phong"):
+            image = runs[method]().rgba  # type: ignore[attr-defined]
+            case = {
+                "method": method,
+                "segments": segments,
+                "triangles": n_tris,
+                "samples_per_pixel": samples,
+                "median_s": times[method]["median_s"],
+                "ratio_to_phong": times[method]["median_s"] / times["phong"]["median_s"],
+                **error_metrics(image, reference),
+                "interior": error_metrics(image, reference, interior & (image[..., 3] >= 1.0)),
+            }
+            if "mesa_glsl_per_pixel" in mesa_times:
+                case["ratio_to_mesa_glsl"] = times[method]["median_s"] / mesa_times["mesa_glsl_per_pixel"]
+            cases.append(case)
+        for name, seconds in mesa_times.items():
+            cases.append(
+                {
+                    "method": name,
+                    "peer": True,
+                    "segments": segments,
+                    "triangles": n_tris,
+                    "samples_per_pixel": 1,
+                    "median_s": seconds,
+                    "ratio_to_phong": seconds / times["phong"]["median_s"],
+                    "ratio_to_mesa_glsl": seconds / mesa_times["mesa_glsl_per_pixel"],
+                    **error_metrics(mesa_images[name], reference),
+                    "interior": error_metrics(
+                        mesa_images[name], reference, interior & (mesa_images[name][..., 3] >= 1.0)
+                    ),
+                }
+            )
+    return {
+        "family": "shading",
+        "title": "Shading frequency × tessellation",
+        "scene": "unit sphere in perspective, point light, Blinn-Phong shininess 40",
+        "size": [size, size],
+        "reference": f"phong, {ref_segments}-segment sphere, {samples} samples per pixel",
+        "peer": "Mesa llvmpipe (1 sample per pixel, 8-bit read-back)" if mesa_reason is None else None,
+        "peer_unavailable": mesa_reason,
+        "cases": cases,
+    }
+
+
+# --------------------------------------------------------------------------- antialiasing
+
+
+def antialiasing(quick: bool = False, repeat: int = 3) -> dict:
+    """Samples per pixel against an 8×8-sample reference of the same scene."""
+    size = 128 if quick else 256
+    grid = (1, 2, 3, 4) if quick else (1, 2, 3, 4, 6)
+    ref_grid = 8
+    scene = sphere_scene(48)
+    reference = bp.render(scene, size, size, shading="phong", samples=ref_grid**2).rgba
+    runs = {
+        f"{k}x{k}": (lambda k=k: bp.render(scene, size, size, shading="phong", samples=k * k)) for k in grid
+    }
+    times = time_interleaved(runs, repeat=repeat)
+    cases = []
+    for k in grid:
+        image = runs[f"{k}x{k}"]().rgba
+        cases.append(
+            {
+                "method": f"{k}x{k}",
+                "samples_per_pixel": k * k,
+                "median_s": times[f"{k}x{k}"]["median_s"],
+                "ratio_to_1x1": times[f"{k}x{k}"]["median_s"] / times["1x1"]["median_s"],
+                **error_metrics(image, reference),
+            }
+        )
+    return {
+        "family": "antialiasing",
+        "title": "Antialiasing: ordered-grid supersampling",
+        "scene": "48-segment sphere, Phong shading",
+        "size": [size, size],
+        "reference": f"{ref_grid}x{ref_grid} samples per pixel",
+        "cases": cases,
+    }
+
+
+# --------------------------------------------------------------------------- shadows
+
+
+def _box(centre: tuple[float, float, float], half: tuple[float, float, float]) -> bp.Mesh:
+    c, h = np.asarray(centre), np.asarray(half)
+    corners = np.array([[x, y, z] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)], float) * h + c
+    tris = np.array(
+        [
+            *([0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4]),
+            *([2, 6, 7], [2, 7, 3], [1, 3, 7], [1, 7, 5], [0, 4, 6], [0, 6, 2]),
+        ]
+    )
+    return bp.Mesh(corners, tris, material=bp.Material(diffuse=(0.3, 0.3, 0.9)))
+
+
+def shadow_scene() -> bp.Scene:
+    """A ground plane (z = 0), a sphere floating over it and a box standing on it."""
+    gp, gt, gn = grid_plane(1, 1, (8.0, 8.0))
+    sp, st, sn = uv_sphere(48, 24, 0.7)
+    lift = np.eye(4)
+    lift[:3, 3] = (0.0, 0.0, 1.4)
+    meshes = [
+        bp.Mesh(gp, gt, gn, material=bp.Material(diffuse=(0.6, 0.6, 0.6))),
+        bp.Mesh(sp, st, sn, transform=lift, material=bp.Material(diffuse=(0.8, 0.2, 0.2))),
+        _box((1.4, 0.9, 0.6), (0.3, 0.3, 0.6)),
+    ]
+    camera = bp.Camera.perspective(
+        45.0, 1.0, 0.5, 50.0, view=bp.look_at((0.0, -7.0, 4.5), (0.0, 0.0, 0.3), (0, 0, 1))
+    )
+    return bp.Scene(meshes, [bp.DirectionalLight((0.4, 0.25, -1.0))], camera)
+
+
+def visible_points(scene: bp.Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """World positions and face normals of the nearest surface at every covered pixel."""
+    from blinn_phong.raster import interpolate, rasterize, resolve_nearest
+
+    prepared = bp.prepare_scene(scene)
+    frags = rasterize(prepared.clip, prepared.triangles, size, size)
+    win = resolve_nearest(frags)
+    vis = frags.subset(win[win >= 0])
+    eye = interpolate(vis, prepared.triangles, prepared.eye_position)
+    world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
+    return world, prepared.face_world_normal[vis.triangle]
+
+
+#: Depth-bias settings: (name, constant bias in window-depth units, slope factor).
+SHADOW_BIASES = (
+    ("no bias", 0.0, 0.0),
+    ("bias 1e-4 + 2·slope", 1e-4, 2.0),
+    ("bias 2e-2 + 8·slope", 2e-2, 8.0),
+)
+
+
+def shadows(quick: bool = False, repeat: int = 3) -> dict:
+    """Shadow maps (resolution × PCF kernel × bias) against Embree ray-traced hard shadows."""
+    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+
+    size = 128 if quick else 256
+    resolutions = (256, 1024) if quick else (256, 512, 1024, 2048)
+    kernels = ("nearest", "box3") if quick else ("nearest", "bilinear", "box3", "box5")
+    biases = SHADOW_BIASES if not quick else SHADOW_BIASES[:2]
+    scene = shadow_scene()
+    light = scene.lights[0]
+    tris, _ = world_triangles(scene)
+    points, normals = visible_points(scene, size)
+    to_light = -np.asarray(light.direction, float)
+    facing = normals @ to_light > 0
+    points, normals = points[facing], normals[facing]
+
+    def ray_traced() -> np.ndarray:
+        return directional_light_visibility(RayScene(tris), points, normals, to_light)
+
+    runs: dict[str, Callable[[], np.ndarray]] = {"ray_traced": ray_traced}
+    params: dict[str, dict] = {"ray_traced": {}}
+    for res in resolutions:
+        for kernel in kernels:
+            for bias_name, constant, slope in biases:
+                name = f"map {res} {kernel} {bias_name}"
+
+                def run(res=res, kernel=kernel, constant=constant, slope=slope) -> np.ndarray:
+                    maps = light_shadow_maps(light, tris, res, constant_bias=constant, slope_bias=slope)
+                    return shadow_map_visibility(light, maps, points, normals, kernel=kernel)
+
+                runs[name] = run
+                params[name] = {"resolution": res, "kernel": kernel, "bias": bias_name}
+    times = time_interleaved(runs, repeat=repeat)
+    reference = ray_traced()
+    cases = []
+    for name, fn in runs.items():
+        vis = np.asarray(fn(), dtype=np.float64)
+        cases.append(
+            {
+                "method": "ray_traced" if name == "ray_traced" else "shadow_map",
+                "label": name,
+                **params[name],
+                "median_s": times[name]["median_s"],
+                "ratio_to_ray_traced": times[name]["median_s"] / times["ray_traced"]["median_s"],
+                "misclassified_share": float(np.mean(np.abs(vis - reference) > 0.5)),
+                **error_metrics(vis, reference),
+            }
+        )
+    return {
+        "family": "shadows",
+        "title": "Shadow maps: resolution × PCF × bias",
+        "scene": "sphere and box over a ground plane, directional light; visible points facing the light",
+        "size": [size, size],
+        "points": len(points),
+        "shadowed_share": float(1 - reference.mean()),
+        "reference": "ray_traced (Embree), exact hard shadows",
+        "peer": "Embree (ray_traced)",
+        "error_unit": "visibility × 255 (a white receiver under a unit light)",
+        "cases": cases,
+    }
+
+
+# --------------------------------------------------------------------------- transparency
+
+
+def layered_scene(layers: int, opacity: float, seed: int = 7) -> bp.Scene:
+    """``layers`` transparent quads, alternately tilted ±30° so neighbours interpenetrate, seen from above."""
+    rng = np.random.default_rng(seed)
+    meshes = []
+    for i in range(layers):
+        z = 0.25 * i
+        tilt = math.radians(30.0 if i % 2 else -30.0)
+        half = 1.6
+        xs = np.array([-half, half, half, -half])
+        ys = np.array([-half, -half, half, half])
+        zs = z + np.tan(tilt) * xs * 0.5
+        corners = np.stack([xs, ys, zs], axis=1)
+        n = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        n /= np.linalg.norm(n)
+        colour = tuple(rng.uniform(0.1, 0.9, 3))
+        mat = bp.Material(ambient=colour, diffuse=colour, specular=(0, 0, 0), opacity=opacity)
+        meshes.append(bp.Mesh(corners, np.array([[0, 1, 2], [0, 2, 3]]), np.tile(n, (4, 1)), material=mat))
+    extent = 1.5
+    camera = bp.Camera.orthographic(
+        -extent, extent, -extent, extent, 0.1, 40.0, view=bp.look_at((0.0, 0.0, 20.0), (0.0, 0.0, 0.0))
+    )
+    return bp.Scene(meshes, [bp.DirectionalLight((0.2, 0.3, -1.0))], camera, ambient=(0.3, 0.3, 0.3))
+
+
+def transparent_fragments(scene: bp.Scene, size: int) -> dict:
+    """Shaded premultiplied fragments of every (transparent) triangle and what the resolvers need."""
+    from blinn_phong.raster import rasterize
+
+    prepared = bp.prepare_scene(scene)
+    frags = rasterize(prepared.clip, prepared.triangles, size, size)
+    shaded = bp.shade_fragments(prepared, frags, shading="flat")
+    rgba = np.c_[shaded.rgb * shaded.alpha[:, None], shaded.alpha]
+    return {
+        "pixel": frags.pixel,
+        "depth": frags.depth,
+        "rgba": rgba,
+        "n_pixels": size * size,
+        "triangle": frags.triangle,
+        "triangle_mesh": prepared.triangle_mesh,
+        "triangle_eye_distance": -prepared.face_eye_centroid[:, 2],
+        "front_facing": frags.front_facing,
+    }
+
+
+def transparency_methods(fr: dict, background: np.ndarray, peel: tuple[int, ...]) -> dict[str, Callable]:
+    """Resolver calls for every transparency method over the same fragments (``name → callable``)."""
+    common = {
+        "triangle": fr["triangle"],
+        "triangle_mesh": fr["triangle_mesh"],
+        "triangle_eye_distance": fr["triangle_eye_distance"],
+        "background": background,
+        "front_facing": fr["front_facing"],
+    }
+    args = (fr["pixel"], fr["depth"], fr["rgba"], fr["n_pixels"])
+    weights = wboit_weights(fr["rgba"][:, 3], "eq10", window_depth=fr["depth"])
+    methods: dict[str, Callable] = {
+        "a_buffer": lambda: resolve_transparency("a_buffer", *args, **common),
+        "sort_objects": lambda: resolve_transparency("sort_objects", *args, **common),
+        "sort_triangles": lambda: resolve_transparency("sort_triangles", *args, **common),
+        "weighted_blended": lambda: resolve_transparency(
+            "weighted_blended", *args, weights=weights, **common
+        ),
+    }
+    for k in peel:
+        methods[f"depth_peeling_{k}"] = lambda k=k: resolve_transparency(
+            "depth_peeling", *args, layers=k, **common
+        )
+    return methods
+
+
+def transparency(quick: bool = False, repeat: int = 3) -> dict:
+    """Sorted, depth-peeled and weighted-blended transparency vs the A-buffer as layers and opacity grow."""
+    size = 96 if quick else 160
+    layer_counts = (2, 4, 8) if quick else (2, 4, 8, 16)
+    opacities = (0.3, 0.8) if quick else (0.2, 0.5, 0.8)
+    peel = (1, 2, 4)
+    cases = []
+    for n in layer_counts:
+        for alpha in opacities:
+            fr = transparent_fragments(layered_scene(n, alpha), size)
+            background = np.tile([0.5, 0.5, 0.5, 1.0], (fr["n_pixels"], 1))
+            methods = transparency_methods(fr, background, peel)
+            times = time_interleaved(methods, repeat=repeat)
+            reference = methods["a_buffer"]()
+            for name, fn in methods.items():
+                cases.append(
+                    {
+                        "method": "depth_peeling" if name.startswith("depth_peeling") else name,
+                        "label": name,
+                        "layers": n,
+                        "opacity": alpha,
+                        **({"peel_layers": int(name.rsplit("_", 1)[1])} if name.startswith("depth_") else {}),
+                        "median_s": times[name]["median_s"],
+                        "ratio_to_a_buffer": times[name]["median_s"] / times["a_buffer"]["median_s"],
+                        **error_metrics(fn(), reference),
+                    }
+                )
+    return {
+        "family": "transparency",
+        "title": "Transparency: sorting, depth peeling, WBOIT vs the A-buffer",
+        "scene": "N quads tilted ±30° so neighbours interpenetrate, opacity α, over grey, seen from above",
+        "size": [size, size],
+        "reference": "a_buffer (exact per-pixel sort)",
+        "cases": cases,
+    }
+
+
+# --------------------------------------------------------------------------- compositing precision
+
+
+def layer_stack(n: int, shape: tuple[int, int], seed: int = 11) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` straight-alpha float64 layers (colour in [0, 1], α in [0.02, 0.3]) and an opaque background."""
+    rng = np.random.default_rng(seed)
+    straight = rng.uniform(0.0, 1.0, (n, *shape, 4))
+    straight[..., 3] = rng.uniform(0.02, 0.3, (n, *shape))
+    background = np.empty((*shape, 4))
+    background[..., :3] = rng.uniform(0.0, 1.0, (*shape, 3))
+    background[..., 3] = 1.0
+    return straight, background
+
+
+def _unorm8(x: np.ndarray) -> np.ndarray:
+    """Values rounded to the nearest multiple of 1/255 (an 8-bit buffer), as float32."""
+    return (np.rint(np.clip(x, 0.0, 1.0) * 255.0) / 255.0).astype(np.float32)
+
+
+def compositing_pipelines(
+    straight: np.ndarray, background: np.ndarray
+) -> dict[str, Callable[[], np.ndarray]]:
+    """The ``over`` stack in every precision and alpha convention; each returns premultiplied float64."""
+    premult64 = np.stack([premultiply(layer) for layer in straight])
+    premult32 = premult64.astype(np.float32)
+    premult16 = premult64.astype(np.float16)
+    straight8 = _unorm8(straight)
+    premult8 = _unorm8(premult64)
+
+    def stack(layers: np.ndarray, dtype: type) -> np.ndarray:
+        acc = background.astype(dtype)
+        for layer in layers:
+            acc = composite(layer, acc, "src_over")
+        return acc.astype(np.float64)
+
+    def float16_storage() -> np.ndarray:
+        # Blending arithmetic in float32, the framebuffer stored as float16 (RGBA16F).
+        acc = background.astype(np.float16)
+        for layer in premult16:
+            acc = composite(layer.astype(np.float32), acc.astype(np.float32), "src_over").astype(np.float16)
+        return acc.astype(np.float64)
+
+    def unorm8_premultiplied() -> np.ndarray:
+        acc = _unorm8(background)
+        for layer in premult8:
+            acc = gl_blend(layer, acc, "ONE", "ONE_MINUS_SRC_ALPHA", target="unorm8")
+        return acc.astype(np.float64)
+
+    def unorm8_straight() -> np.ndarray:
+        # Straight 8-bit layers and an 8-bit straight buffer: premultiply, over, unpremultiply, store.
+        acc = _unorm8(background)
+        for layer in straight8:
+            out = composite(premultiply(layer), premultiply(acc), "src_over")
+            acc = _unorm8(unpremultiply(out))
+        return premultiply(acc.astype(np.float64))
+
+    return {
+        "float64 premultiplied": lambda: stack(premult64, np.float64),
+        "float32 premultiplied": lambda: stack(premult32, np.float32),
+        "float16 premultiplied": float16_storage,
+        "unorm8 premultiplied": unorm8_premultiplied,
+        "unorm8 straight": unorm8_straight,
+    }
+
+
+def compositing_peers(straight: np.ndarray, background: np.ndarray) -> dict[str, Callable[[], np.ndarray]]:
+    """OpenImageIO ``over`` (float32 premultiplied) and Pillow ``alpha_composite`` (straight 8-bit)."""
+    peers: dict[str, Callable[[], np.ndarray]] = {}
+    premult32 = np.stack([premultiply(layer) for layer in straight]).astype(np.float32)
+    try:
+        import OpenImageIO as oiio  # noqa: N813 - the project's usual alias
+    except ImportError:  # pragma: no cover
+        oiio = None
+    if oiio is not None:
+        bufs = [oiio.ImageBuf(np.ascontiguousarray(layer)) for layer in premult32]
+        bg = oiio.ImageBuf(np.ascontiguousarray(background.astype(np.float32)))
+
+        def oiio_over() -> np.ndarray:
+            acc = bg
+            for buf in bufs:
+                acc = oiio.ImageBufAlgo.over(buf, acc)
+            return acc.get_pixels(oiio.FLOAT).astype(np.float64)
+
+        peers["OpenImageIO over (float32)"] = oiio_over
+    try:
+        from PIL import Image
+    except ImportError:  # pragma: no cover
+        Image = None
+    if Image is not None:
+        imgs = [Image.fromarray(np.rint(layer * 255).astype(np.uint8), "RGBA") for layer in straight]
+        bg8 = Image.fromarray(np.rint(background * 255).astype(np.uint8), "RGBA")
+
+        def pillow() -> np.ndarray:
+            acc = bg8
+            for img in imgs:
+                acc = Image.alpha_composite(acc, img)
+            return premultiply(np.asarray(acc, dtype=np.float64) / 255.0)
+
+        peers["Pillow alpha_composite (straight unorm8)"] = pillow
+    return peers
+
+
+def compositing_precision(quick: bool = False, repeat: int = 3) -> dict:
+    """An N-layer ``over`` stack in every precision/convention against float64 premultiplied."""
+    shape = (128, 128) if quick else (256, 256)
+    counts = (2, 8, 32) if quick else (2, 8, 32, 128)
+    cases = []
+    for n in counts:
+        straight, background = layer_stack(n, shape)
+        runs = {**compositing_pipelines(straight, background), **compositing_peers(straight, background)}
+        times = time_interleaved(runs, repeat=repeat)
+        reference = runs["float64 premultiplied"]()
+        peer = (
+            "OpenImageIO over (float32)" if "OpenImageIO over (float32)" in times else "float32 premultiplied"
+        )
+        for name, fn in runs.items():
+            cases.append(
+                {
+                    "method": name,
+                    "peer": name not in ("float64 premultiplied",) and "(" in name,
+                    "layers": n,
+                    "median_s": times[name]["median_s"],
+                    "ratio_to_oiio": times[name]["median_s"] / times[peer]["median_s"],
+                    **error_metrics(fn(), reference),
+                }
+            )
+    return {
+        "family": "compositing",
+        "title": "Compositing precision: N-layer over stack",
+        "scene": "N random layers (α in [0.02, 0.3]) over an opaque random background",
+        "size": list(shape),
+        "reference": "float64 premultiplied",
+        "peer": "OpenImageIO ImageBufAlgo.over (ratios); Pillow alpha_composite",
+        "cases": cases,
+    }
+
+
+# --------------------------------------------------------------------------- scaling
+
+
+def scaling(quick: bool = False, repeat: int = 3) -> dict:
+    """Render time against pixel count and triangle count, ours (Phong) and Mesa's GLSL shader."""
+    sizes = (128, 256, 512) if quick else (128, 256, 512, 1024)
+    segments = (16, 64, 256) if quick else (16, 32, 64, 128, 256, 512)
+    mesa_reason = mesa_available()
+
+    def measure(scene: bp.Scene, size: int) -> dict:
+        runs: dict[str, Callable] = {"phong": lambda: bp.render(scene, size, size, shading="phong")}
+        times = time_interleaved(runs, repeat=repeat)
+        row = {"ours_s": times["phong"]["median_s"]}
+        if mesa_reason is None:
+            from oracles import gl_lighting
+
+            gl_lighting.render_glsl_phong(scene, size, size)
+            row["mesa_glsl_s"] = float(
+                np.median([gl_lighting.render_glsl_phong(scene, size, size).seconds for _ in range(repeat)])
+            )
+            row["ratio_to_mesa_glsl"] = row["ours_s"] / row["mesa_glsl_s"]
+        return row
+
+    pixel_rows = []
+    scene = sphere_scene(64)
+    for size in sizes:
+        pixel_rows.append({"pixels": size * size, "size": size, **measure(scene, size)})
+    triangle_rows = []
+    for seg in segments:
+        sc = sphere_scene(seg)
+        triangle_rows.append({"triangles": len(sc.meshes[0].triangles), "segments": seg, **measure(sc, 256)})
+    return {
+        "family": "scaling",
+        "title": "Scaling: time against pixels and triangles",
+        "scene": "sphere_scene, Phong shading, 1 sample per pixel",
+        "peer": "Mesa llvmpipe GLSL per-pixel shader" if mesa_reason is None else None,
+        "peer_unavailable": mesa_reason,
+        "pixels": pixel_rows,
+        "triangles": triangle_rows,
+    }
+
+
+#: Family name → measurement function ``(quick, repeat) -> dict``.
+FAMILIES: dict[str, Callable[..., dict]] = {
+    "shading": shading,
+    "antialiasing": antialiasing,
+    "shadows": shadows,
+    "transparency": transparency,
+    "compositing": compositing_precision,
+    "scaling": scaling,
+}
