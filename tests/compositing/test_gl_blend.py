@@ -313,6 +313,17 @@ def test_gl_factors_with_func_add_equals_the_closed_form(op):
     assert gl_factors(op.upper()) == (sf, df)
 
 
+def test_gl_factors_path_agrees_with_composite():
+    """The issue's "both paths agree": the blend stage with gl_factors(op) and composite(op)."""
+    from compositing import composite
+
+    src, dst = (x.astype(np.float32) for x in premultiplied_pairs(256, seed=8))
+    for op in CLOSED_FORMS:
+        np.testing.assert_allclose(
+            gl_blend(src, dst, *gl_factors(op)), composite(src, dst, op), rtol=0, atol=1e-6, err_msg=op
+        )
+
+
 @pytest.mark.parametrize("op", [name for name in ALL_OPERATORS if "joint" in name])
 def test_gl_factors_rejects_disjoint_and_conjoint(op):
     with pytest.raises(ValueError, match=r"no OpenGL blend factor pair") as info:
