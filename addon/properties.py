@@ -19,7 +19,6 @@ from bpy.props import (
     FloatVectorProperty,
     IntProperty,
     PointerProperty,
-    StringProperty,
 )
 
 from .mapping import MAX_SHININESS
@@ -117,8 +116,19 @@ class BLINN_PHONG_RenderSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blende
         description="In background mode (blender -b), end the process with exit code 1 when a render "
         "fails, so render farms and scripts see the failure",
     )
-    last_report: StringProperty(
-        name="Last Render", default="", description="Choices, reasons and timings of the last render (JSON)"
+    verify_background: PointerProperty(
+        name="Background",
+        type=bpy.types.Image,
+        description="Image of the render's size to composite the last render over (Verify Against Blender)",
+    )
+    verify_operator: EnumProperty(
+        name="Operator",
+        items=(
+            ("src_over", "Over", "Alpha Over, mode Over: Porter-Duff src-over"),
+            ("disjoint_over", "Disjoint Over", "Alpha Over, mode Disjoint Over (Blender 5.0)"),
+            ("conjoint_over", "Conjoint Over", "Alpha Over, mode Conjoint Over (Blender 5.0)"),
+        ),
+        default="src_over",
     )
 
 
