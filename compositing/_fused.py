@@ -84,8 +84,16 @@ def _term(channel: str, factor: Expr, code: str) -> str | None:
     return f"{channel} * {code}"
 
 
-def kernel_source(spec: OperatorSpec) -> tuple[str, set[float]]:
-    """Source of the fused kernel for one operator, and the constants it needs."""
+def _is_zero(factor: Expr) -> bool:
+    return factor.is_const and float(factor.value) == 0.0  # type: ignore[arg-type]
+
+
+def kernel_source(spec: OperatorSpec, lerp: bool) -> tuple[str, set[float]]:
+    """Source of the fused kernel for one operator, and the constants it needs.
+
+    ``lerp`` selects the variant that mixes with the destination (factor < 1); two
+    variants keep the per-pixel loop free of a branch.
+    """
     consts: set[float] = {0.0, 1.0}
     fa_code = factor_source(spec.fa_expr, consts)
     fb_code = factor_source(spec.fb_expr, consts)
@@ -94,10 +102,19 @@ def kernel_source(spec: OperatorSpec) -> tuple[str, set[float]]:
         terms = [t for t in (_term(f"s{c}", spec.fa_expr, "fa"), _term(f"d{c}", spec.fb_expr, "fb")) if t]
         value = " + ".join(f"({t})" for t in terms) if terms else _const_name(0.0)
         lines.append(f"        m{c} = {value}")
+    if lerp:
+        lines += [f"        m{c} = d{c} * keep + m{c} * mix" for c in range(4)]
     body = "\n".join(lines)
+    # The flag: a NaN or Inf in an input reaches the outputs (x·0 is NaN for x = ±Inf or
+    # NaN) unless the input is skipped by a constant-zero factor; add those inputs as well.
+    checked = ["(m0 + m1)", "(m2 + m3)"]
+    if _is_zero(spec.fa_expr):
+        checked += ["(s0 + s1)", "(s2 + s3)"]
+    if _is_zero(spec.fb_expr) and not lerp:
+        checked += ["(d0 + d1)", "(d2 + d3)"]
     k0, k1 = _const_name(0.0), _const_name(1.0)
     src = f"""
-def kernel(s, d, o, keep, mix, lerp, lo, hi):
+def kernel(s, d, o, keep, mix, lo, hi):
     bad = np.int32(0)
     for p in range(lo, hi):
         i = 4 * p
@@ -108,15 +125,10 @@ def kernel(s, d, o, keep, mix, lerp, lo, hi):
         fa = {fa_code}
         fb = {fb_code}
 {body}
-        if lerp:
-            m0 = d0 * keep + m0 * mix
-            m1 = d1 * keep + m1 * mix
-            m2 = d2 * keep + m2 * mix
-            m3 = d3 * keep + m3 * mix
         o[i] = m0; o[i + 1] = m1; o[i + 2] = m2; o[i + 3] = m3
-        # Flag, without a branch: z is non-finite iff some input or output is non-finite (or
-        # the sum overflows, a false alarm the exact checks clear); alpha outside [0, 1].
-        z = (((s0 + s1) + (s2 + s3)) + ((d0 + d1) + (d2 + d3))) + ((m0 + m1) + (m2 + m3))
+        # Flag without a branch: z is non-finite iff some value is (or the sum overflows,
+        # a false alarm the exact checks clear); alpha outside [0, 1] or NaN.
+        z = {" + ".join(checked)}
         bad |= np.int32((z - z != {k0}) | (min(sa, da) < {k0}) | (max(sa, da) > {k1}))
     return bad != 0
 """
@@ -124,8 +136,8 @@ def kernel(s, d, o, keep, mix, lerp, lo, hi):
 
 
 @functools.cache
-def _compiled(name: str, spec: OperatorSpec, dtype_name: str):
-    src, consts = kernel_source(spec)
+def _compiled(name: str, spec: OperatorSpec, dtype_name: str, lerp: bool):
+    src, consts = kernel_source(spec, lerp)
     t = np.dtype(dtype_name).type
     namespace = {"np": np, "numba": numba, **{_const_name(v): t(v) for v in consts}}
     exec(compile(src, f"<fused kernel {name} {dtype_name}>", "exec"), namespace)
@@ -151,10 +163,10 @@ def composite_fused(
     may be non-finite or some alpha may lie outside [0, 1]; the caller then runs
     the exact checks.
     """
-    kernel = _compiled(spec.name, spec, src.dtype.name)
+    kernel = _compiled(spec.name, spec, src.dtype.name, factor != 1.0)
     out = np.empty_like(src)
     t = src.dtype.type
-    args = (src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor), factor != 1.0)
+    args = (src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor))
     n = src.size // 4
     parts = max(1, min(THREADS * RANGES_PER_THREAD, n // MIN_PIXELS_PER_THREAD))
     if parts == 1:

@@ -96,3 +96,17 @@ def test_fused_engine_refuses_what_it_cannot_do():
         composite(a[:1], b, engine="numba")
     with pytest.raises(ValueError, match="scalar factor"):
         composite(a, b, factor=np.full((8, 8), 0.5, np.float32), engine="numba")
+
+
+@pytest.mark.parametrize("op", ["clear", "src", "dst", "dst_in", "src_in"])
+@pytest.mark.parametrize("factor", [1.0, 0.5, 0.0])
+@pytest.mark.parametrize("which", ["src", "dst"])
+def test_fused_engine_sees_inputs_an_operator_ignores(op, factor, which):
+    # clear reads nothing, src ignores dst, dst ignores src: bad values there are still reported.
+    a, b = image_pair((30, 30), seed=16)
+    for value, message in ((np.inf, "expected finite values"), (np.nan, "expected finite values")):
+        x, y = a.copy(), b.copy()
+        (x if which == "src" else y)[17, 3, 1] = value
+        for engine in ("numpy", "numba"):
+            with pytest.raises(ValueError, match=f"{which}: {message}"):
+                composite(x, y, op, factor=factor, engine=engine)
