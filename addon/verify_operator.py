@@ -1,12 +1,13 @@
-""" "Verify against Blender": the last render over a background, by our ``src_over`` and by Alpha Over.
+""" "Verify against Blender": the last render over a background, by our operator and by Alpha Over.
 
 Inside a running Blender (no second process): the Render Result is saved to a 32-bit EXR and read
-in the project's convention (``compositing.io``); the background image is read from its file the
-same way. Ours is ``compositing.composite(render, background, operator)``. Blender's is a
-throw-away scene whose compositor holds two Image nodes (the same arrays written as EXR, loaded
-``Non-Color``/``Channel Packed`` so Blender converts nothing) and an Alpha Over node, rendered
-once. The operator reports the largest difference and shows ``|ours − Blender|`` as the image
-"Blinn-Phong Verify Difference" in an Image Editor.
+with OpenImageIO (which Blender bundles); the background image is read from its file (EXR as
+stored, other formats decoded by ``compositing.io``). Ours is
+``compositing.composite(render, background, operator)``. Blender's is a throw-away scene whose
+compositor holds two Image nodes (the same arrays written as EXR, loaded ``Non-Color``/``Channel
+Packed`` so Blender converts nothing) and an Alpha Over node, rendered once. The operator reports
+the largest difference and shows ``|ours − Blender|`` as the image "Blinn-Phong Verify Difference"
+in an Image Editor.
 """
 
 import tempfile
@@ -35,6 +36,38 @@ LAST_VERIFY: dict = {}
 DIFFERENCE_IMAGE = "Blinn-Phong Verify Difference"
 
 
+def read_rgba_exr(path: Path | str) -> np.ndarray:
+    """An RGBA EXR as (H, W, 4) float32, row 0 at the top, values as stored (OpenImageIO)."""
+    import OpenImageIO as oiio  # noqa: N813 (the library's documented alias)
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        raise OSError(f"path: cannot open {path}: {oiio.geterror()}")
+    try:
+        spec = image.spec()
+        names = list(spec.channelnames)
+        pixels = image.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+    finally:
+        image.close()
+    picked = [
+        next(i for i, n in enumerate(names) if n.split(".")[-1] == c)
+        for c in "RGBA"
+        if any(n.split(".")[-1] == c for n in names)
+    ]
+    if len(picked) != 4:
+        raise ValueError(f"path: {path} has channels {names}, expected R, G, B and A")
+    return np.ascontiguousarray(pixels[..., picked], dtype=np.float32)
+
+
+def _read_background(path: str) -> np.ndarray:
+    """A background file in the project convention: EXR as stored; other formats via ``compositing.io``."""
+    if Path(path).suffix.lower() == ".exr":
+        return read_rgba_exr(path)
+    from compositing.io import read_image  # decodes sRGB (needs colour-science)
+
+    return read_image(path)
+
+
 def _load_exact(path: Path) -> bpy.types.Image:
     image = bpy.data.images.load(str(path), check_existing=False)
     image.colorspace_settings.name = "Non-Color"
@@ -54,14 +87,14 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
     Returns:
         Blender's result, (H, W, 4) float32, row 0 at the top.
     """
-    from compositing.io import read_image, write_image
+    from .verify import write_exr
 
     if src.shape != dst.shape or src.ndim != 3 or src.shape[2] != 4:
         raise ValueError(
             f"src, dst: expected two (H, W, 4) images of one shape, got {src.shape} and {dst.shape}"
         )
-    write_image(workdir / "src.exr", src)
-    write_image(workdir / "dst.exr", dst)
+    write_exr(workdir / "src.exr", src)
+    write_exr(workdir / "dst.exr", dst)
     scene = bpy.data.scenes.new("Blinn-Phong Verify")
     images = [_load_exact(workdir / "src.exr"), _load_exact(workdir / "dst.exr")]
     camera = bpy.data.objects.new(
@@ -89,7 +122,7 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
         tree.links.new(over.outputs["Image"], compat.add_render_output(tree))
         scene.render.filepath = str(workdir / "blender.exr")
         bpy.ops.render.render(write_still=True, scene=scene.name)
-        return read_image(workdir / "blender.exr")
+        return read_rgba_exr(workdir / "blender.exr")
     finally:
         tree_group = getattr(scene, "compositing_node_group", None)
         bpy.data.scenes.remove(scene)
@@ -105,7 +138,8 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
 def verify_last_render(background: bpy.types.Image, operator: str, workdir: Path) -> dict:
     """Compare ours and Blender's composite of the current Render Result over ``background``."""
     from compositing import composite
-    from compositing.io import read_image, write_image
+
+    from .verify import write_exr
 
     result = bpy.data.images.get("Render Result")
     if result is None:
@@ -114,9 +148,15 @@ def verify_last_render(background: bpy.types.Image, operator: str, workdir: Path
         raise ValueError(f"background: image {background.name!r} has no file to read")
     started = time.perf_counter()
     render_path = workdir / "render.exr"
-    result.save_render(str(render_path), scene=bpy.context.scene)
-    render = read_image(render_path)
-    plate = read_image(bpy.path.abspath(background.filepath))
+    settings = bpy.context.scene.render.image_settings
+    saved = (settings.file_format, settings.color_depth, settings.color_mode)
+    try:  # save_render writes in the scene's output format: make it a 32-bit float RGBA EXR
+        settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
+        result.save_render(str(render_path), scene=bpy.context.scene)
+    finally:
+        settings.file_format, settings.color_depth, settings.color_mode = saved
+    render = read_rgba_exr(render_path)
+    plate = _read_background(bpy.path.abspath(background.filepath))
     if plate.shape != render.shape:
         raise ValueError(
             f"background: {background.name!r} is {plate.shape[1]}×{plate.shape[0]}, "
@@ -126,8 +166,8 @@ def verify_last_render(background: bpy.types.Image, operator: str, workdir: Path
     theirs = blender_alpha_over(render, plate, operator, workdir)
     difference = np.abs(ours.astype(np.float64) - theirs).astype(np.float32)
     files = {"render": render_path, "ours": workdir / "ours.exr", "difference": workdir / "difference.exr"}
-    write_image(files["ours"], ours)
-    write_image(files["difference"], difference)
+    write_exr(files["ours"], ours)
+    write_exr(files["difference"], difference)
     return {
         "operator": operator,
         "max_abs_error": float(difference.max()),
