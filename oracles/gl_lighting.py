@@ -104,12 +104,14 @@ void main() {
 class GLRender:
     """An OpenGL render read back: ``rgba`` uint8 (H, W, 4), row 0 at the top; ``seconds`` to draw + finish.
 
-    ``renderer`` is the ``GL_RENDERER`` string.
+    ``renderer`` is the ``GL_RENDERER`` string; ``cpu_seconds`` the process CPU time of the
+    timed frames (llvmpipe's worker threads run in this process), per frame.
     """
 
     rgba: np.ndarray
     seconds: float
     renderer: str
+    cpu_seconds: float = float("nan")
 
 
 class _Framebuffer:
@@ -334,15 +336,16 @@ def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1
         buffers = _MeshBuffers(gl, scene)
         buffers.draw(scene)  # warm-up: shader variant compilation, buffer upload
         gl.glFinish()
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         for _ in range(max(repeats, 1)):
             gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
             buffers.draw(scene)
             gl.glFinish()
         seconds = (time.perf_counter() - start) / max(repeats, 1)
+        cpu_seconds = (time.process_time() - cpu_start) / max(repeats, 1)
         buffers.delete()
         image = fb.read()
         gl.glUseProgram(0)
-        return GLRender(image, seconds, info.renderer)
+        return GLRender(image, seconds, info.renderer, cpu_seconds)
     finally:
         fb.delete()
