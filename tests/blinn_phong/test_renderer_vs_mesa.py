@@ -51,7 +51,10 @@ def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 
     """Pixels whose centre lies inside its visible triangle, at least ``margin`` pixels from every edge.
 
     Away from edges, coverage cannot depend on the fill rule or on float32 vs float64
-    vertex transformation, and all three vertices' colours contribute.
+    vertex transformation, and all three vertices' colours contribute. Edges are the
+    projected lines through the vertices' homogeneous window positions (valid for
+    triangles crossing the near plane too); fragments within 1e-3 of the near plane in
+    window depth (the clipping edge) are excluded as well.
     """
     prepared = bp.prepare_scene(scene)
     frags = bp.rasterize(prepared.clip, prepared.triangles, width, height)
@@ -59,16 +62,18 @@ def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 
     mask = np.zeros(width * height, bool)
     hit = np.flatnonzero(winner >= 0)
     clip = prepared.clip[prepared.triangles[frags.triangle[winner[hit]]]]  # (n, 3, 4)
-    x = (clip[..., 0] / clip[..., 3] + 1) * width / 2
-    y = (1 - clip[..., 1] / clip[..., 3]) * height / 2  # rows from the top
-    px = hit % width + 0.5
-    py = hit // width + 0.5
+    # Homogeneous window coordinates: x = (x_c + w)·W/2, row = (w - y_c)·H/2, weight w.
+    hom = np.stack(
+        [(clip[..., 0] + clip[..., 3]) * width / 2, (clip[..., 3] - clip[..., 1]) * height / 2, clip[..., 3]],
+        -1,
+    )
+    centre = np.stack([hit % width + 0.5, hit // width + 0.5, np.ones(len(hit))], -1)
     nearest_edge = np.full(len(hit), np.inf)
     for i, j in ((0, 1), (1, 2), (2, 0)):
-        ex, ey = x[:, j] - x[:, i], y[:, j] - y[:, i]
-        cross = ex * (py - y[:, i]) - ey * (px - x[:, i])
-        nearest_edge = np.minimum(nearest_edge, np.abs(cross) / np.hypot(ex, ey))
-    mask[hit] = nearest_edge >= margin
+        line = np.cross(hom[:, i], hom[:, j])
+        distance = np.abs(np.einsum("nk,nk->n", line, centre)) / np.hypot(line[:, 0], line[:, 1])
+        nearest_edge = np.minimum(nearest_edge, distance)
+    mask[hit] = (nearest_edge >= margin) & (frags.depth[winner[hit]] > 1e-3)
     return mask.reshape(height, width)
 
 
@@ -146,6 +151,12 @@ SCENES: dict[str, SceneFactory] = {
         perspective_camera(),
         light_model=bp.LightModel(local_viewer=True, two_sided=True),
     ),
+    "floor_through_near_plane": lambda: bp.Scene(
+        [floor_mesh(MATTE, n=8, y=-0.6, size=8.0), sphere_mesh(SHINY)],
+        [POINT, SPOT],
+        bp.Camera.perspective(70.0, 1.0, 0.5, 20.0, view=bp.look_at((0.2, -0.3, 3.0), (0.0, -0.5, 0.0))),
+        light_model=bp.LightModel(local_viewer=True),
+    ),
     "separate_specular_overbright": lambda: bp.Scene(
         [sphere_mesh(SHINY)],
         [DIRECTIONAL, bp.PointLight((1.5, 2.0, 3.0), (1.0, 1.0, 1.0), 1.6, linear=0.1)],
@@ -182,6 +193,7 @@ FLAT_CASES = [
 ]
 PHONG_CASES = [
     "directional_ortho_local_viewer",
+    "floor_through_near_plane",
     "point_attenuated_perspective_local_viewer",
     "spot_perspective_infinite_viewer",
     "three_lights_perspective_local_viewer",
@@ -266,3 +278,18 @@ def test_comparison_detects_a_wrong_viewer_model(gl) -> None:
     theirs = gl.render_fixed_function(scene, SIZE, SIZE).rgba
     _, max_diff, _ = compare(ours, theirs, interior_mask(scene, SIZE, SIZE))
     assert max_diff > 10
+
+
+def test_near_plane_scene_compares_pixels_of_clipped_triangles() -> None:
+    # Guards the clipping comparison above: thousands of compared pixels lie on triangles
+    # that cross the near plane (clipped by both renderers).
+    scene = SCENES["floor_through_near_plane"]()
+    prepared = bp.prepare_scene(scene)
+    in_front = (prepared.clip[:, 2] + prepared.clip[:, 3] >= 0)[prepared.triangles].sum(axis=1)
+    crossing = (in_front == 1) | (in_front == 2)
+    frags = bp.rasterize(prepared.clip, prepared.triangles, SIZE, SIZE)
+    winner = bp.resolve_nearest(frags)
+    on_clipped = np.zeros(SIZE * SIZE, bool)
+    hit = winner >= 0
+    on_clipped[hit] = crossing[frags.triangle[winner[hit]]]
+    assert (on_clipped & interior_mask(scene, SIZE, SIZE).ravel()).sum() > 1000
