@@ -105,13 +105,16 @@ class GLRender:
     """An OpenGL render read back: ``rgba`` uint8 (H, W, 4), row 0 at the top; ``seconds`` to draw + finish.
 
     ``renderer`` is the ``GL_RENDERER`` string; ``cpu_seconds`` the process CPU time of the
-    timed frames (llvmpipe's worker threads run in this process), per frame.
+    timed frames (llvmpipe's worker threads run in this process), per frame; ``depth`` the
+    (H, W) float32 window depth read from the 24-bit depth buffer (1.0 where nothing was drawn),
+    row 0 at the top.
     """
 
     rgba: np.ndarray
     seconds: float
     renderer: str
     cpu_seconds: float = float("nan")
+    depth: np.ndarray | None = None
 
 
 class _Framebuffer:
@@ -144,6 +147,12 @@ class _Framebuffer:
         data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE)
         img = np.frombuffer(data, np.uint8).reshape(self.height, self.width, 4)
         return img[::-1].copy()  # OpenGL rows are bottom-up
+
+    def read_depth(self) -> np.ndarray:
+        gl = self.gl
+        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
+        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_DEPTH_COMPONENT, gl.GL_FLOAT)
+        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
 
     def delete(self) -> None:
         self.gl.glBindFramebuffer(self.gl.GL_FRAMEBUFFER, 0)
@@ -262,6 +271,12 @@ class _MeshBuffers:
         gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
         gl.glDisableClientState(gl.GL_NORMAL_ARRAY)
 
+    def read_depth(self) -> np.ndarray:
+        gl = self.gl
+        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
+        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_DEPTH_COMPONENT, gl.GL_FLOAT)
+        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
+
     def delete(self) -> None:
         for _, ids, _ in self.items:
             self.gl.glDeleteBuffers(3, ids)
@@ -287,7 +302,7 @@ def render_fixed_function(scene: Scene, width: int, height: int, *, flat: bool =
         gl.glFinish()
         buffers.delete()
         seconds = time.perf_counter() - start
-        return GLRender(fb.read(), seconds, info.renderer)
+        return GLRender(fb.read(), seconds, info.renderer, depth=fb.read_depth())
     finally:
         fb.delete()
 
@@ -346,6 +361,6 @@ def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1
         buffers.delete()
         image = fb.read()
         gl.glUseProgram(0)
-        return GLRender(image, seconds, info.renderer, cpu_seconds)
+        return GLRender(image, seconds, info.renderer, cpu_seconds, fb.read_depth())
     finally:
         fb.delete()

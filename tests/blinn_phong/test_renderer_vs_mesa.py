@@ -293,3 +293,41 @@ def test_near_plane_scene_compares_pixels_of_clipped_triangles() -> None:
     hit = winner >= 0
     on_clipped[hit] = crossing[frags.triangle[winner[hit]]]
     assert (on_clipped & interior_mask(scene, SIZE, SIZE).ravel()).sum() > 1000
+
+
+def test_window_depth_matches_the_depth_buffer(gl) -> None:
+    # glDepthRange(0, 1) window depth, perspective (non-linear in eye z), near-plane clipping:
+    # equal to the 24-bit depth buffer up to its quantisation and float32 vertex maths.
+    scene = SCENES["floor_through_near_plane"]()
+    ours = bp.render(scene, SIZE, SIZE, shading="gouraud", gl_compat=True, engine="numpy").depth
+    theirs = gl.render_fixed_function(scene, SIZE, SIZE).depth
+    interior = interior_mask(scene, SIZE, SIZE)
+    np.testing.assert_allclose(ours[interior], theirs[interior], rtol=0, atol=2e-6)
+    empty = ours == 1.0
+    np.testing.assert_array_equal(theirs[empty], 1.0)
+
+
+def test_random_triangles_cover_the_same_pixels_as_mesa(gl) -> None:
+    # 60 random triangles (arbitrary sub-pixel positions, both windings, some sliver-thin), each
+    # at its own depth with its own exactly representable 8-bit emission: the whole image —
+    # edges included — must be identical, i.e. the same triangle wins every pixel.
+    rng = np.random.default_rng(2024)
+    width, height = 96, 80
+    meshes = []
+    for i in range(60):
+        centre = rng.uniform([0, 0], [width, height])
+        pts = centre + rng.normal(scale=rng.choice([2.0, 6.0, 15.0]), size=(3, 2))
+        if i % 7 == 0:
+            pts[2] = pts[0] + (pts[1] - pts[0]) * 0.5 + rng.normal(scale=0.3, size=2)  # a sliver
+        z = -1.0 - i * 0.05  # later triangles further away: depth order = draw order reversed
+        pos = np.c_[pts, np.full(3, z)].astype(np.float32).astype(np.float64)
+        level = (i * 4 + 10) / 255.0
+        material = bp.Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(level, 1 - level, (i % 5) / 5))
+        meshes.append(
+            bp.Mesh(pos, np.array([[0, 1, 2]]), np.tile([0.0, 0.0, 1.0], (3, 1)), material=material)
+        )
+    scene = bp.Scene(meshes, [], bp.Camera.orthographic(0, width, 0, height, 0.5, 10.0), ambient=(0, 0, 0))
+    ours = to_unorm8(bp.render(scene, width, height, shading="flat", gl_compat=True, engine="numpy").rgba)
+    theirs = gl.render_fixed_function(scene, width, height, flat=True).rgba.astype(np.int64)
+    assert (ours[..., 3] > 0).sum() > 2000
+    np.testing.assert_array_equal(ours, theirs)
