@@ -47,6 +47,7 @@ __all__ = [
     "register",
     "render_converted",
     "unregister",
+    "user_cancelled",
 ]
 
 ENGINE_ID = "BLINN_PHONG"
@@ -66,6 +67,11 @@ runner."""
 
 class RenderCancelled(Exception):
     """The user cancelled the render (``RenderEngine.test_break``)."""
+
+
+def user_cancelled(engine: bpy.types.RenderEngine) -> bool:
+    """True when Blender asks the render to stop (Esc in the UI): ``RenderEngine.test_break()``."""
+    return bool(engine.test_break())
 
 
 def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
@@ -157,19 +163,22 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         try:
             self.update_stats("", "Blinn-Phong: converting the scene")
             converted = convert.scene_from_depsgraph(depsgraph)
-            if self.test_break():
+            if user_cancelled(self):
                 raise RenderCancelled
 
             def progress(stage: str, fraction: float) -> None:
                 self.update_progress(float(fraction))
                 self.update_stats("", f"Blinn-Phong: {stage}")
-                if self.test_break():
+                if user_cancelled(self):
                     raise RenderCancelled
 
             result = render_converted(converted, progress)
             self._write(converted, result)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
+            # Blender crashes saving a still (write_still) after a render that produced no result,
+            # so a cancelled render leaves the error pattern: never a frame that looks finished.
+            self._write_error_pattern(full_w, full_h)
             return
         except Exception as error:
             self._fail(scene, full_w, full_h, error, started)
@@ -223,6 +232,17 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             raise
         self.end_result(render_result)
 
+    def _write_error_pattern(self, width: int, height: int) -> None:
+        """Fill Combined with :func:`error_pattern` (the result Blender shows and saves)."""
+        try:
+            render_result = self.begin_result(0, 0, width, height)
+            combined = render_result.layers[0].passes["Combined"]
+            pattern = error_pattern(render_result.resolution_y, render_result.resolution_x)
+            combined.rect.foreach_set(pattern.ravel())
+            self.end_result(render_result)
+        except Exception as secondary:
+            print(f"Blinn-Phong: could not write the error image: {secondary}", file=sys.stderr, flush=True)
+
     def _fail(
         self, scene: bpy.types.Scene, width: int, height: int, error: Exception, started: float
     ) -> None:
@@ -235,14 +255,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         print(message, file=sys.stderr, flush=True)
         self.report({"ERROR"}, message)
         self.error_set(message)
-        try:
-            render_result = self.begin_result(0, 0, width, height)
-            combined = render_result.layers[0].passes["Combined"]
-            pattern = error_pattern(render_result.resolution_y, render_result.resolution_x)
-            combined.rect.foreach_set(pattern.ravel())
-            self.end_result(render_result)
-        except Exception as secondary:
-            print(f"Blinn-Phong: could not write the error image: {secondary}", file=sys.stderr, flush=True)
+        self._write_error_pattern(width, height)
         settings = getattr(scene, "blinn_phong", None)
         if bpy.app.background and (settings is None or settings.abort_on_error):
             print(

@@ -295,3 +295,29 @@ emit({{"ok": last["ok"], "error": last["error"], "raised": raised}})
     )
     assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
     assert "Blinn-Phong render failed: ValueError" in done.stderr
+
+
+def test_cancel_stops_and_leaves_the_error_pattern(tmp_path: Path) -> None:
+    # Blender's test_break() turns True when the user presses Esc; the engine stops, reports no error,
+    # and (Blender crashes saving a still from an empty result) leaves the pattern, not a finished frame.
+    out = tmp_path / "cancelled.exr"
+    got = run_bpy(
+        CUBE_SCENE
+        + """
+engine.user_cancelled = lambda render_engine: True  # as if Esc were pressed at the first check
+try:
+    bpy.ops.render.render(write_still=True)
+    raised = None
+except RuntimeError as error:
+    raised = str(error)
+last = dict(engine.LAST_RENDER)
+engine.unregister()
+properties.unregister()
+emit({"ok": last["ok"], "error": last["error"], "raised": raised})
+""",
+        tmp_path,
+        args=(str(out),),
+    )
+    assert got == {"ok": False, "error": "cancelled", "raised": None}
+    combined = _read_exr(out)
+    assert (combined[..., 3] == 1).all() and (combined[..., 1] == 0).all() and combined[..., 0].max() == 1.0
