@@ -36,6 +36,7 @@ top-left rule):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,6 +209,7 @@ def rasterize(
     *,
     samples: int = 1,
     cull_backfaces: bool = False,
+    progress: Callable[[float], None] | None = None,
 ) -> Fragments:
     """Rasterize clip-space triangles and return every covered sample (see the module docstring).
 
@@ -218,6 +220,8 @@ def rasterize(
         height: image height in pixels (> 0).
         samples: samples per pixel, a perfect square k² (ordered k×k grid).
         cull_backfaces: drop triangles that are clockwise in window space (``GL_CULL_FACE``, ``GL_BACK``).
+        progress: optional ``callback(fraction)`` called after each batch with the share of
+            the triangle work done (for long renders).
 
     Returns:
         :class:`Fragments`, in no particular order.
@@ -229,11 +233,16 @@ def rasterize(
     setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
     jobs = _tile_jobs(setup.selected, setup.x0, setup.x1, setup.y0, setup.y1)
     pieces: list[tuple[np.ndarray, ...]] = []
+    total = sum(len(j[0]) * size * size for size, j in jobs.items())
+    done = 0
     for size, (job_tri, job_x, job_y) in jobs.items():
         batch = max(1, _BATCH_ELEMENTS // (size * size))
         for start in range(0, len(job_tri), batch):
             stop = start + batch
             pieces.append(_cover(job_tri[start:stop], job_x[start:stop], job_y[start:stop], size, setup))
+            done += len(job_tri[start:stop]) * size * size
+            if progress is not None:
+                progress(done / total)
     if pieces:
         frag_sub = np.concatenate([p[0] for p in pieces])
         fx = np.concatenate([p[1] for p in pieces])
@@ -509,13 +518,14 @@ def visible_fragments(
     samples: int = 1,
     cull_backfaces: bool = False,
     engine: str = "numpy",
+    progress: Callable[[float], None] | None = None,
 ) -> Fragments:
     """The nearest fragment of every covered sample (a z-buffer pass), ordered by ``sample_key``.
 
     ``engine="numpy"`` is :func:`rasterize` + :func:`resolve_nearest` (the reference);
     ``engine="numba"`` runs the compiled loop of :mod:`blinn_phong.fast`, which never
     materialises hidden fragments; ``"auto"`` picks numba when it imports. Arguments
-    as for :func:`rasterize`.
+    as for :func:`rasterize` (``progress`` is reported by the numpy engine).
     """
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
@@ -528,7 +538,9 @@ def visible_fragments(
             )
         if engine == "numba":
             raise ValueError("engine: 'numba' requested but numba cannot be imported")
-    frags = rasterize(clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces)
+    frags = rasterize(
+        clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces, progress=progress
+    )
     winner = resolve_nearest(frags)
     return frags.subset(winner[winner >= 0])
 

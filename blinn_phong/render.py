@@ -618,6 +618,7 @@ def render(
         samples=samples,
         cull_backfaces=cull_backfaces,
         engine=engine,
+        progress=None if progress is None else (lambda f: report("visibility", 0.05 + 0.45 * f)),
     )
     seconds["visibility"] = time.perf_counter() - t
     report("visibility", 0.5)

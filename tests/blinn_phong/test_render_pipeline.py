@@ -71,12 +71,14 @@ def test_normal_buffer_is_world_space_and_passes_sum_to_colour() -> None:
     np.testing.assert_allclose(np.linalg.norm(res.normal[covered], axis=-1), 1.0, atol=1e-5)
 
 
-def test_progress_is_reported_in_order_and_stats_are_filled() -> None:
+@pytest.mark.parametrize("engine", ["numpy", "numba"])
+def test_progress_is_reported_in_order_and_stats_are_filled(engine: str) -> None:
     calls: list[tuple[str, float]] = []
     scene = bp.Scene([rectangle(1, 7, 1, 7, -2, EMISSIVE)], [], pixel_camera(8, 8))
-    res = bp.render(scene, 8, 8, progress=lambda stage, f: calls.append((stage, f)))
+    res = bp.render(scene, 8, 8, engine=engine, progress=lambda stage, f: calls.append((stage, f)))
     fractions = [f for _, f in calls]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert {"prepare", "visibility", "shade"} <= {stage for stage, _ in calls}
     assert res.stats.triangles == 2 and res.stats.shaded == 36
     assert set(res.stats.seconds) >= {"visibility", "shade", "resolve_samples"}
 
