@@ -39,11 +39,14 @@ def run_bpy(
     timeout: float = 120.0,
     args: tuple[str, ...] = (),
     expect_success: bool = True,
+    env: dict[str, str] | None = None,
 ) -> Any:
     """Run ``code`` in a subprocess with bpy importable; return what it last passed to ``emit``."""
     script = tmp_path / "bpy_script.py"
     script.write_text(_PRELUDE + textwrap.dedent(code), encoding="utf-8")
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(REPO))
+    env = dict(
+        os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "blender_user"), PYTHONPATH=str(REPO), **(env or {})
+    )
     done = subprocess.run(
         [sys.executable, str(script), *args],
         capture_output=True,

@@ -94,7 +94,9 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         prefs = bpy.context.preferences
         prefs.extensions.repos.new(name="Test", module="test_repo", custom_directory=repo_dir, source="USER")
         result = bpy.ops.extensions.package_install_files(repo="test_repo", filepath=zip_path,
-                                                          enable_on_install=False)
+                                                          enable_on_install=True)
+        import addon_utils
+        enabled = list(addon_utils.check("bl_ext.test_repo.blinn_phong_render"))
         pkg = "bl_ext.test_repo.blinn_phong_render"
         installed = pathlib.Path(repo_dir) / "blinn_phong_render"
         imported = []
@@ -106,6 +108,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         mapping = importlib.import_module(pkg + ".mapping")
         emit({
             "result": sorted(result),
+            "enabled": enabled,
             "imported": imported,
             "ortho_module": mapping.orthographic_matrix.__module__,
             "top_level_loaded": sorted({"blinn_phong", "compositing", "addon"} & set(sys.modules)),
@@ -115,9 +118,38 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         args=(str(built_zip), str(tmp_path / "repo")),
     )
     assert got["result"] == ["FINISHED"]
+    assert got["enabled"] == [True, True]  # (loaded by default, loaded now)
     pkg = "bl_ext.test_repo.blinn_phong_render"
     assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.scene", pkg + ".compositing.factors"} <= set(
         got["imported"]
     )
     assert got["ortho_module"] == pkg + ".blinn_phong.scene"
+    assert got["top_level_loaded"] == []
+
+
+@pytest.mark.blender
+@pytest.mark.timeout(300)
+def test_loads_the_legacy_way_from_scripts_addons(built_zip: Path, tmp_path: Path) -> None:
+    # Unzipped into <user scripts>/addons, the same package enables as a legacy add-on.
+    addons = tmp_path / "scripts" / "addons"
+    with zipfile.ZipFile(built_zip) as zf:
+        zf.extractall(addons / "blinn_phong_render")
+    got = run_bpy(
+        """
+        import importlib, sys
+        import bpy
+        import addon_utils
+        module = addon_utils.enable("blinn_phong_render", default_set=True, handle_error=print)
+        state = list(addon_utils.check("blinn_phong_render"))
+        scene_module = importlib.import_module("blinn_phong_render.blinn_phong.scene").__name__
+        addon_utils.disable("blinn_phong_render")
+        emit({"file": module.__file__, "state": state, "scene_module": scene_module,
+              "top_level_loaded": sorted({"blinn_phong", "compositing", "addon"} & set(sys.modules))})
+        """,
+        tmp_path,
+        env={"BLENDER_USER_SCRIPTS": str(tmp_path / "scripts")},
+    )
+    assert Path(got["file"]).is_relative_to(addons)
+    assert got["state"] == [True, True]
+    assert got["scene_module"] == "blinn_phong_render.blinn_phong.scene"
     assert got["top_level_loaded"] == []
