@@ -19,6 +19,7 @@ Two engines compute the same thing:
 from __future__ import annotations
 
 import difflib
+import functools
 
 import numpy as np
 
@@ -90,6 +91,7 @@ def _composite_numpy(
     return mixed
 
 
+@functools.cache
 def _fused_available() -> bool:
     try:
         from . import _fused  # noqa: F401
