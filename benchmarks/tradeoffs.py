@@ -270,7 +270,7 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
 
     size = 128 if quick else 256
     resolutions = (256, 1024) if quick else (256, 512, 1024, 2048)
-    kernels = ("nearest", "box3") if quick else ("nearest", "bilinear", "box3", "box5")
+    kernels = ("nearest", "box3") if quick else ("nearest", "bilinear", "box5")
     biases = SHADOW_BIASES if not quick else SHADOW_BIASES[:2]
     scene = shadow_scene()
     light = scene.lights[0]
@@ -296,7 +296,7 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
 
                 runs[name] = run
                 params[name] = {"resolution": res, "kernel": kernel, "bias": bias_name}
-    times = time_interleaved(runs, repeat=repeat)
+    times = time_interleaved(runs, repeat=min(repeat, 3))  # 37 settings: 3 rounds keep it near a minute
     reference = ray_traced()
     cases = []
     for name, fn in runs.items():

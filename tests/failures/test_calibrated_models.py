@@ -1,0 +1,127 @@
+"""The calibrated error models hold on scenes that were not used to fit them.
+
+``blinn_phong/calibration.json`` is fitted by :mod:`benchmarks.error_models` to the
+measurements of ``python -m benchmarks`` (layered quads with seed 7, layer counts 2–16 and
+opacities 0.2/0.5/0.8; one shadow scene; a sphere with shininess 40 and segments 8–128).
+Here other scenes — other seeds, layer counts, opacities, casters, light directions,
+tessellations and shininess — are measured against their exact references (the A-buffer,
+Embree ray tracing, supersampled per-pixel shading of a fine mesh): every predicted error
+must bound the measured one, and every method chosen for a tolerance (in 8-bit steps) must
+stay within it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import blinn_phong as bp
+from benchmarks import error_models as em
+from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
+from benchmarks.tradeoffs import layered_scene, transparency_methods, transparent_fragments, visible_points
+from blinn_phong.primitives import grid_plane, uv_sphere
+
+MODELS = em.load()
+
+
+@pytest.mark.parametrize(("layers", "opacity", "seed"), [(6, 0.6, 21), (12, 0.35, 5), (3, 0.9, 2)])
+def test_depth_peeling_model_bounds_held_out_scenes(layers: int, opacity: float, seed: int) -> None:
+    fr = transparent_fragments(layered_scene(layers, opacity, seed=seed), 64)
+    background = np.tile([0.5, 0.5, 0.5, 1.0], (fr["n_pixels"], 1))
+    methods = transparency_methods(fr, background, peel=tuple(range(1, layers)))
+    reference = methods["a_buffer"]()
+    brightest = em.brightest_radiance(fr["rgba"])
+    for k in range(1, layers):
+        image = methods[f"depth_peeling_{k}"]()
+        assert not has_nonfinite(image)
+        measured = error_metrics(image, reference)["max_steps"]
+        assert measured <= em.predict_depth_peeling(MODELS, k, opacity, brightest) + 1e-9
+    for tolerance in (2.0, 8.0, 32.0):
+        choice = em.choose_depth_peeling(MODELS, tolerance, opacity, brightest, max_layers=layers)
+        if choice["method"] == "depth_peeling":
+            image = methods[f"depth_peeling_{choice['layers']}"]()
+        else:
+            image = methods[choice["method"]]()
+        assert error_metrics(image, reference)["max_steps"] <= tolerance
+
+
+def _held_out_shadow_scene() -> tuple[bp.Scene, float]:
+    gp, gt, gn = grid_plane(1, 1, (7.0, 7.0))
+    meshes = [bp.Mesh(gp, gt, gn)]
+    radii = []
+    for centre, radius in (((-1.0, 0.5, 1.0), 0.5), ((1.2, -0.5, 1.6), 0.9)):
+        p, t, n = uv_sphere(40, 20, radius)
+        move = np.eye(4)
+        move[:3, 3] = centre
+        meshes.append(bp.Mesh(p, t, n, transform=move))
+        radii.append(radius)
+    camera = bp.Camera.perspective(
+        50.0, 1.0, 0.5, 50.0, view=bp.look_at((1.0, -6.0, 5.0), (0, 0, 0.5), (0, 0, 1))
+    )
+    return bp.Scene(meshes, [bp.DirectionalLight((-0.3, 0.5, -1.0))], camera), min(radii)
+
+
+def test_shadow_map_model_bounds_a_held_out_scene() -> None:
+    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+
+    scene, r_min = _held_out_shadow_scene()
+    light = scene.lights[0]
+    tris, _ = world_triangles(scene)
+    points, normals = visible_points(scene, 128)
+    to_light = -np.asarray(light.direction, float)
+    facing = normals @ to_light > 0
+    points, normals = points[facing], normals[facing]
+    exact = directional_light_visibility(RayScene(tris), points, normals, to_light)
+    shadowed = float(1 - exact.mean())
+    diameter = em.scene_extent(tris)
+    m = MODELS["shadow_map"]
+    for res in (128, 256, 512, 1024):
+        maps = light_shadow_maps(
+            light, tris, res, constant_bias=m["constant_bias"], slope_bias=m["slope_bias"]
+        )
+        vis = shadow_map_visibility(light, maps, points, normals, kernel=m["kernel"])
+        assert not has_nonfinite(vis)
+        measured = error_metrics(vis, exact)["mean_steps"]
+        assert measured <= em.predict_shadow_map(MODELS, res, diameter, r_min, shadowed)
+    for tolerance in (0.5, 2.0):
+        choice = em.choose_shadow_map(MODELS, tolerance, diameter, r_min, shadowed)
+        if choice["method"] == "shadow_map":
+            maps = light_shadow_maps(light, tris, choice["resolution"], constant_bias=1e-4, slope_bias=2.0)
+            vis = shadow_map_visibility(light, maps, points, normals, kernel="nearest")
+        else:
+            vis = directional_light_visibility(RayScene(tris), points, normals, to_light)
+        assert error_metrics(vis, exact)["mean_steps"] <= tolerance
+
+
+def _held_out_sphere(segments: int) -> bp.Scene:
+    material = bp.Material(
+        ambient=(0.2, 0.2, 0.2), diffuse=(0.5, 0.45, 0.4), specular=(0.4, 0.4, 0.4), shininess=30.0
+    )
+    pos, tris, normals = uv_sphere(segments, segments // 2)
+    camera = bp.Camera.perspective(30.0, 1.0, 1.0, 20.0, view=bp.look_at((0.5, 0.3, 4.2), (0, 0, 0)))
+    return bp.Scene(
+        [bp.Mesh(pos, tris, normals, material=material)],
+        [bp.PointLight((-2.0, 1.5, 3.0))],
+        camera,
+        ambient=(0.1,) * 3,
+    )
+
+
+def test_shading_model_bounds_held_out_tessellations() -> None:
+    size = 128
+    reference = bp.render(_held_out_sphere(384), size, size, shading="phong", samples=4).rgba
+    interior = reference[..., 3] >= 1.0
+    for segments in (20, 40, 80):
+        scene = _held_out_sphere(segments)
+        mesh = scene.meshes[0]
+        theta = em.max_normal_angle(mesh.normals, mesh.triangles)
+        for method in ("flat", "gouraud", "phong"):
+            image = bp.render(scene, size, size, shading=method, samples=4).rgba
+            assert not has_nonfinite(image)
+            measured = error_metrics(image, reference, interior & (image[..., 3] >= 1.0))["max_steps"]
+            assert measured <= em.predict_shading(MODELS, method, theta), (segments, method)
+        choice = em.choose_shading(MODELS, 16.0, theta)
+        if choice["predicted_steps"] <= 16.0:
+            image = bp.render(scene, size, size, shading=choice["method"], samples=4).rgba
+            assert error_metrics(image, reference, interior & (image[..., 3] >= 1.0))["max_steps"] <= 16.0
