@@ -10,7 +10,9 @@ Usage::
 Tradeoff families (:mod:`benchmarks.tradeoffs`) write ``tradeoffs.json`` (``--quick``:
 ``tradeoffs_quick.json``) into ``--out``; a subset run updates only its families in that
 file, so the charts always show the latest measurement of each. Charts go to
-``<--charts>/charts/*.png`` (:mod:`benchmarks.charts`). The per-module benchmarks
+``<--charts>/charts/*.png`` (:mod:`benchmarks.charts`). A full run that measured the
+shading, shadow and transparency families refits the planner's error and cost models
+(:mod:`benchmarks.error_models` → ``blinn_phong/calibration.json``). The per-module benchmarks
 (``bench_*``) run through their own ``run`` functions and write their own JSON; they are
 skipped by ``--quick`` unless named with ``--only``.
 """
@@ -116,6 +118,11 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
             failures.append(name)
         print(f"   {name}: {time.perf_counter() - t0:.1f} s", flush=True)
+    if not args.quick and {"shading", "shadows", "transparency"} <= set(selected) - set(failures):
+        from benchmarks import error_models
+
+        path = error_models.save(error_models.fit({"families": results}))
+        print(f"calibration {path}")
     if args.charts is not None:
         from benchmarks.charts import draw_all
 
