@@ -106,19 +106,34 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
             importlib.import_module(name)
             imported.append(name)
         mapping = importlib.import_module(pkg + ".mapping")
+        # The installed engine renders Blender's start-up scene (cube, camera, light).
+        scene = bpy.context.scene
+        scene.render.engine = "BLINN_PHONG"
+        scene.render.resolution_percentage = 10
+        scene.render.image_settings.file_format = "OPEN_EXR"
+        scene.render.filepath = sys.argv[3]
+        bpy.ops.render.render(write_still=True)
+        last = dict(importlib.import_module(pkg + ".engine").LAST_RENDER)
+        addon_utils.disable(pkg)
         emit({
             "result": sorted(result),
             "enabled": enabled,
+            "render_ok": last.get("ok"),
             "imported": imported,
             "ortho_module": mapping.orthographic_matrix.__module__,
             "top_level_loaded": sorted({"blinn_phong", "compositing", "addon"} & set(sys.modules)),
         })
         """,
         tmp_path,
-        args=(str(built_zip), str(tmp_path / "repo")),
+        args=(str(built_zip), str(tmp_path / "repo"), str(tmp_path / "installed.exr")),
     )
     assert got["result"] == ["FINISHED"]
     assert got["enabled"] == [True, True]  # (loaded by default, loaded now)
+    assert got["render_ok"] is True
+    from compositing.io import read_image
+
+    image = read_image(tmp_path / "installed.exr")
+    assert image.shape == (108, 192, 4) and 0.05 < image[..., 3].mean() < 0.9  # 10 % of 1920×1080
     pkg = "bl_ext.test_repo.blinn_phong_render"
     assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.scene", pkg + ".compositing.factors"} <= set(
         got["imported"]
