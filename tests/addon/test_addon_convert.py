@@ -54,6 +54,21 @@ quad_obj = bpy.data.objects.new("Quad", quad)
 quad_obj.location = (5.0, 0.0, 0.0)
 scene.collection.objects.link(quad_obj)
 
+# Two faces folded 90° along a sharp edge, shaded smooth: corners keep their own face's normal.
+fold = new_mesh("Fold", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, -1), (0, 0, -1)],
+                [(0, 1, 2, 3), (5, 4, 1, 0)])
+fold.shade_smooth()
+fold.edges[[set(e.vertices) for e in fold.edges].index({0, 1})].use_edge_sharp = True
+fold_obj = bpy.data.objects.new("Fold", fold)
+fold_obj.location = (0.0, 5.0, 0.0)
+scene.collection.objects.link(fold_obj)
+smooth = new_mesh("Smooth", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, -1), (0, 0, -1)],
+                  [(0, 1, 2, 3), (5, 4, 1, 0)])
+smooth.shade_smooth()
+smooth_obj = bpy.data.objects.new("Smooth", smooth)
+smooth_obj.location = (0.0, 8.0, 0.0)
+scene.collection.objects.link(smooth_obj)
+
 # A collection instance of a mesh whose collection has an instance offset.
 coll = bpy.data.collections.new("Src")
 src = bpy.data.objects.new("Src", new_mesh("SrcTri", [(0, 0, 0), (1, 0, 0), (0, 0, 1)], [(0, 1, 2)]))
@@ -176,6 +191,24 @@ def test_custom_split_normals_reach_the_renderer(converted: dict) -> None:
     }
     for position, normal in custom.items():
         np.testing.assert_allclose(by_position[tuple(float(v) for v in position)], normal, atol=2e-3)
+
+
+def test_sharp_edge_splits_normals_and_smooth_edge_shares_them(converted: dict) -> None:
+    def normals_at(name: str, position: tuple[float, float, float]) -> list[tuple[float, ...]]:
+        mesh = converted["meshes"][f"{name}/(none)"]
+        return sorted(
+            {
+                tuple(np.round(n, 4))
+                for p, n in zip(mesh["positions"], mesh["normals"], strict=True)
+                if np.allclose(p, position)
+            }
+        )
+
+    # Faces: z = 0 (normal +z) and y = 0 (normal -y), meeting along the edge from (0,0,0) to (1,0,0).
+    assert normals_at("Fold", (0.0, 0.0, 0.0)) == [(0.0, -1.0, 0.0), (0.0, 0.0, 1.0)]
+    # Without the sharp mark both faces share the averaged normal (0, -1, 1)/√2 on the edge.
+    r = round(1 / math.sqrt(2), 4)
+    assert normals_at("Smooth", (0.0, 0.0, 0.0)) == [(0.0, -r, r)]
 
 
 def test_collection_instance_transform(converted: dict) -> None:
