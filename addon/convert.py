@@ -89,6 +89,9 @@ class ConvertedScene:
             model and Kay parameters).
         light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
             for soft shadows.
+        background: the world colour the frame is composited over (``src_over``) when
+            *Film → Transparent* is off, as Blender's own engines show the world behind the
+            objects; None when it is on (coverage alpha is kept).
         notes: things that were skipped or approximated, for the log and the Render panel.
     """
 
@@ -101,6 +104,7 @@ class ConvertedScene:
     extras: list[dict[str, object]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
     light_radii: list[float] = field(default_factory=list)
+    background: tuple[float, float, float] | None = None
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -487,4 +491,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     scene = Scene(
         meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
     )
-    return ConvertedScene(scene, width, height, region, options, names, extras, notes, light_radii)
+    background = None if render.film_transparent else ambient
+    return ConvertedScene(
+        scene, width, height, region, options, names, extras, notes, light_radii, background
+    )

@@ -35,6 +35,8 @@ from typing import Any
 import bpy
 import numpy as np
 
+from compositing import composite
+
 from . import convert, mapping, pipeline
 
 __all__ = [
@@ -124,6 +126,11 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
         progress=progress,
     )
     result.choices["region"] = list(converted.region)
+    if converted.background is not None:
+        # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
+        world = np.array([*converted.background, 1.0], dtype=np.float32)
+        result.rgba = composite(result.rgba, np.broadcast_to(world, result.rgba.shape), "src_over")
+        result.choices["background"] = "world colour (Film → Transparent is off)"
     return result
 
 

@@ -36,6 +36,7 @@ sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
 sun.data.energy, sun.rotation_euler = 3.0, (0.5, 0.2, 0.0)
 scene.collection.objects.link(sun)
 scene.render.resolution_x, scene.render.resolution_y = 64, 48
+scene.render.film_transparent = True
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1])
 emit(True)
 """

@@ -52,6 +52,7 @@ scene.world.color = (0.1, 0.1, 0.1)
 if compat.world_uses_nodes(scene.world):
     scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.1, 0.1, 1.0)
 scene.render.engine = "BLINN_PHONG"
+scene.render.film_transparent = True
 scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 96, 64, 100
 scene.blinn_phong.samples_per_axis = 2
 scene.blinn_phong.two_sided = False
@@ -218,6 +219,28 @@ def test_f12_render_matches_core_renderer(tmp_path: Path) -> None:
     full = combined[..., 3] == 1
     np.testing.assert_allclose(depth[full], distance[full], rtol=1e-4)
     assert 4.0 < depth[full].min() < depth[full].max() < 8.0
+
+
+def test_film_not_transparent_shows_the_world_behind(tmp_path: Path) -> None:
+    from blinn_phong import render
+
+    out = tmp_path / "world.exr"
+    script = (
+        CUBE_SCENE
+        + """
+scene.render.film_transparent = False
+bpy.ops.render.render(write_still=True)
+engine.unregister()
+properties.unregister()
+emit(True)
+"""
+    )
+    run_bpy(script, tmp_path, args=(str(out),))
+    scene, _ = _hand_scene()
+    reference = render(scene, 96, 64, shading="phong", samples=4).rgba
+    # Porter-Duff src over an opaque world colour: C + (1 - α)·world, α = 1.
+    expected = reference + (1.0 - reference[..., 3:4]) * np.array([0.1, 0.1, 0.1, 1.0], np.float32)
+    np.testing.assert_allclose(_read_exr(out), expected, atol=2e-5)
 
 
 def test_render_border_writes_the_cropped_region(tmp_path: Path) -> None:

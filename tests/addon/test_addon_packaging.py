@@ -110,6 +110,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         scene = bpy.context.scene
         scene.render.engine = "BLINN_PHONG"
         scene.render.resolution_percentage = 10
+        scene.render.film_transparent = True
         scene.render.image_settings.file_format = "OPEN_EXR"
         scene.render.filepath = sys.argv[3]
         bpy.ops.render.render(write_still=True)
