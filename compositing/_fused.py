@@ -116,16 +116,17 @@ def kernel_source(spec: OperatorSpec, lerp: bool) -> tuple[str, set[float]]:
     src = f"""
 def kernel(s, d, o, keep, mix, lo, hi):
     bad = np.int32(0)
-    for p in range(lo, hi):
-        i = 4 * p
-        s0 = s[i]; s1 = s[i + 1]; s2 = s[i + 2]; s3 = s[i + 3]
-        d0 = d[i]; d1 = d[i + 1]; d2 = d[i + 2]; d3 = d[i + 3]
+    # Unsigned indices: no negative-index wrap-around code, so LLVM vectorises the loop.
+    for p in range(np.uint64(lo), np.uint64(hi)):
+        i = np.uint64(4) * p
+        s0 = s[i]; s1 = s[i + U1]; s2 = s[i + U2]; s3 = s[i + U3]
+        d0 = d[i]; d1 = d[i + U1]; d2 = d[i + U2]; d3 = d[i + U3]
         sa = s3
         da = d3
         fa = {fa_code}
         fb = {fb_code}
 {body}
-        o[i] = m0; o[i + 1] = m1; o[i + 2] = m2; o[i + 3] = m3
+        o[i] = m0; o[i + U1] = m1; o[i + U2] = m2; o[i + U3] = m3
         # Flag without a branch: z is non-finite iff some value is (or the sum overflows,
         # a false alarm the exact checks clear); alpha outside [0, 1] or NaN.
         z = {" + ".join(checked)}
@@ -139,7 +140,14 @@ def kernel(s, d, o, keep, mix, lo, hi):
 def _compiled(name: str, spec: OperatorSpec, dtype_name: str, lerp: bool):
     src, consts = kernel_source(spec, lerp)
     t = np.dtype(dtype_name).type
-    namespace = {"np": np, "numba": numba, **{_const_name(v): t(v) for v in consts}}
+    namespace = {
+        "np": np,
+        "numba": numba,
+        "U1": np.uint64(1),
+        "U2": np.uint64(2),
+        "U3": np.uint64(3),
+        **{_const_name(v): t(v) for v in consts},
+    }
     exec(compile(src, f"<fused kernel {name} {dtype_name}>", "exec"), namespace)
     return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
 
