@@ -46,6 +46,8 @@ __all__ = [
 Colour = tuple[float, float, float]
 Shading = Literal["flat", "gouraud", "phong"]
 SHADINGS: tuple[str, ...] = ("flat", "gouraud", "phong")
+TransparencyModel = Literal["partial_occlusion", "emission", "absorption"]
+TRANSPARENCY_MODELS: tuple[str, ...] = ("partial_occlusion", "emission", "absorption")
 
 
 # --------------------------------------------------------------------------- material
@@ -63,9 +65,27 @@ class Material:
         shininess: ``s_rm``, the specular exponent, >= 0. OpenGL limits it to
             [0, 128]; the renderer accepts larger values outside the GL preset.
         opacity: alpha of the surface in [0, 1] (the alpha of ``d_cm`` in OpenGL).
+        transparency_model: how a transparent surface (``opacity < 1`` or
+            ``kay_greenberg`` set) of lit colour ``c`` and opacity ``α`` combines with what
+            lies behind it; each is the fragment ``src over`` the background
+            (:mod:`blinn_phong.transparency`):
+
+            * ``"partial_occlusion"`` (default) — covers the fraction α:
+              premultiplied ``(α·c, α)``, i.e. ``α·c + (1 − α)·behind`` (Porter & Duff 1984);
+            * ``"emission"`` — only adds light, hides nothing: ``(α·c, 0)``, i.e.
+              ``α·c + behind`` (α scales the glow);
+            * ``"absorption"`` — a grey filter of transmittance ``T = 1 − α`` plus the
+              light the surface reflects itself: ``(c, α)``, i.e. ``c + T·behind``.
+        kay_greenberg: ``(t_min, t_max, power)`` for Kay–Greenberg transparency (Kay &
+            Greenberg 1979): the opacity becomes ``1 − t`` with
+            ``t = t_min + (t_max − t_min)·[1 − (1 − |N_z|)^power]`` from the eye-space
+            normal, replacing ``opacity``; t values in [0, 1], power > 0. None: constant opacity.
+        specular_washout: highlights wash out transparency: the opacity becomes
+            ``min(1, α + specular luminance)`` (``opaque fraction = (1 − t) + specular``).
 
     Defaults are OpenGL's (spec §2.14.1 table 2.11 — ambient 0.2, diffuse 0.8,
-    specular 0, emission 0, shininess 0).
+    specular 0, emission 0, shininess 0). The transparency fields only matter to
+    :func:`blinn_phong.render` when it resolves transparency (not under ``gl_compat``).
     """
 
     ambient: Colour = (0.2, 0.2, 0.2)
@@ -74,12 +94,45 @@ class Material:
     emission: Colour = (0.0, 0.0, 0.0)
     shininess: float = 0.0
     opacity: float = 1.0
+    transparency_model: TransparencyModel = "partial_occlusion"
+    kay_greenberg: tuple[float, float, float] | None = None
+    specular_washout: bool = False
 
     def __post_init__(self) -> None:
         for name in ("ambient", "diffuse", "specular", "emission"):
             object.__setattr__(self, name, colour3(getattr(self, name), f"Material.{name}"))
         object.__setattr__(self, "shininess", number(self.shininess, "Material.shininess", low=0.0))
         object.__setattr__(self, "opacity", number(self.opacity, "Material.opacity", low=0.0, high=1.0))
+        if self.transparency_model not in TRANSPARENCY_MODELS:
+            raise ValueError(
+                f"Material.transparency_model: expected one of {TRANSPARENCY_MODELS}, "
+                f"got {self.transparency_model!r}"
+            )
+        if self.kay_greenberg is not None:
+            values = tuple(self.kay_greenberg) if isinstance(self.kay_greenberg, tuple | list) else ()
+            if len(values) != 3:
+                raise ValueError(
+                    "Material.kay_greenberg: expected (t_min, t_max, power) or None, "
+                    f"got {self.kay_greenberg!r}"
+                )
+            t_min = number(values[0], "Material.kay_greenberg t_min", low=0.0, high=1.0)
+            t_max = number(values[1], "Material.kay_greenberg t_max", low=0.0, high=1.0)
+            power = number(values[2], "Material.kay_greenberg power", low=0.0, low_open=True)
+            object.__setattr__(self, "kay_greenberg", (t_min, t_max, power))
+        if not isinstance(self.specular_washout, bool):
+            raise TypeError(f"Material.specular_washout: expected a bool, got {self.specular_washout!r}")
+
+    @property
+    def transparent(self) -> bool:
+        """True when light from behind can show through: ``opacity < 1`` or Kay–Greenberg with t > 0."""
+        return self.min_opacity < 1.0
+
+    @property
+    def min_opacity(self) -> float:
+        """The lowest opacity of a fragment of this material (Kay–Greenberg: ``1 − max(t_min, t_max)``)."""
+        if self.kay_greenberg is not None:
+            return 1.0 - max(self.kay_greenberg[0], self.kay_greenberg[1])
+        return self.opacity
 
 
 # --------------------------------------------------------------------------- lights
