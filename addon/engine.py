@@ -164,6 +164,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         full_w, full_h = mapping.render_size(
             render_settings.resolution_x, render_settings.resolution_y, render_settings.resolution_percentage
         )
+        layer = depsgraph.view_layer.name  # render() runs once per view layer
         started = time.perf_counter()
         LAST_RENDER.clear()
         LAST_RENDER.update({"ok": False, "error": None, "scene": scene.name, "frame": scene.frame_current})
@@ -180,15 +181,15 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                     raise RenderCancelled
 
             result = render_converted(converted, progress)
-            self._write(converted, result)
+            self._write(converted, result, layer)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
             # Blender crashes saving a still (write_still) after a render that produced no result,
             # so a cancelled render leaves the error pattern: never a frame that looks finished.
-            self._write_error_pattern(full_w, full_h)
+            self._write_error_pattern(full_w, full_h, layer)
             return
         except Exception as error:
-            self._fail(scene, full_w, full_h, error, started)
+            self._fail(scene, full_w, full_h, error, started, layer)
             return
         LAST_RENDER.update(
             {
@@ -207,7 +208,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
 
     # ----------------------------------------------------------------- result
 
-    def _write(self, converted: convert.ConvertedScene, result: Any) -> None:
+    def _write(self, converted: convert.ConvertedScene, result: Any, layer: str) -> None:
         x0, y0, x1, y1 = converted.region
         width, height = x1 - x0, y1 - y0
         self.add_pass("Depth", 1, "Z")
@@ -215,9 +216,9 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             self.add_pass(name, 3, "RGB")
         self.add_pass("Shadow", 1, "X")
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
-        render_result = self.begin_result(0, 0, converted.width, converted.height)
+        render_result = self.begin_result(0, 0, converted.width, converted.height, layer=layer)
         try:
-            layer = render_result.layers[0]
+            result_layer = render_result.layers[0]
             got = (render_result.resolution_x, render_result.resolution_y)
             if got != (width, height):
                 raise RuntimeError(
@@ -229,7 +230,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 buffers[name] = result.passes[key]
             buffers["Shadow"] = result.passes["shadow"]
             for name, image in buffers.items():
-                render_pass = layer.passes.get(name)
+                render_pass = result_layer.passes.get(name)
                 if render_pass is None:
                     continue
                 flat = np.ascontiguousarray(image[::-1], dtype=np.float32).ravel()
@@ -239,10 +240,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             raise
         self.end_result(render_result)
 
-    def _write_error_pattern(self, width: int, height: int) -> None:
+    def _write_error_pattern(self, width: int, height: int, layer: str) -> None:
         """Fill Combined with :func:`error_pattern` (the result Blender shows and saves)."""
         try:
-            render_result = self.begin_result(0, 0, width, height)
+            render_result = self.begin_result(0, 0, width, height, layer=layer)
             combined = render_result.layers[0].passes["Combined"]
             pattern = error_pattern(render_result.resolution_y, render_result.resolution_x)
             combined.rect.foreach_set(pattern.ravel())
@@ -251,7 +252,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             print(f"Blinn-Phong: could not write the error image: {secondary}", file=sys.stderr, flush=True)
 
     def _fail(
-        self, scene: bpy.types.Scene, width: int, height: int, error: Exception, started: float
+        self, scene: bpy.types.Scene, width: int, height: int, error: Exception, started: float, layer: str
     ) -> None:
         message = f"Blinn-Phong render failed: {type(error).__name__}: {error}"
         details = traceback.format_exc()
@@ -262,7 +263,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         print(message, file=sys.stderr, flush=True)
         self.report({"ERROR"}, message)
         self.error_set(message)
-        self._write_error_pattern(width, height)
+        self._write_error_pattern(width, height, layer)
         settings = getattr(scene, "blinn_phong", None)
         if bpy.app.background and (settings is None or settings.abort_on_error):
             print(

@@ -344,3 +344,37 @@ emit({"ok": last["ok"], "error": last["error"], "raised": raised})
     assert got == {"ok": False, "error": "cancelled", "raised": None}
     combined = _read_exr(out)
     assert (combined[..., 3] == 1).all() and (combined[..., 1] == 0).all() and combined[..., 0].max() == 1.0
+
+
+def test_each_view_layer_gets_its_own_render(tmp_path: Path) -> None:
+    # A second view layer excludes the cube's collection: its Render Layers output must be empty.
+    got = run_bpy(
+        CUBE_SCENE
+        + """
+coll = bpy.data.collections.new("Things")
+scene.collection.children.link(coll)
+scene.collection.objects.unlink(cube)
+coll.objects.link(cube)
+second = scene.view_layers.new("Without Cube")
+second.layer_collection.children["Things"].exclude = True
+tree = compat.compositor_tree(scene)
+compat.set_full_precision(scene)
+layer_node = tree.nodes.new("CompositorNodeRLayers")
+final = compat.add_render_output(tree)
+tree.links.new(layer_node.outputs["Image"], final)
+alphas = {}
+for name in (scene.view_layers[0].name, "Without Cube"):
+    layer_node.layer = name
+    scene.render.filepath = sys.argv[1].replace(".exr", f"_{len(alphas)}.exr")
+    bpy.ops.render.render(write_still=True)
+    alphas[name] = scene.render.filepath
+engine.unregister()
+properties.unregister()
+emit(alphas)
+""",
+        tmp_path,
+        args=(str(tmp_path / "layers.exr"),),
+    )
+    with_cube, without_cube = (_read_exr(Path(p)) for p in got.values())
+    assert 0.15 < with_cube[..., 3].mean() < 0.9
+    assert (without_cube == 0).all()
