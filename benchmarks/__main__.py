@@ -126,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.charts is not None:
         from benchmarks.charts import draw_all
 
-        for path in draw_all(results, args.charts / "charts"):
+        for path in draw_all(results, args.charts / "charts", out):
             print(f"chart {path}")
     print(f"total {time.perf_counter() - started:.1f} s; results in {json_path}")
     if failures:

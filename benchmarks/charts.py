@@ -279,6 +279,129 @@ def _scaling(data: dict, out: Path) -> list[Path]:
     return [out / "scaling.png"]
 
 
+def _peer_rows(results: dict[str, dict], results_dir: Path | None) -> list[tuple[str, float, str]]:
+    """(label, our time ÷ peer time, accuracy note) from the tradeoffs and the per-module JSON files."""
+    rows: list[tuple[str, float, str]] = []
+
+    def load(name: str) -> dict | None:
+        path = None if results_dir is None else Path(results_dir) / name
+        if path is None or not path.exists():
+            return None
+        import json
+
+        return json.loads(path.read_text())
+
+    def steps(metrics: dict) -> str:
+        return f"max {metrics['max_steps']:.3g} / mean {metrics['mean_steps']:.2g} steps"
+
+    try:
+        shading = results.get("shading", {}).get("cases", [])
+        for c in shading:
+            if c["method"] == "phong" and c["segments"] == 64 and "ratio_to_mesa_glsl" in c:
+                mesa = next(
+                    m for m in shading if m["method"] == "mesa_glsl_per_pixel" and m["segments"] == 64
+                )
+                rows.append(
+                    (
+                        "render, Phong (64-seg sphere) vs Mesa GLSL",
+                        c["ratio_to_mesa_glsl"],
+                        f"ours {steps(c['interior'])}, Mesa {steps(mesa['interior'])}",
+                    )
+                )
+        for c in results.get("compositing", {}).get("cases", []):
+            if c["layers"] == 128 and c["method"] == "float32 premultiplied":
+                rows.append(("128-layer over, float32 vs OIIO over", c["ratio_to_oiio"], steps(c)))
+            if c["layers"] == 128 and c["method"] == "unorm8 straight":
+                pillow = next(
+                    m
+                    for m in results["compositing"]["cases"]
+                    if m["layers"] == 128 and m["method"].startswith("Pillow")
+                )
+                rows.append(
+                    (
+                        "128-layer over, straight unorm8 vs Pillow",
+                        c["median_s"] / pillow["median_s"],
+                        steps(c),
+                    )
+                )
+        for c in results.get("shadows", {}).get("cases", []):
+            if (
+                c.get("resolution") == 1024
+                and c.get("kernel") == "nearest"
+                and c.get("bias", "").startswith("bias 1e")
+            ):
+                rows.append(("shadow map 1024² vs Embree ray tracing", c["ratio_to_ray_traced"], steps(c)))
+        comp = load("compositing.json")
+        if comp:
+            for r in comp.get("float32", []):
+                if r.get("name") == "src_over":
+                    rows.append((f"composite src_over {r['size']} vs OIIO over", r["ratio_to_oiio_over"], ""))
+            for r in comp.get("unorm8", []):
+                if "ratio_to_pillow_alpha_composite" in r and not r["name"].startswith("pillow"):
+                    rows.append(
+                        (f"{r['name']} {r['size']} vs Pillow", r["ratio_to_pillow_alpha_composite"], "")
+                    )
+        gl = load("gl_blend.json")
+        if gl:
+            for r in gl.get("cases", []):
+                if r.get("state") == "src_over":
+                    note = (
+                        f"max {r['max_steps']} step"
+                        if "max_steps" in r
+                        else f"max diff {r.get('max_abs_difference')}"
+                    )
+                    rows.append(
+                        (f"gl_blend src_over {r['target']} vs Mesa", r["ratio_gl_blend_over_mesa"], note)
+                    )
+        blender = load("blender_compositor.json")
+        if blender:
+            for r in blender.get("rows", []):
+                if r.get("case") == "alpha_over/src_over" and r.get("ratio_blender_op_over_numba"):
+                    rows.append(
+                        (
+                            "Alpha Over 1920×1080 vs Blender compositor",
+                            1.0 / r["ratio_blender_op_over_numba"],
+                            "",
+                        )
+                    )
+    except (KeyError, StopIteration, TypeError, ZeroDivisionError) as exc:  # a peer's JSON changed shape
+        print(f"peers chart: skipped a row ({exc!r})")
+    return rows
+
+
+def peers_chart(results: dict[str, dict], results_dir: Path | None, out_dir: Path) -> list[Path]:
+    """One bar per peer comparison: our time as a multiple of the peer's (same run), with the accuracy."""
+    rows = _peer_rows(results, results_dir)
+    if not rows:
+        return []
+    fig, ax = plt.subplots(figsize=(11, 0.42 * len(rows) + 1.2))
+    labels = [r[0] for r in rows]
+    ratios = [r[1] for r in rows]
+    colours = ["tab:green" if x <= 1 else "tab:red" for x in ratios]
+    ax.barh(range(len(rows)), ratios, color=colours)
+    for i, (_, ratio, note) in enumerate(rows):
+        ax.annotate(
+            f"×{ratio:.2g}  {note}", (ratio, i), fontsize=7, xytext=(3, -3), textcoords="offset points"
+        )
+    ax.axvline(1.0, color="k", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlim(min(min(ratios), 1.0) / 2, max(max(ratios), 1.0) * 40)
+    ax.set_yticks(range(len(rows)), labels, fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlabel(
+        "our time ÷ the peer's, same run (medians; best-of-N where a module reports that); < 1: faster",
+        fontsize=8,
+    )
+    ax.tick_params(labelsize=7)
+    ax.grid(True, axis="x", which="both", alpha=0.25)
+    fig.suptitle("Peers doing the same work: time ratio and our error (8-bit steps)", fontsize=10)
+    fig.tight_layout()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_dir / "peers.png", dpi=DPI)
+    plt.close(fig)
+    return [out_dir / "peers.png"]
+
+
 _DRAW: dict[str, Callable[[dict, Path], list[Path]]] = {
     "shading": _shading,
     "antialiasing": _antialiasing,
@@ -289,10 +412,15 @@ _DRAW: dict[str, Callable[[dict, Path], list[Path]]] = {
 }
 
 
-def draw_all(results: dict[str, dict], out_dir: Path) -> list[Path]:
-    """Draw the charts of every family present in ``results`` (``family → data``) into ``out_dir``."""
+def draw_all(results: dict[str, dict], out_dir: Path, results_dir: Path | None = None) -> list[Path]:
+    """Draw the charts of every family in ``results`` (``family → data``) and the peers chart.
+
+    ``results_dir`` holds the per-module JSON files (``compositing.json``, ``gl_blend.json``,
+    ``blender_compositor.json``) read for the peers chart, when present.
+    """
     paths: list[Path] = []
     for family, data in results.items():
         if family in _DRAW:
             paths += _DRAW[family](data, Path(out_dir))
+    paths += peers_chart(results, results_dir, Path(out_dir))
     return paths
