@@ -14,12 +14,13 @@ pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]
 UI_SCRIPT = """
 import types
 import bpy
-from addon import engine, properties, render_ui
+from addon import engine, properties, render_ui, verify_operator
 
 bpy.ops.wm.read_factory_settings(use_empty=True)
 properties.register()
 engine.register()
 render_ui.register()
+verify_operator.register()
 scene = bpy.context.scene
 
 class Layout:
@@ -37,6 +38,9 @@ class Layout:
         self.log.append(("operator", idname))
     def column(self, **_):
         return self
+    def template_ID(self, data, name, **_):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name!r}"
+        self.log.append(("template_ID", name))
 
 def draw(panel, context):
     log = []
@@ -83,13 +87,20 @@ copied = {
     "light_source": spot.blinn_phong.source, "k": [spot.blinn_phong.constant, spot.blinn_phong.linear,
     spot.blinn_phong.quadratic], "exponent": spot.blinn_phong.spot_exponent,
 }
+def editor(tree_type):
+    return types.SimpleNamespace(space_data=types.SimpleNamespace(tree_type=tree_type), scene=scene)
+node_editor, shader_editor = editor("CompositorNodeTree"), editor("ShaderNodeTree")
+verify_polls = [verify_operator.BLINN_PHONG_PT_verify.poll(c) for c in (node_editor, shader_editor)]
+drawn_verify = draw(verify_operator.BLINN_PHONG_PT_verify, node_editor)
 scene.render.engine = "BLENDER_WORKBENCH"
+verify_operator.unregister()
 render_ui.unregister()
 engine.unregister()
 properties.unregister()
 shared_after = "BLINN_PHONG" in bpy.types.RENDER_PT_format.COMPAT_ENGINES
 emit({"polls": polls, "shared": shared, "shared_after": shared_after, "drawn": drawn,
-      "drawn_custom": drawn_custom, "copied": copied})
+      "drawn_custom": drawn_custom, "copied": copied, "verify_polls": verify_polls,
+      "drawn_verify": drawn_verify})
 """
 
 
@@ -127,6 +138,13 @@ def test_panels_draw_the_settings_that_matter(ui: dict) -> None:
         custom["BLINN_PHONG_PT_material"]
     )
     assert {"constant", "linear", "quadratic", "spot_exponent"} <= props(custom["BLINN_PHONG_PT_light"])
+
+
+def test_verify_panel_in_the_compositor_sidebar(ui: dict) -> None:
+    assert ui["verify_polls"] == [True, False]
+    assert ["template_ID", "verify_background"] in ui["drawn_verify"]
+    assert ["prop", "verify_operator"] in ui["drawn_verify"]
+    assert ["operator", "blinn_phong.verify_composite"] in ui["drawn_verify"]
 
 
 def test_copy_derived_values_follow_the_principled_bsdf_and_the_light(ui: dict) -> None:
