@@ -32,10 +32,11 @@ def premultiplied(draw, n=8):
     return np.concatenate([straight * alpha, alpha], axis=1)
 
 
-settings.register_profile("compositing", max_examples=60, deadline=None)
-settings.load_profile("compositing")
+# Per test, not a global profile: other test modules keep their own settings.
+SETTINGS = settings(max_examples=60, deadline=None)
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied(), premultiplied())
 def test_over_is_associative(a, b, c):
     left = composite(composite(a, b), c)
@@ -43,11 +44,13 @@ def test_over_is_associative(a, b, c):
     np.testing.assert_allclose(left, right, rtol=1e-12, atol=1e-12)
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied())
 def test_src_over_is_dst_over_swapped(a, b):
     np.testing.assert_array_equal(composite(a, b, "src_over"), composite(b, a, "dst_over"))
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied())
 def test_swapped_operators(a, b):
     for op, swapped in [
@@ -60,6 +63,7 @@ def test_swapped_operators(a, b):
     np.testing.assert_array_equal(composite(a, b, "plus"), composite(b, a, "plus"))
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied())
 def test_clear_src_dst_identities(a, b):
     np.testing.assert_array_equal(composite(a, b, "clear"), np.zeros_like(a))
@@ -67,6 +71,7 @@ def test_clear_src_dst_identities(a, b):
     np.testing.assert_array_equal(composite(a, b, "dst"), b)
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied())
 def test_over_alpha_is_the_union_of_coverages(a, b):
     out = composite(a, b)
@@ -80,6 +85,7 @@ def test_over_alpha_is_the_union_of_coverages(a, b):
     )
 
 
+@SETTINGS
 @given(premultiplied(), premultiplied(), premultiplied(), unit)
 def test_average_then_composite_equals_composite_then_average(a1, a2, c, w):
     mixed = w * a1 + (1 - w) * a2
