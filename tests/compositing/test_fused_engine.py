@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from compositing_testdata import image_pair
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from compositing import ALL_OPERATORS, composite
 from compositing.factors import FACTORS, evaluate
@@ -110,3 +112,18 @@ def test_fused_engine_sees_inputs_an_operator_ignores(op, factor, which):
         for engine in ("numpy", "numba"):
             with pytest.raises(ValueError, match=f"{which}: {message}"):
                 composite(x, y, op, factor=factor, engine=engine)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    op=st.sampled_from(["src_over", "xor", "disjoint_over", "conjoint_over", "disjoint_src_atop"]),
+    factor=st.one_of(st.just(1.0), st.just(0.0), st.floats(0.0, 1.0)),
+    rows=st.integers(1, 40),
+    dtype=st.sampled_from([np.float32, np.float64]),
+)
+def test_fused_equals_numpy_bitwise_on_random_inputs(seed, op, factor, rows, dtype):
+    a, b = image_pair((rows, 37), seed=seed % 10_000, dtype=dtype)
+    np.testing.assert_array_equal(
+        composite(a, b, op, factor=factor, engine="numba"), composite(a, b, op, factor=factor, engine="numpy")
+    )
