@@ -29,7 +29,6 @@ from blinn_phong.normals import normalize
 from blinn_phong.oit import transparency_pass
 from blinn_phong.planner import Choice, plan
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.raytrace import RayScene, area_light_visibility, world_triangles
 from blinn_phong.render import prepare_scene, render, resolve_samples, shade_fragments
 from blinn_phong.scene import AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import light_visibility
@@ -119,6 +118,45 @@ class FrameResult:
     triangles: int = 0
 
 
+def embree_available() -> bool:
+    """True when ``embreex`` (Embree ray casting) imports; Blender's own Python does not ship it."""
+    try:
+        import embreex  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _world_triangles(scene: Scene) -> np.ndarray:
+    """(T, 3, 3) world-space triangles in scene order (``blinn_phong.raytrace.world_triangles``).
+
+    ``blinn_phong.raytrace`` imports Embree at module level; without it the same transform is done here.
+    """
+    try:
+        from blinn_phong.raytrace import world_triangles
+    except ImportError:
+        parts = [
+            (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
+            for m in scene.meshes
+        ]
+        return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+    return world_triangles(scene)[0]
+
+
+def _without_embree(choice: Choice) -> Choice:
+    """A shadow choice that needs no Embree: ray-traced and soft shadows become shadow maps."""
+    if choice.method == "ray_traced":
+        params = {"resolution": 2048, "kernel": "box3"}
+    elif choice.method == "soft":
+        params = {"resolution": 2048, "kernel": "box7"}
+    else:
+        return choice
+    reason = (
+        f"Embree (embreex) is not available here: shadow map instead of {choice.method} ({choice.reason})"
+    )
+    return Choice("shadow_map", reason, params)
+
+
 def _planning_scene(scene: Scene, kay: tuple[tuple[float, float, float] | None, ...]) -> Scene:
     """``scene`` with each Kay-Greenberg mesh at its lowest opacity, ``1 − max(t_min, t_max)``."""
     if not any(kay):
@@ -148,11 +186,14 @@ def _choices(scene: Scene, options: EffectOptions) -> tuple[Choice, list[Choice]
     lines.append(f"transparency: {transparency}")
     shadows = []
     forced_shadow = SHADOW_SETTINGS[options.shadows]
+    embree = embree_available()
     for i, (light, choice) in enumerate(zip(scene.lights, the_plan.shadows, strict=True)):
         if isinstance(light, AmbientLight):
             continue
         if forced_shadow is not None:
             choice = Choice(forced_shadow, f"set in the render settings (planner: {choice.method})")
+        if not embree:
+            choice = _without_embree(choice)
         shadows.append(choice)
         lines.append(f"shadows, light {i}: {choice}")
     return transparency, shadows, lines
@@ -166,7 +207,7 @@ def _visibility(
     points: np.ndarray,
     normals: np.ndarray,
     options: EffectOptions,
-    ray_scene: Callable[[], RayScene],
+    ray_scene: Callable[[], object],
 ) -> np.ndarray:
     if choice.method != "soft":
         return light_visibility(choice.method, light, tris, points, normals, **choice.params)
@@ -182,6 +223,8 @@ def _visibility(
     u /= np.linalg.norm(u)
     v = np.cross(axis, u)
     corner = centre - radius * (u + v)
+    from blinn_phong.raytrace import area_light_visibility
+
     return area_light_visibility(
         ray_scene(),
         points,
@@ -246,7 +289,7 @@ def render_frame(
     fragments = rasterize(prepared.clip, prepared.triangles, width, height, samples=samples)
     seconds["rasterize"] = time.perf_counter() - t
     report("rasterize", 0.3)
-    tris, _ = world_triangles(scene)
+    tris = _world_triangles(scene)
     radii = options.light_radii or (0.0,) * len(scene.lights)
     if len(radii) != len(scene.lights):
         raise ValueError(f"options.light_radii: expected {len(scene.lights)} radii, got {len(radii)}")
@@ -254,12 +297,14 @@ def render_frame(
     lit = [(scene.lights[i], c, radii[i]) for i, c in zip(non_ambient, shadow_choices, strict=True)]
     inv_view = np.linalg.inv(scene.camera.view)
     kay_mesh = np.array([k is not None for k in kay], dtype=bool)
-    cache: dict[str, RayScene] = {}
+    cache: dict[str, object] = {}
     known = np.zeros(len(fragments), dtype=bool)
     visibility_all = np.ones((len(fragments), len(lit)))
 
-    def ray_scene() -> RayScene:
+    def ray_scene() -> object:
         if "scene" not in cache:
+            from blinn_phong.raytrace import RayScene
+
             cache["scene"] = RayScene(tris)
         return cache["scene"]
 

@@ -378,3 +378,35 @@ emit(alphas)
     with_cube, without_cube = (_read_exr(Path(p)) for p in got.values())
     assert 0.15 < with_cube[..., 3].mean() < 0.9
     assert (without_cube == 0).all()
+
+
+def test_renders_with_only_what_blender_ships(tmp_path: Path) -> None:
+    # Blender's Python has numpy and OpenImageIO but not embreex, numba or colour-science.
+    from addon_testing import REPO
+
+    got = run_bpy(
+        """
+        import sys
+        for name in ("embreex", "numba", "colour"):
+            sys.modules[name] = None  # any import of these now raises ImportError
+        import bpy
+        from addon import engine, properties
+        properties.register()
+        engine.register()
+        try:
+            bpy.ops.wm.open_mainfile(filepath=sys.argv[1], load_ui=False)
+            bpy.context.scene.render.resolution_percentage = 25
+            bpy.ops.render.render()
+            last = dict(engine.LAST_RENDER)
+        finally:
+            engine.unregister()
+            properties.unregister()
+        emit({"ok": last["ok"], "error": last["error"], "shadows": last["choices"]["shadows"],
+              "reasons": last["choices"]["reasons"]})
+        """,
+        tmp_path,
+        args=(str(REPO / "blend_files" / "shadows.blend"),),
+    )
+    assert got["ok"] is True, got["error"]
+    assert got["shadows"] == ["shadow_map", "shadow_map"]
+    assert all("Embree" in r for r in got["reasons"] if r.startswith("shadows"))

@@ -168,3 +168,27 @@ def test_kay_greenberg_glass_opacity_follows_the_eye_normal(tilt_degrees: float)
     np.testing.assert_allclose(centre[..., 2], alpha, atol=1e-6)
     np.testing.assert_allclose(centre[..., 0], 1 - alpha, atol=1e-6)
     assert got.choices["transparency"] != "zbuffer"
+
+
+def test_without_embree_shadows_fall_back_to_shadow_maps(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Blender's Python has no embreex: ray-traced shadows become shadow maps, with the reason given.
+    import sys
+
+    monkeypatch.setitem(sys.modules, "embreex", None)
+    monkeypatch.setitem(sys.modules, "blinn_phong.raytrace", None)
+    floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
+    scene = Scene(
+        (_quad(0.0, 2.0, floor), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (DirectionalLight((1.0, 0.0, -1.0), intensity=1.0),),
+        _top_camera(),
+        ambient=(0, 0, 0),
+    )
+    got = render_frame(scene, 40, 40, options=EffectOptions(shadows="HARD"))
+    assert got.choices["shadows"] == ["shadow_map"]
+    assert any("Embree" in reason for reason in got.choices["reasons"])
+    rows, cols = np.indices((40, 40))
+    x, y = -2 + (cols + 0.5) * 0.1, 2 - (rows + 0.5) * 0.1
+    umbra = (np.abs(x) < 0.2) & (np.abs(y) < 0.2)  # the shadow of the square (slanted sun: shifted +1 in x)
+    lit = ((np.abs(x) > 0.45) | (np.abs(y) > 0.45)) & ((np.abs(x + 1.0) > 0.35) | (np.abs(y) > 0.35))
+    np.testing.assert_allclose(got.rgba[..., 0][umbra], 0.0, atol=1e-6)
+    np.testing.assert_allclose(got.rgba[..., 0][lit], 1 / math.sqrt(2), atol=1e-6)
