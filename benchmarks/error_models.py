@@ -21,8 +21,8 @@ Models (each states the error metric it predicts, all in 8-bit steps):
 * ``shading`` — max error on interior pixels of a curved mesh against per-pixel shading
   of the exact surface, per method, as a power law ``a·θ^b`` of the angle ``θ`` between
   adjacent vertex normals (``2π/segments`` for a UV sphere), fitted in log space; the
-  prediction uses the upper envelope (the fit times its largest residual factor).
-  Calibrated on shininess 40 only: valid for shininess ≤ 40.
+  prediction uses the upper envelope (the fit times its largest residual factor) times
+  :data:`SHADING_MARGIN`. Calibrated on shininess 40 only: valid for shininess ≤ 40.
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ __all__ = [
     "fit",
     "load",
     "max_normal_angle",
+    "plan_within",
     "predict_depth_peeling",
     "predict_shading",
     "predict_shadow_map",
@@ -50,6 +51,11 @@ __all__ = [
 ]
 
 CALIBRATION_PATH = Path(__file__).resolve().parent.parent / "blinn_phong" / "calibration.json"
+
+#: Safety factor on the shading envelope for scenes other than the calibration sphere (other
+#: lights, views, shininess ≤ 40): the fit has one light and one view, so its largest
+#: residual under-covers new ones; 1.5 is half an octave of slack on a power law.
+SHADING_MARGIN = 1.5
 
 
 def _check_tolerance(tolerance: float) -> float:
@@ -168,7 +174,8 @@ def _fit_shading(data: dict) -> dict:
             "theta_range": [float(theta.min()), float(theta.max())],
         }
     return {
-        "error": "interior max_steps <= a * theta ** b, theta = max angle between adjacent vertex normals",
+        "error": "interior max_steps <= margin * a * theta ** b, theta: max angle of adjacent vertex normals",
+        "margin": SHADING_MARGIN,
         "shininess_calibrated": 40.0,
         "methods": out,
     }
@@ -281,7 +288,7 @@ def choose_shadow_map(
 def predict_shading(models: dict, method: str, theta: float) -> float:
     """Predicted interior max error (8-bit steps) of ``method``; ``theta`` is :func:`max_normal_angle`."""
     m = models["shading"]["methods"][method]
-    return m["a"] * theta ** m["b"]
+    return models["shading"].get("margin", 1.0) * m["a"] * theta ** m["b"]
 
 
 def choose_shading(models: dict, tolerance: float, theta: float) -> dict:
@@ -301,6 +308,76 @@ def choose_shading(models: dict, tolerance: float, theta: float) -> dict:
         "predicted_steps": predict_shading(models, "phong", theta),
         "predicted_cost": 1.0,
     }
+
+
+def plan_within(scene: object, tolerance_steps: float, models: dict | None = None) -> object:
+    """A :class:`blinn_phong.planner.Plan` whose choices are the fastest predicted within ``tolerance_steps``.
+
+    The planner's own tolerance is in linear radiance for transparency (what depth peeling
+    leaves out) and in misclassified share of the shadowed area for shadow maps; the
+    calibrated models convert a tolerance in 8-bit steps into each: depth peeling's measured
+    max error is ``c·255`` times the planner's bound, so the planner gets ``T/(255·c)``; a
+    shadow map's measured mean error is ``255·c·s/2`` times the planner's area share (its
+    bound is ``2·D/(r·R)``, ours ``c·s·D/(r·R)`` with the shadowed share ``s`` ≤ 1), so it gets
+    ``2·T/(255·c)``. The cost models then replace a choice by the exact method when that is
+    predicted to be faster (depth peeling against the A-buffer, a shadow map against ray tracing).
+    Shading: flat or Gouraud where predicted within the tolerance and cheaper, else the planner's.
+
+    Args:
+        scene: a :class:`blinn_phong.Scene`.
+        tolerance_steps: acceptable error in 8-bit steps (> 0): the max error of the
+            transparency resolve, the mean error of shadow visibility (a hard shadow edge is
+            255 steps off at some point for any map), the max error of shading.
+        models: from :func:`load` (default: ``blinn_phong/calibration.json``).
+
+    Returns:
+        The plan; every replaced choice says why in its reason.
+    """
+    from blinn_phong.normals import vertex_normals
+    from blinn_phong.planner import Choice, Plan, plan
+
+    tol = _check_tolerance(tolerance_steps)
+    m = models if models is not None else load()
+    peel, smap = m["depth_peeling"], m["shadow_map"]
+    transparency = plan(scene, tolerance=tol / (255.0 * peel["c"])).transparency
+    if transparency.method == "depth_peeling":
+        k = int(transparency.params["layers"])
+        cost = peel["t0"] + peel["t1"] * k
+        if cost >= 1.0:
+            transparency = Choice("a_buffer", f"{k} peeled layers would cost {cost:.2f}× the exact A-buffer")
+        else:
+            transparency = Choice(
+                "depth_peeling",
+                f"{transparency.reason}; calibrated: ≤ {tol:g} steps, about {cost:.2f}× the A-buffer's time",
+                dict(transparency.params),
+            )
+    shadows = []
+    for choice in plan(scene, tolerance=2.0 * tol / (255.0 * smap["c"])).shadows:
+        if choice.method == "shadow_map":
+            res = int(choice.params["resolution"])
+            cost = smap["t0"] + smap["t2"] * res**2
+            if cost >= 1.0:
+                choice = Choice(
+                    "ray_traced",
+                    f"a {res}² map would be within {tol:g} mean steps but cost {cost:.2f}× ray tracing",
+                )
+        shadows.append(choice)
+    base = plan(scene)
+    shading = []
+    for mesh, choice in zip(scene.meshes, base.shading, strict=True):  # type: ignore[attr-defined]
+        if choice.method == "phong" and mesh.shading is None and len(mesh.triangles):
+            normals = (
+                mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
+            )
+            pick = choose_shading(m, tol, max_normal_angle(normals, mesh.triangles))
+            if pick["method"] != "phong":
+                choice = Choice(
+                    pick["method"],
+                    f"calibrated: predicted {pick['predicted_steps']:.3g} ≤ {tol:g} steps at "
+                    f"{pick['predicted_cost']:.2f}× Phong's time",
+                )
+        shading.append(choice)
+    return Plan(transparency, tuple(shadows), tuple(shading), tol)
 
 
 def main() -> None:

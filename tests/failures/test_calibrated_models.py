@@ -49,7 +49,8 @@ def _held_out_shadow_scene() -> tuple[bp.Scene, float]:
     gp, gt, gn = grid_plane(1, 1, (7.0, 7.0))
     meshes = [bp.Mesh(gp, gt, gn)]
     radii = []
-    for centre, radius in (((-1.0, 0.5, 1.0), 0.5), ((1.2, -0.5, 1.6), 0.9)):
+    # the small sphere hangs between the light and the large one: it shadows a curved receiver
+    for centre, radius in (((-1.0, 0.5, 1.0), 0.5), ((1.2, -0.5, 1.6), 0.9), ((1.67, -1.27, 3.17), 0.4)):
         p, t, n = uv_sphere(40, 20, radius)
         move = np.eye(4)
         move[:3, 3] = centre
@@ -125,3 +126,36 @@ def test_shading_model_bounds_held_out_tessellations() -> None:
         if choice["predicted_steps"] <= 16.0:
             image = bp.render(scene, size, size, shading=choice["method"], samples=4).rgba
             assert error_metrics(image, reference, interior & (image[..., 3] >= 1.0))["max_steps"] <= 16.0
+
+
+@pytest.mark.parametrize("tolerance", [1.0, 4.0, 16.0])
+def test_plan_within_keeps_transparency_within_the_tolerance(tolerance: float) -> None:
+    for layers, opacity, seed in ((6, 0.6, 21), (10, 0.3, 4)):
+        scene = layered_scene(layers, opacity, seed=seed)
+        choice = em.plan_within(scene, tolerance).transparency
+        assert choice.method in ("depth_peeling", "a_buffer")
+        fr = transparent_fragments(scene, 64)
+        background = np.tile([0.5, 0.5, 0.5, 1.0], (fr["n_pixels"], 1))
+        k = int(choice.params.get("layers", 1))
+        methods = transparency_methods(fr, background, peel=(k,))
+        name = f"depth_peeling_{k}" if choice.method == "depth_peeling" else "a_buffer"
+        measured = error_metrics(methods[name](), methods["a_buffer"]())["max_steps"]
+        assert measured <= tolerance, (layers, opacity, choice)
+
+
+@pytest.mark.parametrize("tolerance", [1.0, 16.0, 64.0])
+def test_plan_within_keeps_shadows_within_the_tolerance(tolerance: float) -> None:
+    from blinn_phong.raytrace import world_triangles
+    from blinn_phong.shadows import light_visibility
+
+    scene, _ = _held_out_shadow_scene()
+    light = scene.lights[0]
+    tris, _ = world_triangles(scene)
+    points, normals = visible_points(scene, 128)
+    facing = normals @ -np.asarray(light.direction, float) > 0
+    points, normals = points[facing], normals[facing]
+    choice = em.plan_within(scene, tolerance).shadows[0]
+    vis = light_visibility(choice.method, light, tris, points, normals, **choice.params)
+    exact = light_visibility("ray_traced", light, tris, points, normals)
+    assert not has_nonfinite(vis)
+    assert error_metrics(vis, exact)["mean_steps"] <= tolerance, choice
