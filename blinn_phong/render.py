@@ -32,13 +32,18 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import face_normals, normalize, transform_normals, vertex_normals
+from blinn_phong.planner import Plan
 from blinn_phong.raster import Fragments, interpolate, visible_fragments
 from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
+
+if TYPE_CHECKING:
+    from blinn_phong.frame import Fog
 
 __all__ = [
     "FragmentShading",
@@ -48,6 +53,7 @@ __all__ = [
     "check_gl_ranges",
     "prepare_scene",
     "render",
+    "resolve_nearest_buffers",
     "resolve_samples",
     "shade_fragments",
     "surface_at_fragments",
@@ -551,8 +557,13 @@ class RenderResult:
         normal: (H, W, 3) float32 world-space unit normal (mean over covered samples,
             renormalised); zero where empty.
         passes: ``"ambient"`` (with emission), ``"diffuse"``, ``"specular"``: (H, W, 3)
-            float32 premultiplied light passes; they sum to ``rgba[..., :3]`` outside the GL preset.
+            float32 premultiplied light passes of the nearest surface; they sum to
+            ``rgba[..., :3]`` outside the GL preset when nothing is transparent and there is no
+            fog. With shadows they include the shadowing, and ``"shadow"`` (H, W, 1) holds the
+            mean visibility of the lights, weighted like the passes.
         stats: :class:`RenderStats`.
+        plan: the :class:`~blinn_phong.planner.Plan` the render followed (``plan.reasons()``
+            gives one line per decision; the caller's overrides say so).
     """
 
     rgba: np.ndarray
@@ -560,6 +571,45 @@ class RenderResult:
     normal: np.ndarray
     passes: dict[str, np.ndarray]
     stats: RenderStats
+    plan: Plan | None = None
+
+
+def resolve_nearest_buffers(
+    shaded: FragmentShading,
+    keys: np.ndarray,
+    depth: np.ndarray,
+    width: int,
+    height: int,
+    samples: int,
+    engine: str = "numpy",
+) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """Image buffers of one shaded fragment per covered sample (the nearest surface).
+
+    Args:
+        shaded: the fragments' shading (straight colour and opacity).
+        keys: (N,) their sample keys (``Fragments.sample_key``), distinct.
+        depth: (N,) their window depths.
+        width: image width in pixels.
+        height: image height in pixels.
+        samples: samples per pixel.
+        engine: ``"numpy"``, or ``"numba"``/``"auto"`` for the compiled scatter.
+
+    Returns:
+        ``(rgba, passes, normal, depth)``: (H, W, 4) float32 premultiplied RGBA (coverage ×
+        opacity in alpha), the ``ambient``/``diffuse``/``specular`` (H, W, 3) premultiplied
+        passes, the (H, W, 3) world normal (mean over covered samples, renormalised) and the
+        (H, W) nearest window depth (1.0 where empty, the OpenGL clear value).
+    """
+    n_keys = width * height * samples
+    buffers = _scatter_samples(n_keys, keys, shaded, depth, engine)
+    rgba, ambient, diffuse, specular, normal = (
+        resolve_samples(b, width, height, samples) for b in buffers[:5]
+    )
+    passes = {"ambient": ambient, "diffuse": diffuse, "specular": specular}
+    if samples > 1:
+        normal = normalize(normal)  # the mean of unit normals; one sample is unit already
+    depth_img = buffers[5].reshape(height, width, samples).min(axis=2)
+    return rgba, passes, normal, depth_img
 
 
 def render(
@@ -573,8 +623,20 @@ def render(
     cull_backfaces: bool = False,
     engine: str = "auto",
     progress: ProgressCallback | None = None,
+    transparency: str | None = None,
+    peel_layers: int | None = None,
+    wboit_weight: str = "eq10",
+    shadows: object = None,
+    fog: Fog | None = None,
+    tolerance: float = 0.0,
 ) -> RenderResult:
-    """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting.
+    """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
+
+    The planner (:func:`blinn_phong.planner.plan`) picks the transparency method and each
+    light's shadow method; an argument other than ``None``/``"auto"`` replaces the
+    planner's choice for that concern only (:func:`blinn_phong.frame.frame_plan`). The
+    plan followed, with one reason per decision, is ``result.plan``. With no transparent
+    material, no shadow to cast and no fog the image is the plain z-buffer render.
 
     Args:
         scene: the :class:`~blinn_phong.scene.Scene` (camera required).
@@ -589,15 +651,40 @@ def render(
             visibility pass and lighting kernel (same results to ~1e-12); ``"auto"`` —
             numba when it can be imported, else numpy.
         progress: optional ``callback(stage, fraction_done)`` called as stages finish.
+        transparency: ``None``/``"auto"`` (the planner's choice) or one of
+            :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
+            alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,
+            ``depth_peeling``, ``a_buffer`` (exact), ``weighted_blended``.
+        peel_layers: layers for depth peeling (None: the planner's, else 8).
+        wboit_weight: weighted blended OIT weight, ``"eq10"`` (McGuire & Bavoil eq. 10) or ``"constant"``.
+        shadows: ``None``/``"auto"`` (the planner's choice per light), a method of
+            :data:`blinn_phong.frame.SHADOW_CHOICES` or a :class:`blinn_phong.frame.ShadowOptions`
+            (method and parameters) for every light, or a list with one such entry per
+            ``scene.lights`` entry.
+        fog: a :class:`blinn_phong.frame.Fog` applied per fragment before blending, or None.
+        tolerance: the planner's tolerance (0: exact methods only).
+
+    ``shading="auto"`` uses the planner's per-mesh shading frequency (flat where it is exact).
+    ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
+    raises ``ValueError``).
 
     Returns:
-        :class:`RenderResult`.
+        :class:`RenderResult`, with ``plan`` the plan followed.
     """
-    shading = _check_shading(shading)
+    from blinn_phong import frame  # the effects stages build on this module's stages
+
+    if shading != "auto":
+        shading = _check_shading(shading)
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    if fog is not None and not isinstance(fog, frame.Fog):
+        raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")
     if gl_compat:
         check_gl_ranges(scene)
+        if fog is not None:
+            raise ValueError("fog: not available with gl_compat (the preset renders the plain z-buffer)")
     seconds: dict[str, float] = {}
 
     def report(stage: str, fraction: float) -> None:
@@ -605,9 +692,45 @@ def render(
             progress(stage, fraction)
 
     t = time.perf_counter()
+    the_plan = frame.frame_plan(
+        scene,
+        tolerance=tolerance,
+        shading=shading,
+        transparency=transparency,
+        peel_layers=peel_layers,
+        wboit_weight=wboit_weight,
+        shadows=shadows,
+        gl_compat=gl_compat,
+    )
+    seconds["plan"] = time.perf_counter() - t
+    if shading == "auto":
+        scene, shading = frame.scene_with_planned_shading(scene, the_plan, shading), "phong"
+
+    t = time.perf_counter()
     prepared = prepare_scene(scene)
     seconds["prepare"] = time.perf_counter() - t
     report("prepare", 0.05)
+
+    if frame.needs_effects(scene, the_plan, fog):
+
+        def shade(fragments: Fragments, visibility: np.ndarray | None) -> FragmentShading:
+            return shade_fragments(prepared, fragments, shading=shading, visibility=visibility, engine=engine)
+
+        rgba, depth, normal, passes, n_shaded = frame.render_effects(
+            prepared,
+            width,
+            height,
+            the_plan,
+            shade=shade,
+            samples=samples,
+            cull_backfaces=cull_backfaces,
+            fog=fog,
+            seconds=seconds,
+            report=report,
+        )
+        report("done", 1.0)
+        stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
+        return RenderResult(rgba, depth, normal, passes, stats, plan=the_plan)
 
     t = time.perf_counter()
     visible = visible_fragments(
@@ -629,19 +752,12 @@ def render(
     report("shade", 0.9)
 
     t = time.perf_counter()
-    k = visible.samples
-    covered = visible.sample_key
     # Scatter each per-sample quantity into a float32 sample buffer, then the box filter.
-    n_keys = width * height * k
-    buffers = _scatter_samples(n_keys, covered, shaded, visible.depth, engine)
-    rgba, ambient, diffuse, specular, normal = (resolve_samples(b, width, height, k) for b in buffers[:5])
-    passes = {"ambient": ambient, "diffuse": diffuse, "specular": specular}
-    if k > 1:
-        normal = normalize(normal)  # the mean of unit normals; one sample is unit already
-    depth_buf = buffers[5]
-    depth = depth_buf.reshape(height, width, k).min(axis=2)
+    rgba, passes, normal, depth = resolve_nearest_buffers(
+        shaded, visible.sample_key, visible.depth, width, height, visible.samples, engine
+    )
     seconds["resolve_samples"] = time.perf_counter() - t
     report("done", 1.0)
 
     stats = RenderStats(seconds, len(prepared.triangles), len(visible))
-    return RenderResult(rgba=rgba, depth=depth, normal=normal, passes=passes, stats=stats)
+    return RenderResult(rgba=rgba, depth=depth, normal=normal, passes=passes, stats=stats, plan=the_plan)
