@@ -41,7 +41,7 @@ from blinn_phong.planner import Choice, Plan, plan
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.raytrace import RayScene, area_light_visibility, world_triangles
 from blinn_phong.render import FragmentShading, PreparedScene, resolve_nearest_buffers, resolve_samples
-from blinn_phong.scene import AmbientLight, DirectionalLight, Material, Scene
+from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS, light_visibility
 from blinn_phong.transparency import kay_greenberg_transparency, washed_out_opacity
 
@@ -178,31 +178,28 @@ class Fog:
 
 
 def _planning_scene(scene: Scene) -> Scene:
-    """``scene`` as the planner should see it: each material at its lowest fragment opacity.
+    """``scene`` as the planner should see it: each mesh at the lowest opacity its fragments can have.
 
-    The planner reads ``Material.opacity``; a Kay–Greenberg material reaches ``1 − max(t)``, and an
-    emission-model one hides nothing behind it (fragment alpha 0), so it plans as opacity 0.
+    The planner reads ``mesh.material.opacity``; a Kay–Greenberg material reaches ``1 − max(t)``,
+    an emission-model one hides nothing behind it (fragment alpha 0) so it plans as opacity 0,
+    and under two-sided lighting the back material counts too.
     """
 
-    def planned(material: Material) -> Material:
+    def lowest(material: Material) -> float:
         if not material.transparent:
-            return material
-        opacity = 0.0 if material.transparency_model == "emission" else material.min_opacity
-        return replace(material, opacity=opacity, kay_greenberg=None)
+            return 1.0
+        return 0.0 if material.transparency_model == "emission" else material.min_opacity
 
-    if not any(
-        m.material.transparent or (m.back_material and m.back_material.transparent) for m in scene.meshes
-    ):
-        return scene
-    meshes = tuple(
-        replace(
-            m,
-            material=planned(m.material),
-            back_material=None if m.back_material is None else planned(m.back_material),
-        )
-        for m in scene.meshes
-    )
-    return replace(scene, meshes=meshes)
+    two_sided = scene.light_model.two_sided
+    meshes = []
+    for mesh in scene.meshes:
+        sides = [mesh.material] + ([mesh.back_material] if two_sided and mesh.back_material else [])
+        opacity = min(lowest(m) for m in sides)
+        front = mesh.material
+        if opacity != front.opacity or front.kay_greenberg is not None:
+            mesh = replace(mesh, material=replace(front, opacity=opacity, kay_greenberg=None))
+        meshes.append(mesh)
+    return replace(scene, meshes=tuple(meshes))
 
 
 def _shadow_list(shadows: object, n_lights: int) -> list[ShadowOptions]:
@@ -226,7 +223,7 @@ def _shadow_list(shadows: object, n_lights: int) -> list[ShadowOptions]:
     return [one(shadows, "shadows")] * n_lights
 
 
-def _overridden(method: str, planned: Choice, what: str) -> str:
+def _overridden(planned: Choice, what: str) -> str:
     return f"{what} (planner: {planned.method} — {planned.reason})"
 
 
@@ -238,7 +235,7 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
     if options.method not in _AUTO:
         method = str(options.method)
         if method != planned.method:
-            reason = _overridden(method, planned, "set by the caller")
+            reason = _overridden(planned, "set by the caller")
     if method == "soft" and (isinstance(light, DirectionalLight) or options.radius <= 0.0):
         why = "a directional light" if isinstance(light, DirectionalLight) else "radius 0"
         method, reason = (
@@ -301,6 +298,8 @@ def frame_plan(
         A :class:`~blinn_phong.planner.Plan` whose choices carry the keyword parameters of the
         functions that carry them out.
     """
+    if shading != "auto" and shading not in SHADINGS:
+        raise ValueError(f"shading: expected 'auto' or one of {SHADINGS}, got {shading!r}")
     if transparency not in _AUTO and transparency not in TRANSPARENCY_CHOICES:
         raise ValueError(
             f"transparency: expected None, 'auto' or one of {TRANSPARENCY_CHOICES}, got {transparency!r}"
@@ -331,9 +330,7 @@ def frame_plan(
     else:
         t_choice = planned.transparency
         if transparency not in _AUTO and transparency != t_choice.method:
-            t_choice = Choice(
-                str(transparency), _overridden(str(transparency), t_choice, "set by the caller")
-            )
+            t_choice = Choice(str(transparency), _overridden(t_choice, "set by the caller"))
         if t_choice.method == "depth_peeling":
             layers = peel_layers or planned.transparency.params.get("layers", 8)
             t_choice = Choice(t_choice.method, t_choice.reason, {"layers": int(layers)})  # type: ignore[arg-type]
@@ -352,7 +349,7 @@ def frame_plan(
         shading_choices = tuple(
             c
             if mesh.shading is not None or c.method == shading
-            else Choice(shading, _overridden(shading, c, f"render(shading={shading!r})"))
+            else Choice(shading, _overridden(c, f"render(shading={shading!r})"))
             for mesh, c in zip(scene.meshes, planned.shading, strict=True)
         )
     return Plan(t_choice, s_choices, shading_choices, planned.tolerance)

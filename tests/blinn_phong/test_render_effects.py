@@ -435,3 +435,40 @@ def test_bad_options_name_the_argument() -> None:
         bp.render(lone_sphere, 8, 8, shadows=[bp.ShadowOptions("planar")])
     with pytest.raises(ValueError, match=r"Material\.transparency_model"):
         bp.Material(transparency_model="glass")
+
+
+# --------------------------------------------------------------------------- shading frequency
+
+
+def test_shading_auto_takes_flat_where_the_planner_proves_it_exact() -> None:
+    # A flat quad, a sun along (-1, 0, -1)/√2, viewer at infinity: l = (1, 0, 1)/√2, v = (0, 0, 1),
+    # so n·l = 1/√2 and n·h = (1 + 1/√2)/|l + v| everywhere: kd·n·l + ks·(n·h)^s.
+    material = bp.Material(
+        ambient=(0, 0, 0), diffuse=(0.5, 0.5, 0.5), specular=(0.4, 0.4, 0.4), shininess=10.0
+    )
+    scene = bp.Scene(
+        (quad(0.0, 5.0, material),),
+        (bp.DirectionalLight((-1, 0, -1)),),
+        top_camera(),
+        ambient=(0, 0, 0),
+        light_model=bp.LightModel(local_viewer=False),
+    )
+    auto = bp.render(scene, 8, 8, shading="auto")
+    assert auto.plan.shading[0].method == "flat"
+    half = np.array([1 / math.sqrt(2), 0.0, 1 + 1 / math.sqrt(2)])
+    expected = 0.5 / math.sqrt(2) + 0.4 * (half[2] / np.linalg.norm(half)) ** 10
+    np.testing.assert_allclose(auto.rgba[..., :3], expected, atol=1e-6)
+    default = bp.render(scene, 8, 8)
+    assert default.plan.shading[0].method == "phong" and "planner: flat" in default.plan.shading[0].reason
+    np.testing.assert_allclose(default.rgba, auto.rgba, atol=1e-6)
+
+
+def test_engines_agree_on_the_effects_path() -> None:
+    scene = bp.Scene(
+        (*point_light_scene().meshes, quad(1.0, 0.8, emissive(tuple(BLUE), 0.5))),
+        point_light_scene().lights,
+        top_camera(),
+    )
+    numpy_image = bp.render(scene, SIZE, SIZE, engine="numpy", samples=4).rgba
+    numba_image = bp.render(scene, SIZE, SIZE, engine="numba", samples=4).rgba
+    np.testing.assert_allclose(numba_image, numpy_image, atol=1e-6)
