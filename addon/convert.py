@@ -214,6 +214,12 @@ def material_from_blender(
     else:
         inputs, notes = principled_inputs(material)
         values = mapping.blinn_phong_from_principled(**inputs)
+    if settings is not None and settings.transparency_model == "KAY":
+        values["kay_greenberg"] = (
+            float(settings.kay_min_transmission),
+            float(settings.kay_max_transmission),
+            float(settings.kay_exponent),
+        )
     extras: dict[str, object] = {"shading": None, "transparency_model": "ALPHA"}
     if settings is not None:
         extras = {

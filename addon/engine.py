@@ -108,12 +108,6 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
         fog_density=o.fog_density,
         fog_start=o.fog_start,
         fog_end=o.fog_end,
-        kay=tuple(
-            (e["kay_min_transmission"], e["kay_max_transmission"], e["kay_exponent"])
-            if e.get("transparency_model") == "KAY"
-            else None
-            for e in converted.extras
-        ),
     )
     width, height = converted.region_size
     result = pipeline.render_frame(
