@@ -39,7 +39,6 @@ from blinn_phong.normals import normalize
 from blinn_phong.oit import TRANSPARENCY_METHODS, transparency_pass
 from blinn_phong.planner import Choice, Plan, plan
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.raytrace import RayScene, area_light_visibility, world_triangles
 from blinn_phong.render import FragmentShading, PreparedScene, resolve_nearest_buffers, resolve_samples
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS, light_visibility
@@ -51,6 +50,7 @@ __all__ = [
     "WBOIT_WEIGHTS",
     "Fog",
     "ShadowOptions",
+    "embree_available",
     "frame_plan",
     "needs_effects",
     "render_effects",
@@ -227,6 +227,20 @@ def _overridden(planned: Choice, what: str) -> str:
     return f"{what} (planner: {planned.method} — {planned.reason})"
 
 
+#: Shadow methods that cast rays with Embree (:mod:`blinn_phong.raytrace`); ``planar`` tests its
+#: points against the projected casters with it too.
+_NEEDS_EMBREE = ("ray_traced", "soft", "planar")
+
+
+def embree_available() -> bool:
+    """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it."""
+    try:
+        import embreex  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Choice:
     """The planner's choice for one light unless ``options.method`` overrides it, with full parameters."""
     if isinstance(light, AmbientLight):
@@ -242,6 +256,12 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             "ray_traced",
             f"soft shadows asked for, but {why} has no area: hard ray-traced shadows",
         )
+    if method in _NEEDS_EMBREE and not embree_available():
+        method, reason = (
+            "shadow_map",
+            f"Embree (embreex) is not installed: a shadow map instead of {method} ({reason})",
+        )
+        options = replace(options, resolution=options.resolution or 2048)
     params: dict[str, object] = {}
     if method == "shadow_map":
         params["resolution"] = options.resolution or planned.params.get("resolution", 1024)
@@ -377,10 +397,25 @@ def needs_effects(scene: Scene, the_plan: Plan, fog: Fog | None) -> bool:
 # --------------------------------------------------------------------------- the frame
 
 
+def _world_triangles(scene: Scene) -> np.ndarray:
+    """(T, 3, 3) world-space triangles in scene order, as :func:`blinn_phong.raytrace.world_triangles`.
+
+    Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
+    :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
+    """
+    parts = [
+        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
+        for m in scene.meshes
+    ]
+    return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+
+
 def _soft_visibility(
-    light: object, params: dict[str, object], ray_scene: RayScene, points: np.ndarray, normals: np.ndarray
+    light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
     """Area-light visibility: a square of side ``2·radius`` at the light, facing the receivers' centroid."""
+    from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
+
     radius = float(params["radius"])  # type: ignore[arg-type]
     centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
     axis = points.mean(axis=0) - centre
@@ -513,12 +548,14 @@ def render_effects(
     if any(c.method != "none" for _, c in lit):
         world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
         normal = prepared.face_world_normal[visible.triangle]
-        tris, _ = world_triangles(scene)
-        ray_scene: list[RayScene] = []
+        tris = _world_triangles(scene)
+        ray_scene: list[object] = []
         columns = []
         for light, c in lit:
             if c.method == "soft":
                 if not ray_scene:
+                    from blinn_phong.raytrace import RayScene  # Embree: imported only when used
+
                     ray_scene.append(RayScene(tris))
                 columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
             else:

@@ -472,3 +472,41 @@ def test_engines_agree_on_the_effects_path() -> None:
     numpy_image = bp.render(scene, SIZE, SIZE, engine="numpy", samples=4).rgba
     numba_image = bp.render(scene, SIZE, SIZE, engine="numba", samples=4).rgba
     np.testing.assert_allclose(numba_image, numpy_image, atol=1e-6)
+
+
+def test_without_embree_shadows_fall_back_to_shadow_maps() -> None:
+    # Blender's own Python has no embreex: blinn_phong imports, and every shadow method that casts
+    # rays (ray_traced, soft, planar's point test) becomes a shadow map, with the reason given.
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = """
+import sys
+sys.modules["embreex"] = None
+import numpy as np
+import blinn_phong as bp
+square = np.array([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], float)
+white = bp.Material(ambient=(0, 0, 0), diffuse=(1, 1, 1))
+floor = bp.Mesh(2 * square, np.array([(0, 1, 2), (0, 2, 3)]), material=white)
+block = bp.Mesh(0.25 * square + [0, 0, 2], np.array([(0, 1, 2), (0, 2, 3)]))
+camera = bp.Camera.orthographic(-2, 2, -2, 2, 1, 20, view=bp.look_at((0, 0, 10), (0, 0, 0)))
+scene = bp.Scene((floor, block), (bp.PointLight((0, 0, 4)),), camera, ambient=(0, 0, 0))
+for shadows in (None, "ray_traced", bp.ShadowOptions("shadow_map", resolution=1024)):
+    result = bp.render(scene, 40, 40, shadows=shadows)
+    print(result.rgba[20, 16, 0], result.rgba[20, 2, 0], result.plan.shadows[0].method)
+print("blinn_phong.raytrace" in sys.modules, bp.plan(scene).shadows[0].method, result.plan.shadows[0].reason)
+"""
+    root = Path(__file__).resolve().parents[2]
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=120)
+    assert run.returncode == 0, run.stderr
+    # Pixel (20, 16): floor point (-0.35, -0.05) in the shadow ring (|x| < 0.5); (20, 2): (-1.75, -0.05) lit,
+    # kd·(n·l) = 4 / √(1.75² + 0.05² + 16).
+    lit = 4 / math.sqrt(1.75**2 + 0.05**2 + 16)
+    lines = run.stdout.split("\n")
+    for line in lines[:3]:
+        shadowed, lit_value, method = line.split()
+        assert float(shadowed) == 0.0 and abs(float(lit_value) - lit) < 1e-5 and method == "shadow_map"
+    assert lines[3].startswith("False planar")  # Embree never imported; the planner's own choice
+    planned = bp.render(point_light_scene(), 8, 8).plan.shadows[0]
+    assert planned.method == "planar"  # with Embree the planner's choice stands
