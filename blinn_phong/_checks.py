@@ -23,11 +23,48 @@ def float_array(value: object, name: str, shape: tuple[int | None, ...]) -> np.n
         ) from exc
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape, strict=True)):
         raise ValueError(f"{name}: expected shape {_fmt(shape)}, got shape {arr.shape}")
+    _check_finite(arr, name)
+    return arr
+
+
+def real_array(value: object, name: str, *, last_axis: int | None = None) -> np.ndarray:
+    """Return ``value`` as a finite float array of any shape, or raise.
+
+    float32 and float64 arrays keep their dtype; integers, booleans and Python numbers
+    become float64. With ``last_axis`` the array must have shape ``(..., last_axis)``.
+
+    Raises:
+        TypeError: not real numbers.
+        ValueError: wrong last axis, or NaN/Inf present (the count is reported).
+    """
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiub":
+        raise TypeError(f"{name}: expected real numbers, got dtype {arr.dtype}")
+    if arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64)
+    if last_axis is not None and (arr.ndim < 1 or arr.shape[-1] != last_axis):
+        raise ValueError(f"{name}: expected shape (..., {last_axis}), got shape {arr.shape}")
+    _check_finite(arr, name)
+    return arr
+
+
+def unit_interval_array(value: object, name: str, *, last_axis: int | None = None) -> np.ndarray:
+    """:func:`real_array` whose values must also lie in [0, 1] (no clamping)."""
+    arr = real_array(value, name, last_axis=last_axis)
+    if arr.size and (arr.min() < 0 or arr.max() > 1):
+        outside = int(np.count_nonzero((arr < 0) | (arr > 1)))
+        raise ValueError(
+            f"{name}: expected values in [0, 1]; got {outside} of {arr.size} outside, "
+            f"range [{float(arr.min())!r}, {float(arr.max())!r}]"
+        )
+    return arr
+
+
+def _check_finite(arr: np.ndarray, name: str) -> None:
     if not np.isfinite(arr).all():
         n_nan = int(np.count_nonzero(np.isnan(arr)))
         n_inf = int(np.count_nonzero(np.isinf(arr)))
         raise ValueError(f"{name}: expected finite values; got {n_nan} NaN and {n_inf} Inf of {arr.size}")
-    return arr
 
 
 def colour3(value: object, name: str) -> tuple[float, float, float]:

@@ -1,19 +1,32 @@
 """Transparency models per material, Kay–Greenberg transparency and specular wash-out.
 
-A transparent surface changes the light arriving from behind it (``behind``, premultiplied
-RGBA) in one of three ways; each is one blend of :mod:`compositing`:
+A transparent surface of lit colour ``c`` (linear RGB, not premultiplied) changes the light
+arriving from behind it (``behind``, premultiplied RGBA) in one of three ways. Each model is
+one function here, computed by the one implementation of the three models,
+:mod:`compositing.transparency` (:func:`compositing.emission`,
+:func:`compositing.partial_occlusion`, :func:`compositing.absorption`):
 
-* ``emission`` — the surface only adds light (fire, glow, a hologram): its reflected light
-  is a premultiplied colour of alpha 0, ``src over`` the background, i.e.
-  ``rgb' = c + behind.rgb``, ``α' = behind.α``. Order-independent (a sum).
+* ``emission`` — the surface only adds light (fire, glow, a hologram), scaled by its
+  opacity ``α``: ``rgb' = α·c + behind.rgb``, ``α' = behind.α``. Order-independent (a sum).
+  As a fragment: ``(α·c, 0)`` ``src over`` the background.
 * ``partial_occlusion`` — the surface covers a fraction ``α`` of the pixel (a net curtain,
-  screen door, coverage): ``(α·c, α) src over behind = α·c + (1 − α)·behind``
+  screen door, coverage): ``(α·c, α) over behind = α·c + (1 − α)·behind``
   (Porter & Duff 1984).
 * ``absorption`` — the surface filters what passes through it (coloured glass): each
-  channel of the background is multiplied by the transmittance ``T``, the OpenGL blend
-  ``glBlendFunc(GL_ZERO, GL_SRC_COLOR)`` (:func:`compositing.gl_blend`); alpha is kept.
-  The light the surface reflects itself (``c``, e.g. its highlight) is then added as in
-  ``emission``. Stacked filters multiply, so their order does not matter.
+  channel of the background is multiplied by the transmittance ``T`` (the OpenGL blend
+  ``glBlendFunc(GL_ZERO, GL_SRC_COLOR)``), alpha is kept; the light the surface reflects
+  itself (``c``, e.g. its highlight) is then added as in ``emission``:
+  ``rgb' = c + T ⊙ behind.rgb``. Stacked filters multiply, so their order does not matter.
+  A material's opacity ``α`` is the grey filter ``T = 1 − α``.
+
+The renderer resolves fragments with ``src over`` (:mod:`blinn_phong.oit`), so it asks
+:func:`transparent_fragment` for the premultiplied fragment that gives each model:
+``(α·c, α)``, ``(α·c, 0)`` and ``(c, α)``. Over an opaque background the three fragments
+give exactly the three functions above. Over a partly transparent background
+(``behind.α < 1``) the absorption fragment's alpha is ``α + (1 − α)·behind.α`` rather than
+``behind.α``: the filter is counted as coverage, so that a backdrop ``W`` composited later
+is filtered too (``c + T·(behind.rgb + (1 − behind.α)·W)``), which a single premultiplied
+alpha can express only for a grey filter.
 
 Kay & Greenberg, "Transparency for computer synthesized images", SIGGRAPH '79: a thin
 curved shell looks more opaque towards its silhouette, where the view crosses more
@@ -32,36 +45,23 @@ from typing import Literal
 
 import numpy as np
 
-from compositing import composite, gl_blend
+import compositing
+from blinn_phong._checks import number, real_array, unit_interval_array
 
 __all__ = [
     "TRANSPARENCY_MODELS",
+    "absorption_surface",
     "blend_transparent_surface",
+    "emission_surface",
     "kay_greenberg_transparency",
+    "partial_occlusion_surface",
+    "transparent_fragment",
     "washed_out_opacity",
 ]
 
-TransparencyModel = Literal["emission", "partial_occlusion", "absorption"]
-#: The three transparency models a material can use.
-TRANSPARENCY_MODELS: tuple[str, ...] = ("emission", "partial_occlusion", "absorption")
-
-
-def _real(name: str, value: np.ndarray | float) -> np.ndarray:
-    arr = np.asarray(value)
-    if arr.dtype.kind not in "fiu":
-        raise TypeError(f"{name} must be real numbers, got dtype {arr.dtype}")
-    if arr.dtype not in (np.float32, np.float64):
-        arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got NaN or Inf")
-    return arr
-
-
-def _unit_interval(name: str, value: np.ndarray | float) -> np.ndarray:
-    arr = _real(name, value)
-    if arr.size and (arr.min() < 0 or arr.max() > 1):
-        raise ValueError(f"{name} must lie in [0, 1], got range [{arr.min()}, {arr.max()}]")
-    return arr
+TransparencyModel = Literal["partial_occlusion", "emission", "absorption"]
+#: The three transparency models a material can use (the first is a material's default).
+TRANSPARENCY_MODELS: tuple[str, ...] = ("partial_occlusion", "emission", "absorption")
 
 
 def kay_greenberg_transparency(
@@ -81,14 +81,14 @@ def kay_greenberg_transparency(
     Returns:
         Transparency in [min(t_min, t_max), max(t_min, t_max)], shape and float dtype of ``normal_z``.
     """
-    nz = _real("normal_z", normal_z)
+    nz = real_array(normal_z, "normal_z")
     if nz.size and np.abs(nz).max() > 1 + 1e-6:
-        raise ValueError(f"normal_z must be the z of a unit normal (|N_z| <= 1), got max {np.abs(nz).max()}")
-    for name, v in (("t_min", t_min), ("t_max", t_max)):
-        if not 0 <= v <= 1:
-            raise ValueError(f"{name} must lie in [0, 1], got {v}")
-    if not np.isfinite(power) or power <= 0:
-        raise ValueError(f"power must be finite and > 0, got {power}")
+        raise ValueError(
+            f"normal_z: expected the z of a unit normal, |N_z| <= 1 (+1e-6), got max {np.abs(nz).max()!r}"
+        )
+    t_min = number(t_min, "t_min", low=0.0, high=1.0)
+    t_max = number(t_max, "t_max", low=0.0, high=1.0)
+    power = number(power, "power", low=0.0, low_open=True)
     a = np.minimum(np.abs(nz), 1.0)
     return (t_min + (t_max - t_min) * (1.0 - (1.0 - a) ** power)).astype(nz.dtype, copy=False)
 
@@ -103,11 +103,88 @@ def washed_out_opacity(transparency: np.ndarray | float, specular: np.ndarray | 
     Returns:
         Opacity in [0, 1] (broadcast shape).
     """
-    t = _unit_interval("transparency", transparency)
-    s = _real("specular", specular)
+    t = unit_interval_array(transparency, "transparency")
+    s = real_array(specular, "specular")
     if s.size and s.min() < 0:
-        raise ValueError(f"specular must be >= 0, got minimum {s.min()}")
+        negative = int(np.count_nonzero(s < 0))
+        raise ValueError(f"specular: expected values >= 0, got {negative} negative (minimum {s.min()!r})")
     return np.minimum(1.0, (1.0 - t) + s)
+
+
+def _surface_and_behind(surface_rgb: object, behind: object) -> tuple[np.ndarray, np.ndarray]:
+    """The lit colour as (..., 3) and ``behind`` as (..., 4), both in ``behind``'s float dtype."""
+    back = real_array(behind, "behind", last_axis=4)
+    rgb = real_array(surface_rgb, "surface_rgb", last_axis=3).astype(back.dtype, copy=False)
+    return rgb, back
+
+
+def _opacity(opacity: object, dtype: np.dtype) -> np.ndarray:
+    """Opacity in [0, 1] as a (..., 1) array in ``dtype`` (broadcasts against RGB or RGBA)."""
+    return unit_interval_array(opacity, "opacity").astype(dtype, copy=False)[..., None]
+
+
+def emission_surface(surface_rgb: np.ndarray, behind: np.ndarray, *, opacity: object = 1.0) -> np.ndarray:
+    """The emission model: ``rgb' = α·c + behind.rgb``, ``α' = behind.α`` (additive, order-free).
+
+    Computed by :func:`compositing.emission` with the emitted light ``α·c``.
+
+    Args:
+        surface_rgb: (..., 3) linear light ``c`` the surface sends to the eye (not premultiplied).
+        behind: (..., 4) premultiplied linear RGBA behind the surface.
+        opacity: ``α`` in [0, 1], a number or an array of ``behind.shape[:-1]``; it scales the
+            glow (1 by default: the full lit colour is added).
+
+    Returns:
+        (..., 4) premultiplied RGBA (broadcast shape) in the float dtype of ``behind``.
+    """
+    rgb, back = _surface_and_behind(surface_rgb, behind)
+    return compositing.emission(_opacity(opacity, back.dtype) * rgb, back)
+
+
+def partial_occlusion_surface(surface_rgb: np.ndarray, behind: np.ndarray, *, opacity: object) -> np.ndarray:
+    """The partial-occlusion model: ``(α·c, α) over behind = α·c + (1 − α)·behind`` (Porter & Duff 1984).
+
+    Computed by :func:`compositing.partial_occlusion`.
+
+    Args:
+        surface_rgb: (..., 3) linear lit colour ``c`` (not premultiplied).
+        behind: (..., 4) premultiplied linear RGBA behind the surface.
+        opacity: coverage ``α`` in [0, 1], a number or an array of ``behind.shape[:-1]``.
+
+    Returns:
+        (..., 4) premultiplied RGBA (broadcast shape) in the float dtype of ``behind``.
+    """
+    rgb, back = _surface_and_behind(surface_rgb, behind)
+    a = _opacity(opacity, back.dtype)
+    shape = np.broadcast_shapes(rgb.shape[:-1], a.shape[:-1])
+    surface = np.concatenate(
+        [np.broadcast_to(a * rgb, (*shape, 3)), np.broadcast_to(a, (*shape, 1))], axis=-1
+    )
+    return compositing.partial_occlusion(surface, back)
+
+
+def absorption_surface(surface_rgb: np.ndarray, behind: np.ndarray, *, transmittance: object) -> np.ndarray:
+    """The absorption model: ``rgb' = c + T ⊙ behind.rgb``, ``α' = behind.α`` (a filter plus its own light).
+
+    The filter is :func:`compositing.absorption` (``glBlendFunc(GL_ZERO, GL_SRC_COLOR)`` with
+    source ``(T, 1)``); the surface's own light ``c`` is then added by :func:`compositing.emission`.
+
+    Args:
+        surface_rgb: (..., 3) linear light ``c`` the surface reflects itself (e.g. its highlight).
+        behind: (..., 4) premultiplied linear RGBA behind the surface.
+        transmittance: ``T`` in [0, 1], per channel (..., 3), or one number for a grey filter
+            (a material of opacity ``α`` is the grey filter ``1 − α``).
+
+    Returns:
+        (..., 4) premultiplied RGBA (broadcast shape) in the float dtype of ``behind``.
+    """
+    rgb, back = _surface_and_behind(surface_rgb, behind)
+    t = unit_interval_array(transmittance, "transmittance").astype(back.dtype, copy=False)
+    if t.ndim == 0:
+        t = np.full(3, t, dtype=back.dtype)
+    elif t.shape[-1] != 3:
+        raise ValueError(f"transmittance: expected a number or shape (..., 3), got shape {t.shape}")
+    return compositing.emission(rgb, compositing.absorption(t, back))
 
 
 def blend_transparent_surface(
@@ -115,48 +192,76 @@ def blend_transparent_surface(
     behind: np.ndarray,
     model: TransparencyModel,
     *,
-    opacity: np.ndarray | float | None = None,
-    transmittance: np.ndarray | None = None,
+    opacity: object = None,
+    transmittance: object = None,
 ) -> np.ndarray:
     """Put one transparent surface in front of ``behind`` by one of the three models.
+
+    Dispatches to :func:`emission_surface`, :func:`partial_occlusion_surface` or
+    :func:`absorption_surface` (formulas in the module docstring).
 
     Args:
         surface_rgb: (..., 3) linear light the surface sends to the eye (its lit colour,
             not premultiplied).
         behind: (..., 4) premultiplied linear RGBA of what lies behind the surface.
         model: ``"emission"``, ``"partial_occlusion"`` or ``"absorption"``.
-        opacity: coverage α in [0, 1] (scalar or ``behind.shape[:-1]``), for ``partial_occlusion``.
-        transmittance: (..., 3) per-channel transmittance in [0, 1], for ``absorption``.
+        opacity: ``α`` in [0, 1] (number or ``behind.shape[:-1]``): required by
+            ``partial_occlusion``, optional for ``emission`` (default 1), refused by ``absorption``.
+        transmittance: ``T`` in [0, 1] ((..., 3) or a number): required by ``absorption``,
+            refused by the other two models.
 
     Returns:
-        (..., 4) premultiplied RGBA in the dtype of ``behind``.
+        (..., 4) premultiplied RGBA in the float dtype of ``behind``.
+
+    Raises:
+        ValueError: unknown model, a missing parameter, or a parameter the model does not use.
     """
-    rgb = _real("surface_rgb", surface_rgb)
-    back = _real("behind", behind)
-    if rgb.ndim < 1 or rgb.shape[-1] != 3:
-        raise ValueError(f"surface_rgb must have shape (..., 3), got {rgb.shape}")
-    if back.ndim < 1 or back.shape[-1] != 4:
-        raise ValueError(f"behind must have shape (..., 4) (premultiplied RGBA), got {back.shape}")
-    shape = np.broadcast_shapes(rgb.shape[:-1], back.shape[:-1])
-    dtype = back.dtype
-    rgb = np.broadcast_to(rgb, (*shape, 3)).astype(dtype)
-    back = np.broadcast_to(back, (*shape, 4)).astype(dtype)
-    glow = np.concatenate([rgb, np.zeros((*shape, 1), dtype=dtype)], axis=-1)
-    if model == "emission":
-        return composite(glow, back, "src_over")
-    if model == "partial_occlusion":
-        if opacity is None:
-            raise ValueError("the partial_occlusion model needs opacity (coverage in [0, 1])")
-        a = np.broadcast_to(_unit_interval("opacity", opacity), shape).astype(dtype)[..., None]
-        return composite(np.concatenate([rgb * a, a], axis=-1), back, "src_over")
+    if model not in TRANSPARENCY_MODELS:
+        raise ValueError(f"model: expected one of {TRANSPARENCY_MODELS}, got {model!r}")
     if model == "absorption":
+        if opacity is not None:
+            raise ValueError(
+                "opacity: the absorption model does not use it; pass transmittance "
+                f"(the grey filter of opacity a is 1 - a), got opacity={opacity!r}"
+            )
         if transmittance is None:
-            raise ValueError("the absorption model needs transmittance ((..., 3) in [0, 1])")
-        t = _unit_interval("transmittance", transmittance)
-        if t.ndim < 1 or t.shape[-1] != 3:
-            raise ValueError(f"transmittance must have shape (..., 3), got {t.shape}")
-        t = np.broadcast_to(t, (*shape, 3)).astype(dtype)
-        filt = np.concatenate([t, np.ones((*shape, 1), dtype=dtype)], axis=-1)
-        filtered = gl_blend(filt, back, "ZERO", "SRC_COLOR", src_factor_alpha="ZERO", dst_factor_alpha="ONE")
-        return composite(glow, filtered.astype(dtype, copy=False), "src_over")
-    raise ValueError(f"model must be one of {TRANSPARENCY_MODELS}, got {model!r}")
+            raise ValueError("transmittance: the absorption model needs it ((..., 3) or a number in [0, 1])")
+        return absorption_surface(surface_rgb, behind, transmittance=transmittance)
+    if transmittance is not None:
+        raise ValueError(
+            f"transmittance: the {model} model does not use it (only absorption does), "
+            f"got transmittance={transmittance!r}"
+        )
+    if model == "emission":
+        return emission_surface(surface_rgb, behind, opacity=1.0 if opacity is None else opacity)
+    if opacity is None:
+        raise ValueError("opacity: the partial_occlusion model needs it (coverage in [0, 1])")
+    return partial_occlusion_surface(surface_rgb, behind, opacity=opacity)
+
+
+def transparent_fragment(surface_rgb: np.ndarray, opacity: object, model: TransparencyModel) -> np.ndarray:
+    """The premultiplied fragment whose ``src over`` the background gives ``model``.
+
+    ``partial_occlusion``: ``(α·c, α)``; ``emission``: ``(α·c, 0)``; ``absorption``: ``(c, α)``,
+    the grey filter ``T = 1 − α``. Over an opaque background, ``fragment over behind`` equals
+    :func:`blend_transparent_surface` exactly; over a partly transparent one the absorption
+    fragment also counts the filter as coverage (module docstring).
+
+    Args:
+        surface_rgb: (N, 3) or (..., 3) linear lit colour ``c`` (not premultiplied).
+        opacity: ``α`` in [0, 1], shape ``surface_rgb.shape[:-1]`` or a number.
+        model: one of :data:`TRANSPARENCY_MODELS`.
+
+    Returns:
+        (..., 4) premultiplied RGBA in the float dtype of ``surface_rgb`` (float64 for integers).
+    """
+    if model not in TRANSPARENCY_MODELS:
+        raise ValueError(f"model: expected one of {TRANSPARENCY_MODELS}, got {model!r}")
+    rgb = real_array(surface_rgb, "surface_rgb", last_axis=3)
+    a = _opacity(opacity, rgb.dtype)
+    shape = np.broadcast_shapes(rgb.shape[:-1], a.shape[:-1])
+    colour = rgb if model == "absorption" else a * rgb
+    alpha = np.zeros_like(a) if model == "emission" else a
+    return np.concatenate(
+        [np.broadcast_to(colour, (*shape, 3)), np.broadcast_to(alpha, (*shape, 1))], axis=-1
+    )
