@@ -224,6 +224,31 @@ def test_emission_model_adds_light_without_covering_the_background() -> None:
     np.testing.assert_allclose(result.rgba, np.broadcast_to(np.r_[0.3 * BLUE, 0.0], (8, 8, 4)), atol=1e-7)
 
 
+def test_transparent_back_material_under_two_sided_lighting() -> None:
+    # A quad facing down (clockwise seen from above): the camera sees its back face, whose
+    # material is red glass (α 0.5) while the front is opaque; two-sided lighting picks the back.
+    facing_down = quad(1.0, 5.0, emissive(tuple(GREEN)))
+    glass_back = bp.Mesh(
+        facing_down.positions,
+        facing_down.triangles[:, ::-1],
+        -facing_down.normals,
+        material=emissive(tuple(GREEN)),
+        back_material=emissive(tuple(RED), 0.5),
+    )
+    scene = bp.Scene(
+        (quad(0.0, 5.0, emissive(tuple(FLOOR))), glass_back),
+        (),
+        top_camera(),
+        ambient=(0, 0, 0),
+        light_model=bp.LightModel(two_sided=True),
+    )
+    result = bp.render(scene, 8, 8)
+    assert result.plan.transparency.method == "draw_last"
+    np.testing.assert_allclose(
+        result.rgba[..., :3], np.broadcast_to(over(RED, 0.5, FLOOR), (8, 8, 3)), atol=1e-6
+    )
+
+
 @pytest.mark.parametrize("tilt_degrees", [0.0, 60.0])
 def test_kay_greenberg_opacity_follows_the_eye_space_normal(tilt_degrees: float) -> None:
     # t = t_min + (t_max − t_min)·[1 − (1 − |N_z|)^p], N_z = cos(tilt) under an orthographic view.
@@ -282,8 +307,11 @@ def test_planar_shadow_of_a_square_under_a_slanted_sun() -> None:
     np.testing.assert_allclose(result.rgba[..., 0][lit], 1 / math.sqrt(2), atol=1e-6)
     np.testing.assert_array_equal(result.passes["shadow"][..., 0][shadow], 0.0)
     np.testing.assert_allclose(result.passes["shadow"][..., 0][lit], 1.0, atol=1e-6)
-    ray_traced = bp.render(sun_scene(), SIZE, SIZE, shadows="ray_traced")
+    calls: list[tuple[str, float]] = []
+    ray_traced = bp.render(sun_scene(), SIZE, SIZE, shadows="ray_traced", progress=lambda *c: calls.append(c))
     np.testing.assert_array_equal(result.rgba, ray_traced.rgba)
+    fractions = [fraction for _, fraction in calls]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0 and "shadows" in {s for s, _ in calls}
 
 
 def point_light_scene() -> bp.Scene:
@@ -405,6 +433,9 @@ def test_no_nan_or_inf_under_any_combination() -> None:
     configurations += [
         {"shadows": bp.ShadowOptions("soft", radius=0.3, samples=4), "fog": bp.Fog("exp2", density=0.3)},
         {"shadows": bp.ShadowOptions("shadow_map", resolution=64, kernel="box3", slope_bias=0.0)},
+        {"shading": "gouraud", "shadows": "ray_traced", "transparency": "a_buffer"},
+        {"shading": "flat", "shadows": "ray_traced", "fog": bp.Fog("linear", start=5.0, end=15.0)},
+        {"shading": "auto", "tolerance": 0.05},
     ]
     for options in configurations:
         result = bp.render(scene, 16, 16, samples=4, **options)
