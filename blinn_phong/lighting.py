@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blinn_phong._checks import float_array
 from blinn_phong.normals import normalize
 from blinn_phong.scene import (
     AmbientLight,
@@ -48,7 +49,19 @@ from blinn_phong.scene import (
     SpotLight,
 )
 
-__all__ = ["EyeLights", "ShadingTerms", "gl_clamp", "lights_in_eye_space", "shade", "shade_many"]
+__all__ = [
+    "UNIT_NORMAL_TOLERANCE",
+    "EyeLights",
+    "ShadingTerms",
+    "gl_clamp",
+    "lights_in_eye_space",
+    "shade",
+    "shade_many",
+]
+
+#: A normal given to :func:`shade` must have length 0 or ``1 ± UNIT_NORMAL_TOLERANCE``
+#: (float32 normalisation is good to about 1e-7; a longer normal would scale the light).
+UNIT_NORMAL_TOLERANCE = 1e-5
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,6 +171,32 @@ class ShadingTerms:
         return self.ambient + self.diffuse + self.specular
 
 
+def _points_and_normals(points: object, normals: object) -> tuple[np.ndarray, np.ndarray]:
+    """``points`` and ``normals`` as finite (N, 3) float64 arrays, normals of length 0 or 1, or raise."""
+    p = float_array(points, "points", (None, 3))
+    n = float_array(normals, "normals", (len(p), 3))
+    length = np.sqrt(np.einsum("ij,ij->i", n, n))
+    bad = np.flatnonzero((length != 0.0) & (np.abs(length - 1.0) > UNIT_NORMAL_TOLERANCE))
+    if len(bad):
+        raise ValueError(
+            f"normals: expected unit vectors (length 1 ± {UNIT_NORMAL_TOLERANCE:g}) or zero vectors; "
+            f"got {len(bad)} of {len(n)} with other lengths (row {bad[0]}: length {length[bad[0]]!r})"
+        )
+    return p, n
+
+
+def _visibility(visibility: object, count: int, n_lights: int) -> np.ndarray:
+    """``visibility`` as an (N, L) float64 array of values in [0, 1], or raise."""
+    vis = float_array(visibility, "visibility", (count, n_lights))
+    outside = int(np.count_nonzero((vis < 0) | (vis > 1)))
+    if outside:
+        raise ValueError(
+            f"visibility: expected values in [0, 1]; got {outside} of {vis.size} outside, "
+            f"range [{vis.min()!r}, {vis.max()!r}]"
+        )
+    return vis
+
+
 def shade(
     points: np.ndarray,
     normals: np.ndarray,
@@ -173,9 +212,10 @@ def shade(
     """Evaluate the lighting equation (module docstring) at eye-space points.
 
     Args:
-        points: (N, 3) eye-space positions (eye at the origin looking down -Z).
-        normals: (N, 3) eye-space unit normals (zero vectors receive only ambient and
-            emission). For back faces under two-sided lighting pass the flipped normal.
+        points: (N, 3) finite eye-space positions (eye at the origin looking down -Z).
+        normals: (N, 3) finite eye-space unit normals, length ``1 ±`` :data:`UNIT_NORMAL_TOLERANCE`
+            (1e-5), or zero vectors, which receive only ambient and emission. For back faces
+            under two-sided lighting pass the flipped normal.
         material: the surface material (use the back material for back faces).
         lights: from :func:`lights_in_eye_space`.
         global_ambient: ``a_cs`` (linear RGB).
@@ -189,22 +229,17 @@ def shade(
 
     Returns:
         :class:`ShadingTerms` in float64.
+
+    Raises:
+        ValueError: a NaN/Inf point or normal (the count is reported), a normal of another
+            length, or a visibility outside [0, 1], naming the argument.
     """
     model = LightModel() if model is None else model
-    p = np.asarray(points, dtype=np.float64)
-    n = np.asarray(normals, dtype=np.float64)
+    p, n = _points_and_normals(points, normals)
     count = len(p)
-    if p.shape != (count, 3) or n.shape != (count, 3):
-        raise ValueError(f"points and normals: expected two (N, 3) arrays, got {p.shape} and {n.shape}")
     n_lights = len(lights)
     if visibility is not None:
-        vis = np.asarray(visibility, dtype=np.float64)
-        if vis.shape != (count, n_lights):
-            raise ValueError(
-                f"visibility: expected shape (n_points, n_lights) = ({count}, {n_lights}), got {vis.shape}"
-            )
-        if not np.isfinite(vis).all() or (vis < 0).any() or (vis > 1).any():
-            raise ValueError("visibility: expected finite values in [0, 1]")
+        vis = _visibility(visibility, count, n_lights)
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if engine != "numpy" and not per_light:
@@ -293,7 +328,8 @@ def shade_many(
     """
     model = LightModel() if model is None else model
     ids = np.asarray(material_ids)
-    p = np.asarray(points, dtype=np.float64)
+    p, n = _points_and_normals(points, normals)
+    vis = None if visibility is None else _visibility(visibility, len(p), len(lights))
     if ids.shape != (len(p),) or (ids.size and ids.dtype.kind not in "iu"):
         raise ValueError(
             f"material_ids: expected ({len(p)},) integers, got shape {ids.shape} dtype {ids.dtype}"
@@ -308,23 +344,6 @@ def shade_many(
         from blinn_phong.fast import numba_available
 
         if numba_available():
-            n = np.asarray(normals, dtype=np.float64)
-            if n.shape != p.shape or p.ndim != 2 or p.shape[1] != 3:
-                raise ValueError(
-                    f"points and normals: expected two (N, 3) arrays, got {p.shape} and {n.shape}"
-                )
-            vis = None
-            if visibility is not None:
-                vis = np.asarray(visibility, dtype=np.float64)
-                if (
-                    vis.shape != (len(p), len(lights))
-                    or not np.isfinite(vis).all()
-                    or (vis < 0).any()
-                    or (vis > 1).any()
-                ):
-                    raise ValueError(
-                        f"visibility: expected ({len(p)}, {len(lights)}) finite values in [0, 1]"
-                    )
             return _shade_compiled(
                 p, n, ids.astype(np.int64), list(materials), lights, global_ambient, model, vis
             )
@@ -336,12 +355,12 @@ def shade_many(
         sel = np.flatnonzero(ids == mid)
         terms = shade(
             p[sel],
-            np.asarray(normals)[sel],
+            n[sel],
             materials[int(mid)],
             lights,
             global_ambient=global_ambient,
             model=model,
-            visibility=None if visibility is None else np.asarray(visibility)[sel],
+            visibility=None if vis is None else vis[sel],
         )
         out["ambient"][sel] = terms.ambient
         out["diffuse"][sel] = terms.diffuse
