@@ -22,22 +22,13 @@ from typing import Literal
 
 import numpy as np
 
+from blinn_phong._checks import number, real_array
+
 __all__ = ["FOG_MODES", "apply_fog", "eye_distance", "fog_factor"]
 
 FogMode = Literal["linear", "exp", "exp2"]
 #: The three OpenGL fog modes.
 FOG_MODES: tuple[str, ...] = ("linear", "exp", "exp2")
-
-
-def _float_array(name: str, value: np.ndarray | float) -> np.ndarray:
-    arr = np.asarray(value)
-    if arr.dtype.kind not in "fiu":
-        raise TypeError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
-    if arr.dtype not in (np.float32, np.float64):
-        arr = arr.astype(np.float64)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got NaN or Inf")
-    return arr
 
 
 def eye_distance(eye_positions: np.ndarray, mode: Literal["plane", "radial"] = "plane") -> np.ndarray:
@@ -51,14 +42,12 @@ def eye_distance(eye_positions: np.ndarray, mode: Literal["plane", "radial"] = "
     Returns:
         (...) distances in the unit of the positions.
     """
-    p = _float_array("eye_positions", eye_positions)
-    if p.ndim < 1 or p.shape[-1] != 3:
-        raise ValueError(f"eye_positions must have shape (..., 3), got {p.shape}")
+    p = real_array(eye_positions, "eye_positions", last_axis=3)
     if mode == "plane":
         return np.abs(p[..., 2])
     if mode == "radial":
         return np.linalg.norm(p, axis=-1)
-    raise ValueError(f"mode must be 'plane' or 'radial', got {mode!r}")
+    raise ValueError(f"mode: expected 'plane' or 'radial', got {mode!r}")
 
 
 def fog_factor(
@@ -79,24 +68,25 @@ def fog_factor(
             and ``1/density``.
         mode: ``"linear"``, ``"exp"`` or ``"exp2"``.
         density: fog density (≥ 0) for the exponential modes, per unit distance.
-        start: distance where linear fog begins (f = 1).
-        end: distance where linear fog is complete (f = 0); must differ from ``start``.
+        start: distance where linear fog begins (f = 1), finite.
+        end: distance where linear fog is complete (f = 0), finite and different from ``start``.
 
     Returns:
         Array of fog factors with the shape and float dtype of ``distance``.
     """
-    c = _float_array("distance", distance)
+    c = real_array(distance, "distance")
     if mode == "linear":
+        start = number(start, "start")
+        end = number(end, "end")
         if end == start:
-            raise ValueError(f"linear fog needs end != start, got start = end = {start}")
+            raise ValueError(f"end: expected end != start for linear fog, got start = end = {end!r}")
         f = (end - c) / (end - start)
     elif mode in ("exp", "exp2"):
-        if not np.isfinite(density) or density < 0:
-            raise ValueError(f"density must be a finite number >= 0, got {density}")
+        density = number(density, "density", low=0.0)
         dc = density * c
         f = np.exp(-dc) if mode == "exp" else np.exp(-(dc * dc))
     else:
-        raise ValueError(f"mode must be one of {FOG_MODES}, got {mode!r}")
+        raise ValueError(f"mode: expected one of {FOG_MODES}, got {mode!r}")
     return np.clip(f, 0.0, 1.0).astype(c.dtype, copy=False)
 
 
@@ -126,17 +116,15 @@ def apply_fog(
     Returns:
         (..., 4) fogged premultiplied RGBA in the dtype of ``rgba``.
     """
-    img = _float_array("rgba", rgba)
-    if img.ndim < 1 or img.shape[-1] != 4:
-        raise ValueError(f"rgba must have shape (..., 4), got {img.shape}")
-    d = _float_array("distance", distance)
+    img = real_array(rgba, "rgba", last_axis=4)
+    d = real_array(distance, "distance")
     if d.shape != img.shape[:-1]:
         raise ValueError(
-            f"distance must have shape {img.shape[:-1]} (rgba without its last axis), got {d.shape}"
+            f"distance: expected shape {img.shape[:-1]} (rgba without its last axis), got {d.shape}"
         )
-    cf = _float_array("fog_color", fog_color)
+    cf = real_array(fog_color, "fog_color")
     if cf.shape != (3,):
-        raise ValueError(f"fog_color must hold 3 values (linear RGB), got shape {cf.shape}")
+        raise ValueError(f"fog_color: expected 3 values (linear RGB), got shape {cf.shape}")
     f = fog_factor(d, mode, density=density, start=start, end=end)[..., None].astype(img.dtype)
     out = img.copy()
     alpha = img[..., 3:4]
