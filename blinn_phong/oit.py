@@ -39,6 +39,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from blinn_phong.raster import Fragments, resolve_nearest
 from compositing import composite
 
 __all__ = [
@@ -484,7 +485,7 @@ def resolve_transparency(
 
 
 def transparency_pass(
-    fragments: object,
+    fragments: Fragments,
     opaque: np.ndarray,
     shade: Callable[[np.ndarray], np.ndarray],
     method: str,
@@ -516,36 +517,36 @@ def transparency_pass(
 
     Returns:
         ``(rgba, depth)``: (width·height·samples, 4) premultiplied RGBA per sample (index
-        ``Fragments.sample_key``) and (width·height·samples,) opaque window depth (1 = empty).
+        ``Fragments.sample_key``) in the dtype ``shade`` returns (the transparent fragments'
+        when both are shaded; float64 when nothing is), and (width·height·samples,) float64
+        opaque window depth (1 = empty). The opaque pass is :func:`blinn_phong.raster.resolve_nearest`
+        on the opaque fragments.
     """
-    n_keys = int(fragments.width * fragments.height * fragments.samples)  # type: ignore[attr-defined]
-    key = np.asarray(fragments.sample_key)  # type: ignore[attr-defined]
-    frag_depth = np.asarray(fragments.depth)  # type: ignore[attr-defined]
-    frag_tri = np.asarray(fragments.triangle)  # type: ignore[attr-defined]
+    n_keys = int(fragments.width * fragments.height * fragments.samples)
+    key = np.asarray(fragments.sample_key)
+    frag_depth = np.asarray(fragments.depth)
+    frag_tri = np.asarray(fragments.triangle)
     op = np.asarray(opaque, dtype=bool)
     if op.shape != key.shape:
-        raise ValueError(f"opaque must have one flag per fragment, shape {key.shape}, got {op.shape}")
+        raise ValueError(f"opaque: expected one flag per fragment, shape {key.shape}, got {op.shape}")
     if method != "zbuffer" and method not in TRANSPARENCY_METHODS:
-        raise ValueError(f"method must be 'zbuffer' or one of {TRANSPARENCY_METHODS}, got {method!r}")
-    # opaque pass: nearest depth per sample, ties to the earlier triangle (GL_LESS in draw order)
-    op_idx = np.flatnonzero(op)
+        raise ValueError(f"method: expected 'zbuffer' or one of {TRANSPARENCY_METHODS}, got {method!r}")
+    # opaque pass: the z-buffer (GL_LESS in draw order) over the opaque fragments only
+    nearest = resolve_nearest(fragments.subset(np.flatnonzero(op)))
+    covered = np.flatnonzero(nearest >= 0)
+    winners = np.flatnonzero(op)[nearest[covered]]
     depth = np.ones(n_keys)
-    np.minimum.at(depth, key[op_idx], frag_depth[op_idx])
-    nearest = op_idx[frag_depth[op_idx] == depth[key[op_idx]]]
-    first = np.full(n_keys, np.iinfo(np.int64).max)
-    np.minimum.at(first, key[nearest], frag_tri[nearest])
-    winners = nearest[frag_tri[nearest] == first[key[nearest]]]
-    winners = winners[np.unique(key[winners], return_index=True)[1]]
-    image = np.zeros((n_keys, 4))
-    if len(winners):
-        image[key[winners]] = shade(winners)
-    if method == "zbuffer":
-        return image, depth
-    tr_idx = np.flatnonzero(~op)
+    depth[covered] = frag_depth[winners]
+    opaque_rgba = np.asarray(shade(winners)) if len(winners) else None
+    tr_idx = np.flatnonzero(~op) if method != "zbuffer" else np.empty(0, np.int64)
     tr_idx = tr_idx[frag_depth[tr_idx] < depth[key[tr_idx]]]
-    if len(tr_idx) == 0:
+    rgba = np.asarray(shade(tr_idx)) if len(tr_idx) else None
+    dtype = next((x.dtype for x in (opaque_rgba, rgba) if x is not None), np.dtype(np.float64))
+    image = np.zeros((n_keys, 4), dtype)
+    if opaque_rgba is not None:
+        image[covered] = opaque_rgba
+    if rgba is None:
         return image, depth
-    rgba = np.asarray(shade(tr_idx))
     weights = None
     if method == "weighted_blended":
         weights = wboit_weights(rgba[:, 3], wboit_equation, window_depth=frag_depth[tr_idx])
@@ -558,9 +559,9 @@ def transparency_pass(
         triangle=frag_tri[tr_idx],
         triangle_mesh=triangle_mesh,
         triangle_eye_distance=triangle_eye_distance,
-        background=image.astype(rgba.dtype),
+        background=image.astype(rgba.dtype, copy=False),
         layers=layers,
         weights=weights,
-        front_facing=np.asarray(fragments.front_facing)[tr_idx],  # type: ignore[attr-defined]
+        front_facing=np.asarray(fragments.front_facing)[tr_idx],
     )
     return out, depth

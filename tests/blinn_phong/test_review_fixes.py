@@ -9,6 +9,8 @@ from blinn_phong.fast import numba_available
 from blinn_phong.fog import apply_fog, fog_factor
 from blinn_phong.lighting import lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import normalize
+from blinn_phong.oit import transparency_pass
+from blinn_phong.raster import Fragments
 from blinn_phong.scene import DirectionalLight, Material
 from blinn_phong.transparency import (
     TRANSPARENCY_MODELS,
@@ -182,3 +184,48 @@ def test_fog_reports_non_finite_counts_in_the_shared_style():
         fog_factor(np.array([np.nan, np.inf, -np.inf, 1.0]))
     with pytest.raises(ValueError, match=r"^rgba: expected shape \(\.\.\., 4\), got shape \(2, 3\)"):
         apply_fog(np.zeros((2, 3)), np.zeros(2), (0, 0, 0))
+
+
+# ---------------------------------------------------------- transparency_pass opaque z-buffer
+
+
+def _fragments(pixel, depth, triangle, width=3):
+    n = len(pixel)
+    return Fragments(
+        width,
+        1,
+        1,
+        np.asarray(pixel, np.int64),
+        np.zeros(n, np.int64),
+        np.asarray(depth, np.float64),
+        np.asarray(triangle, np.int64),
+        np.full((n, 3), 1 / 3),
+        np.ones(n, bool),
+    )
+
+
+# pixel 0: opaque at 0.5 (tri 1) and 0.3 (tri 2) -> the nearer, tri 2;
+# pixel 1: two opaque at the same depth 0.4 (tri 3 and tri 0) -> GL_LESS keeps the first drawn, tri 0;
+#          a transparent fragment (tri 4) in front at 0.2; pixel 2: empty
+FRAGS = _fragments([0, 0, 1, 1, 1], [0.5, 0.3, 0.4, 0.4, 0.2], [1, 2, 3, 0, 4])
+OPAQUE = np.array([True, True, True, True, False])
+COLOURS = np.array([[0.1, 0, 0, 1], [0.2, 0, 0, 1], [0.3, 0, 0, 1], [0.4, 0, 0, 1], [0, 0, 0.25, 0.5]])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("method", ["zbuffer", "a_buffer"])
+def test_transparency_pass_keeps_the_shade_dtype_and_resolves_like_gl_less(dtype, method):
+    shaded = []
+
+    def shade(index):
+        shaded.append(np.sort(index))
+        return COLOURS[index].astype(dtype)
+
+    rgba, depth = transparency_pass(
+        FRAGS, OPAQUE, shade, method, triangle_mesh=np.zeros(5, int), triangle_eye_distance=np.zeros(5)
+    )
+    assert rgba.dtype == dtype
+    np.testing.assert_array_equal(depth, [0.3, 0.4, 1.0])
+    np.testing.assert_array_equal(shaded[0], [1, 3])  # only the visible opaque fragments are shaded
+    expected_pixel1 = COLOURS[3] if method == "zbuffer" else COLOURS[4] + 0.5 * COLOURS[3]  # over
+    np.testing.assert_allclose(rgba, np.array([COLOURS[1], expected_pixel1, np.zeros(4)]), atol=1e-7)
