@@ -43,6 +43,7 @@ from typing import Final
 import numpy as np
 
 from .factors import ALL_OPERATORS
+from .operators import resolve_operator
 from .validate import as_rgba, broadcast_shapes
 
 __all__ = ["GL_BLEND_EQUATIONS", "GL_BLEND_FACTORS", "GL_BLEND_TARGETS", "gl_blend", "gl_factors"]
@@ -336,16 +337,15 @@ def gl_factors(op: str) -> tuple[str, str]:
     and raise ``ValueError``.
 
     Args:
-        op: An operator name such as ``"src_over"`` (case-insensitive).
+        op: An operator name such as ``"src_over"``, read as :func:`compositing.composite` reads
+            it (:func:`compositing.operators.resolve_operator`: case-insensitive, ``-`` as ``_``).
 
     Returns:
         ``(src_factor, dst_factor)``, GL names without the ``GL_`` prefix, usable with :func:`gl_blend`.
     """
     if not isinstance(op, str):
-        raise TypeError(f"op must be an operator name (str), got {type(op).__name__} {op!r}")
-    spec = ALL_OPERATORS.get(op.strip().lower())
-    if spec is None:
-        raise ValueError(f"op: unknown operator {op!r}; valid operators are {', '.join(ALL_OPERATORS)}")
+        raise TypeError(f"op: expected an operator name (str), got {type(op).__name__} {op!r}")
+    spec = resolve_operator(op)
     if not spec.gl_realisable:
         realisable = [name for name, s in ALL_OPERATORS.items() if s.gl_realisable]
         raise ValueError(
