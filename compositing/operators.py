@@ -160,8 +160,7 @@ def composite(
     if use_fused:
         if not fusable:
             raise ValueError(
-                "engine='numba' needs src and dst of the same shape (got "
-                f"{src.shape} and {dst.shape}), C-contiguous, and a scalar factor"
+                f"engine: 'numba' {_unfusable_reason(src, dst, mix)}; use engine='numpy' or 'auto'"
             )
         from ._fused import composite_fused
 
@@ -180,6 +179,18 @@ def composite(
         out = _composite_numpy(spec, src, dst, mix, shape)
     _check_overflow(out)
     return out
+
+
+def _unfusable_reason(src: np.ndarray, dst: np.ndarray, mix: np.ndarray | float) -> str:
+    """Which requirement of the fused engine ``src``, ``dst`` and the factor fail (the first one)."""
+    if src.shape != dst.shape:
+        return f"needs src and dst of the same shape, got {src.shape} and {dst.shape}"
+    if src.ndim < 2:
+        return f"needs images (at least one pixel axis before RGBA), got shape {src.shape}"
+    if not isinstance(mix, float):
+        return f"needs a scalar factor, got a factor array of shape {np.shape(mix)}"
+    name = "src" if not src.flags.c_contiguous else "dst"
+    return f"needs C-contiguous arrays, {name} is not (use np.ascontiguousarray)"
 
 
 def _check_overflow(out: np.ndarray) -> None:
