@@ -85,8 +85,8 @@ class ConvertedScene:
             without a render border.
         options: render settings.
         mesh_names: ``"<object>/<material>"`` for each mesh in ``scene.meshes``.
-        extras: per mesh, the material settings the core ``Material`` does not hold (transparency
-            model and Kay parameters).
+        extras: per mesh, the material settings the core ``Material`` does not hold (the
+            shading override, already applied to ``Mesh.shading``).
         light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
             for soft shadows.
         background: the world colour the frame is composited over (``src_over``) when
@@ -195,10 +195,12 @@ def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, ob
 def material_from_blender(
     material: bpy.types.Material | None,
 ) -> tuple[Material, dict[str, object], list[str]]:
-    """The Blinn-Phong material of a Blender material, its extra settings and notes.
+    """The Blinn-Phong material of a Blender material, its per-mesh settings and notes.
 
     ``Material.blinn_phong.source == "CUSTOM"`` uses the stored coefficients; otherwise they are
-    derived from the Principled BSDF (``mapping.blinn_phong_from_principled``).
+    derived from the Principled BSDF (``mapping.blinn_phong_from_principled``). The transparency
+    model, Kay-Greenberg parameters and specular wash-out go to the core ``Material``; the shading
+    override (``extras["shading"]``) goes to the ``Mesh``.
     """
     settings = getattr(material, "blinn_phong", None) if material is not None else None
     notes: list[str] = []
@@ -214,21 +216,17 @@ def material_from_blender(
     else:
         inputs, notes = principled_inputs(material)
         values = mapping.blinn_phong_from_principled(**inputs)
-    if settings is not None and settings.transparency_model == "KAY":
-        values["kay_greenberg"] = (
-            float(settings.kay_min_transmission),
-            float(settings.kay_max_transmission),
-            float(settings.kay_exponent),
-        )
-    extras: dict[str, object] = {"shading": None, "transparency_model": "ALPHA"}
+    extras: dict[str, object] = {"shading": None}
     if settings is not None:
-        extras = {
-            "shading": None if settings.shading == "SCENE" else settings.shading.lower(),
-            "transparency_model": settings.transparency_model,
-            "kay_min_transmission": float(settings.kay_min_transmission),
-            "kay_max_transmission": float(settings.kay_max_transmission),
-            "kay_exponent": float(settings.kay_exponent),
-        }
+        values["transparency_model"] = settings.transparency_model.lower()
+        values["specular_washout"] = bool(settings.specular_washout)
+        if settings.use_kay_greenberg:
+            values["kay_greenberg"] = (
+                float(settings.kay_min_transmission),
+                float(settings.kay_max_transmission),
+                float(settings.kay_exponent),
+            )
+        extras["shading"] = None if settings.shading == "SCENE" else settings.shading.lower()
     return Material(**values), extras, notes
 
 

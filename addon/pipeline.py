@@ -3,8 +3,8 @@
 ``blinn_phong.render`` plans transparency and shadows (``blinn_phong.planner``), renders the
 effects the plan needs (``blinn_phong.frame``) and returns the plan with a reason per decision.
 This module only translates the add-on's settings into its arguments ("Auto" = the planner's
-choice) and keeps the engine usable in Blender's own Python, which has no Embree (``embreex``):
-there ray-traced and soft shadows become shadow maps, and the reason says so.
+choice). In Blender's own Python, which has no Embree (``embreex``), ``render`` itself replaces
+ray-traced, soft and planar shadows by shadow maps and says so in the plan.
 
 Outputs follow the project conventions (float32 premultiplied linear RGBA, row 0 at the top).
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blinn_phong import Fog, ShadowOptions, plan, render
+from blinn_phong import Fog, ShadowOptions, render
 from blinn_phong.scene import AmbientLight, Scene
 
 __all__ = [
@@ -24,7 +24,6 @@ __all__ = [
     "TRANSPARENCY_SETTINGS",
     "EffectOptions",
     "FrameResult",
-    "embree_available",
     "render_frame",
 ]
 
@@ -40,10 +39,6 @@ TRANSPARENCY_SETTINGS: dict[str, str | None] = {
 
 SHADOW_SETTINGS: dict[str, str | None] = {"AUTO": None, "NONE": "none", "HARD": "ray_traced", "SOFT": "soft"}
 """Render-setting value -> shadow method (None: the planner's choice per light)."""
-
-#: Shadow maps used where Embree is missing: a PCF kernel per replaced method (planar shadows
-#: test their points against the projected casters with Embree too).
-_SHADOW_MAP_FALLBACK = {"ray_traced": "box3", "soft": "box7", "planar": "box3"}
 
 
 @dataclass(frozen=True)
@@ -112,49 +107,21 @@ class FrameResult:
     triangles: int = 0
 
 
-def embree_available() -> bool:
-    """True when ``embreex`` (Embree ray casting) imports; Blender's own Python does not ship it."""
-    try:
-        import embreex  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _shadow_argument(scene: Scene, options: EffectOptions, notes: list[str]) -> object:
-    """``render(shadows=...)``: None (planner), a method for every light, or one ShadowOptions per light."""
+def _shadow_argument(scene: Scene, options: EffectOptions) -> object:
+    """``render(shadows=...)``: None (the planner's choice per light), one method for every light, or
+    one ``ShadowOptions`` per light for soft shadows (each light's own radius)."""
     method = SHADOW_SETTINGS[options.shadows]
+    if method != "soft":
+        return method
     radii = options.light_radii or (0.0,) * len(scene.lights)
     if len(radii) != len(scene.lights):
         raise ValueError(f"options.light_radii: expected {len(scene.lights)} radii, got {len(radii)}")
-    embree = embree_available()
-    if method in (None, "ray_traced", "none") and (embree or method == "none"):
-        return method
-    if method is None:  # no Embree: the planner's choices, ray tracing replaced by shadow maps
-        per_light = [(c.method, dict(c.params)) for c in plan(scene, options.tolerance).shadows]
-    else:
-        per_light = [(method, {}) for _ in scene.lights]
-    arguments = []
-    for i, (light, (chosen, params)) in enumerate(zip(scene.lights, per_light, strict=True)):
-        if isinstance(light, AmbientLight):
-            arguments.append(ShadowOptions(method="none"))
-            continue
-        if not embree and chosen in _SHADOW_MAP_FALLBACK:
-            notes.append(
-                f"shadows, light {i}: shadow_map instead of {chosen}: Embree (embreex) is not available"
-            )
-            arguments.append(
-                ShadowOptions(method="shadow_map", resolution=2048, kernel=_SHADOW_MAP_FALLBACK[chosen])
-            )
-        elif chosen == "soft":
-            arguments.append(
-                ShadowOptions(
-                    method="soft", samples=options.shadow_samples, radius=radii[i], offset=options.shadow_bias
-                )
-            )
-        else:
-            arguments.append(ShadowOptions(method=chosen, **params))
-    return arguments
+    return [
+        ShadowOptions(
+            method="soft", samples=options.shadow_samples, radius=radius, offset=options.shadow_bias
+        )
+        for radius in radii
+    ]
 
 
 def render_frame(
@@ -171,11 +138,10 @@ def render_frame(
 
     Returns:
         :class:`FrameResult`; ``choices["reasons"]`` holds one line per decision of the plan that
-        was followed, plus a line per Embree fallback.
+        was followed.
     """
     options = options or EffectOptions()
-    notes: list[str] = []
-    shadows = _shadow_argument(scene, options, notes)
+    shadows = _shadow_argument(scene, options)
     fog = None
     if options.fog != "NONE":
         fog = Fog(
@@ -208,7 +174,7 @@ def render_frame(
         "transparency": followed.transparency.method,
         "shadows": [followed.shadows[i].method for i in lit],
         "fog": options.fog,
-        "reasons": [*followed.reasons(), *notes],
+        "reasons": followed.reasons(),
     }
     return FrameResult(
         result.rgba, result.depth, passes, choices, dict(result.stats.seconds), result.stats.triangles

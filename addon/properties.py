@@ -166,10 +166,25 @@ class BLINN_PHONG_MaterialSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blen
     transparency_model: EnumProperty(
         name="Transparency Model",
         items=(
-            ("ALPHA", "Alpha", "Constant opacity"),
-            ("KAY", "Kay", "Kay-Greenberg: more opaque at grazing angles (curved glass)"),
+            ("PARTIAL_OCCLUSION", "Alpha", "Covers the fraction α of what is behind: α·c + (1 − α)·behind"),
+            ("EMISSION", "Emission", "Only adds light, hides nothing: α·c + behind"),
+            (
+                "ABSORPTION",
+                "Absorption",
+                "A grey filter of transmittance 1 − α plus its own light: c + (1 − α)·behind",
+            ),
         ),
-        default="ALPHA",
+        default="PARTIAL_OCCLUSION",
+    )
+    use_kay_greenberg: BoolProperty(
+        name="Kay-Greenberg",
+        default=False,
+        description="Opacity from the eye-space normal: more opaque at grazing angles (curved glass)",
+    )
+    specular_washout: BoolProperty(
+        name="Specular Wash-Out",
+        default=False,
+        description="Highlights make a transparent surface more opaque: min(1, α + specular luminance)",
     )
     kay_min_transmission: FloatProperty(
         name="Min Transmission",

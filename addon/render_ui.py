@@ -167,10 +167,12 @@ class BLINN_PHONG_PT_material(_EnginePanel, bpy.types.Panel):  # noqa: N801
             layout.operator(BLINN_PHONG_OT_copy_derived_material.bl_idname, icon="COPYDOWN")
         layout.prop(settings, "shading")
         layout.prop(settings, "transparency_model")
-        if settings.transparency_model == "KAY":
+        layout.prop(settings, "use_kay_greenberg")
+        if settings.use_kay_greenberg:
             layout.prop(settings, "kay_min_transmission")
             layout.prop(settings, "kay_max_transmission")
             layout.prop(settings, "kay_exponent")
+        layout.prop(settings, "specular_washout")
 
 
 class BLINN_PHONG_PT_light(_EnginePanel, bpy.types.Panel):  # noqa: N801

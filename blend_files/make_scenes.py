@@ -226,7 +226,7 @@ def make_transparency() -> bpy.types.Scene:
     )
     blue.rotation_euler = (math.radians(20), 0.0, math.radians(-15))
     kay = _material("Kay glass", (0.8, 0.9, 1.0), specular=0.9, shininess=120)
-    kay.blinn_phong.transparency_model = "KAY"
+    kay.blinn_phong.use_kay_greenberg = True
     kay.blinn_phong.kay_min_transmission, kay.blinn_phong.kay_max_transmission = 0.1, 0.85
     _add("primitive_uv_sphere_add", kay, radius=0.8, segments=32, ring_count=16, location=(1.6, 0, 0))
     _light(scene, "SUN", "Sun", (3, -4, 6), (0, 0, 0), 2.0)
@@ -333,12 +333,12 @@ def main(argv: list[str] | None = None) -> int:
         "shadows": make_shadows,
         "compositing": lambda: make_compositing(plate),
     }
-    bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
     properties.register()
     engine.register()
     try:
         for name in SCENES:
             makers[name]()
+            bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
             path = out / f"{name}.blend"
             bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True, relative_remap=True)
             print(f"wrote {path}")

@@ -308,3 +308,61 @@ def test_camera_projection_matches_blender_calc_matrix_camera(tmp_path: Path) ->
     assert len(rows) == 72
     worst = max(rows, key=lambda r: r[-1])
     assert worst[-1] < 1e-5, worst
+
+
+MATERIALS = """
+import bpy
+from addon import convert, properties
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+properties.register()
+principled = bpy.data.materials.new("Principled")
+principled.use_nodes = True
+bsdf = principled.node_tree.nodes["Principled BSDF"]
+bsdf.inputs["Base Color"].default_value = (0.5, 0.25, 0.125, 1.0)
+bsdf.inputs["Metallic"].default_value = 0.5
+bsdf.inputs["Roughness"].default_value = 0.6
+bsdf.inputs["IOR"].default_value = 2.0
+bsdf.inputs["Emission Color"].default_value = (1.0, 0.5, 0.0, 1.0)
+bsdf.inputs["Emission Strength"].default_value = 3.0
+bsdf.inputs["Alpha"].default_value = 0.75
+glass = bpy.data.materials.new("Glass")
+g = glass.blinn_phong
+g.source = "CUSTOM"
+g.diffuse, g.specular, g.shininess, g.opacity = (0.1, 0.2, 0.3), (0.4, 0.4, 0.4), 50.0, 0.3
+g.transparency_model, g.use_kay_greenberg, g.specular_washout = "ABSORPTION", True, True
+g.kay_min_transmission, g.kay_max_transmission, g.kay_exponent = 0.2, 0.7, 3.0
+g.shading = "FLAT"
+out = {}
+for mat in (principled, glass, None):
+    m, extras, notes = convert.material_from_blender(mat)
+    out[mat.name if mat else "none"] = {
+        "diffuse": m.diffuse, "ambient": m.ambient, "specular": m.specular, "emission": m.emission,
+        "shininess": m.shininess, "opacity": m.opacity, "model": m.transparency_model,
+        "kay": m.kay_greenberg, "washout": m.specular_washout, "shading": extras["shading"],
+    }
+properties.unregister()
+emit(out)
+"""
+
+
+def test_materials_from_principled_and_custom_settings(tmp_path: Path) -> None:
+    got = run_bpy(MATERIALS, tmp_path)
+    p = got["Principled"]
+    # Metallic 0.5: diffuse = base·(1 − m); F0 = mix(2·0.5·((2−1)/(2+1))², base, m); s = 2/α² − 2, α = 0.36.
+    base = np.array([0.5, 0.25, 0.125])
+    s = 2 / 0.36**2 - 2
+    f0 = 0.5 * (1 / 9) + 0.5 * base
+    np.testing.assert_allclose(p["diffuse"], base * 0.5, rtol=1e-6)
+    np.testing.assert_allclose(p["ambient"], base * 0.5, rtol=1e-6)
+    np.testing.assert_allclose(p["specular"], f0 * (s + 8) / 8, rtol=1e-5)
+    assert p["shininess"] == pytest.approx(s, rel=1e-5)
+    np.testing.assert_allclose(p["emission"], (3.0, 1.5, 0.0), rtol=1e-6)
+    assert p["opacity"] == pytest.approx(0.75) and p["model"] == "partial_occlusion" and p["kay"] is None
+    g = got["Glass"]
+    np.testing.assert_allclose(g["diffuse"], (0.1, 0.2, 0.3), rtol=1e-6)
+    assert g["shininess"] == 50.0 and g["opacity"] == pytest.approx(0.3)
+    assert g["model"] == "absorption" and g["washout"] is True and g["shading"] == "flat"
+    np.testing.assert_allclose(g["kay"], (0.2, 0.7, 3.0), rtol=1e-6)
+    # No material: the default grey derived like a Principled BSDF of base colour 0.8.
+    np.testing.assert_allclose(got["none"]["diffuse"], (0.8, 0.8, 0.8), rtol=1e-6)

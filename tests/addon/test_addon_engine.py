@@ -380,11 +380,6 @@ emit(alphas)
     assert (without_cube == 0).all()
 
 
-@pytest.mark.xfail(
-    reason="blinn_phong/frame.py imports blinn_phong.raytrace, which imports embreex at module level, "
-    "so blinn_phong cannot be imported in Blender's Python until that import is made lazy",
-    strict=False,
-)
 def test_renders_with_only_what_blender_ships(tmp_path: Path) -> None:
     # Blender's Python has numpy and OpenImageIO but not embreex, numba or colour-science.
     from addon_testing import REPO

@@ -71,7 +71,7 @@ scene.blinn_phong.fog = "LINEAR"
 ctx = types.SimpleNamespace(engine=engine.ENGINE_ID, scene=scene, material=mat, light=spot)
 drawn = {p.__name__: draw(p, ctx) for p in panels}
 mat.blinn_phong.source = "CUSTOM"
-mat.blinn_phong.transparency_model = "KAY"
+mat.blinn_phong.use_kay_greenberg = True
 spot.blinn_phong.source = "CUSTOM"
 drawn_custom = {p.__name__: draw(p, ctx) for p in panels[3:]}
 
@@ -134,9 +134,15 @@ def test_panels_draw_the_settings_that_matter(ui: dict) -> None:
     assert ["label", "No render yet in this session"] in drawn["BLINN_PHONG_PT_render_last"]
     # Derived mode shows the derived values and the copy operator; custom mode the editable ones.
     assert ["operator", "blinn_phong.copy_derived_material"] in drawn["BLINN_PHONG_PT_material"]
-    assert {"diffuse", "specular", "shininess", "opacity", "kay_exponent"} <= props(
-        custom["BLINN_PHONG_PT_material"]
-    )
+    assert {
+        "diffuse",
+        "specular",
+        "shininess",
+        "opacity",
+        "transparency_model",
+        "kay_exponent",
+        "specular_washout",
+    } <= props(custom["BLINN_PHONG_PT_material"])
     assert {"constant", "linear", "quadratic", "spot_exponent"} <= props(custom["BLINN_PHONG_PT_light"])
 
 
