@@ -334,7 +334,7 @@ def test_gl_factors_rejects_disjoint_and_conjoint(op):
 def test_gl_factors_rejects_unknown_names():
     with pytest.raises(ValueError, match=r"unknown operator 'over'.*src_over"):
         gl_factors("over")
-    with pytest.raises(TypeError, match="op must be"):
+    with pytest.raises(TypeError, match="op: expected an operator name"):
         gl_factors(3)
 
 
