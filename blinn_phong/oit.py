@@ -25,9 +25,13 @@ over pixels. Every blend is :func:`compositing.composite`.
 * :func:`resolve_weighted_blended` with :func:`wboit_weights` — McGuire & Bavoil,
   "Weighted Blended Order-Independent Transparency", JCGT 2(2) 2013:
   ``accum = Σ (c·w, α·w)`` (premultiplied ``c``), ``revealage = Π (1 − α)``,
-  ``result = (accum.rgb / accum.a)·(1 − revealage)`` as a colour of alpha
-  ``1 − revealage``, composited over the background. Exact for one layer or for layers
-  of equal colour; otherwise an approximation whose error the benchmark measures.
+  ``result = (accum.rgb / max(accum.a, 1e-5))·(1 − revealage)`` as a colour of alpha
+  ``1 − revealage``, composited over the background. The paper's floor ``1e-5`` (its
+  listing's ``max(accum.a, 1e-5)``) is kept: for one layer, or layers of equal colour,
+  the result is exact where ``accum.a = Σ w·α ≥ 1e-5`` and its colour is scaled by
+  ``accum.a / 1e-5`` below it (faint, distant fragments come out darker: α = 0.01 at window
+  depth 0.99 with eq. 10 has ``w·α = 1e-6``, a tenth of its colour). Otherwise an
+  approximation whose error the benchmark measures.
 
 :func:`depth_test` discards transparent fragments behind the opaque depth buffer (GL_LESS),
 the "depth-tested but not written" rule for transparent geometry.
@@ -376,8 +380,15 @@ def resolve_weighted_blended(
 
     ``accum = Σ w·(rgb, α)`` (premultiplied rgb; the paper's ``(C·α·w, α·w)``),
     ``revealage = Π (1 − α)``; the transparent layer is the colour
-    ``accum.rgb / accum.a`` with coverage ``1 − revealage``, composited ``src over``
-    the background. No sorting, one pass, the result does not depend on order.
+    ``accum.rgb / max(accum.a, 1e-5)`` with coverage ``1 − revealage``, composited
+    ``src over`` the background. No sorting, one pass, the result does not depend on order.
+
+    The floor ``1e-5`` is the paper's (it avoids dividing by zero where nothing was
+    accumulated). It bounds the error of a single layer (or of layers of equal colour):
+    exact when ``accum.a ≥ 1e-5``, otherwise the layer's colour is multiplied by
+    ``accum.a / 1e-5 < 1`` (its coverage is exact). Weights that include ``α`` (all of
+    :func:`wboit_weights`) make ``accum.a`` quadratic in ``α``, so faint fragments are the
+    ones affected.
 
     Args:
         pixel: (n,) flat pixel (or sample) index of each fragment.

@@ -9,7 +9,7 @@ from blinn_phong.fast import numba_available
 from blinn_phong.fog import apply_fog, fog_factor
 from blinn_phong.lighting import lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import normalize
-from blinn_phong.oit import transparency_pass
+from blinn_phong.oit import resolve_weighted_blended, transparency_pass, wboit_weights
 from blinn_phong.raster import Fragments
 from blinn_phong.scene import DirectionalLight, Material
 from blinn_phong.transparency import (
@@ -229,3 +229,26 @@ def test_transparency_pass_keeps_the_shade_dtype_and_resolves_like_gl_less(dtype
     np.testing.assert_array_equal(shaded[0], [1, 3])  # only the visible opaque fragments are shaded
     expected_pixel1 = COLOURS[3] if method == "zbuffer" else COLOURS[4] + 0.5 * COLOURS[3]  # over
     np.testing.assert_allclose(rgba, np.array([COLOURS[1], expected_pixel1, np.zeros(4)]), atol=1e-7)
+
+
+# --------------------------------------------------------------------------- WBOIT floor on one layer
+
+
+def test_wboit_one_layer_is_exact_above_the_floor_and_scaled_below_it():
+    # McGuire & Bavoil 2013, eq. 10 weight α·max(1e-2, 3e3·(1 − d)³) and the listing's max(accum.a, 1e-5)
+    alpha = np.array([0.01, 0.01, 0.5, 0.05, 0.9])
+    depth = np.array([0.99, 0.5, 0.99, 0.9, 0.999])
+    colour = 0.8
+    w = wboit_weights(alpha, "eq10", window_depth=depth)
+    np.testing.assert_allclose(w, alpha * np.maximum(1e-2, 3e3 * (1 - depth) ** 3), rtol=1e-15)
+    rgba = np.c_[np.full((5, 3), colour) * alpha[:, None], alpha]
+    out = resolve_weighted_blended(np.arange(5), w, rgba, 5)
+    accum_a = w * alpha
+    np.testing.assert_allclose(out[:, 3], alpha, rtol=1e-15)  # coverage always exact
+    expected = colour * alpha * np.minimum(1.0, accum_a / 1e-5)
+    np.testing.assert_allclose(out[:, 0], expected, rtol=1e-12)
+    # the reviewer's case: α = 0.01 at depth 0.99 resolves to 0.0008 instead of 0.008
+    np.testing.assert_allclose(out[0, 0], 0.0008, rtol=1e-12)
+    above = accum_a >= 1e-5
+    assert above.any() and (~above).any()
+    np.testing.assert_allclose(out[above, 0], colour * alpha[above], rtol=1e-12)
