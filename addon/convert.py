@@ -61,6 +61,7 @@ class RenderOptions:
 
     shading: str = "phong"
     samples: int = 4
+    tolerance: float = 0.0
     transparency: str = "AUTO"
     peel_layers: int = 8
     shadows: str = "AUTO"
@@ -389,6 +390,7 @@ def render_options(settings: object | None) -> RenderOptions:
     return RenderOptions(
         shading=settings.shading.lower(),
         samples=settings.samples_per_axis**2,
+        tolerance=float(settings.tolerance),
         transparency=settings.transparency,
         peel_layers=settings.peel_layers,
         shadows=settings.shadows,

@@ -108,6 +108,7 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
         fog_density=o.fog_density,
         fog_start=o.fog_start,
         fog_end=o.fog_end,
+        tolerance=o.tolerance,
     )
     width, height = converted.region_size
     result = pipeline.render_frame(

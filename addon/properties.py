@@ -67,9 +67,20 @@ class BLINN_PHONG_RenderSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blende
 
     shading: EnumProperty(
         name="Shading",
-        items=SHADING_ITEMS,
+        items=(
+            ("AUTO", "Auto", "The planner's choice per mesh: flat where it is exact, else Phong"),
+            *SHADING_ITEMS,
+        ),
         default="PHONG",
         description="Shading frequency for materials that do not override it",
+    )
+    tolerance: FloatProperty(
+        name="Tolerance",
+        min=0.0,
+        soft_max=0.05,
+        default=0.0,
+        precision=4,
+        description="Error the planner may accept to choose a faster method (linear radiance; 0: exact only)",
     )
     samples_per_axis: IntProperty(
         name="Anti-Aliasing", min=1, max=8, default=2, description="k×k ordered-grid samples per pixel"

@@ -94,6 +94,7 @@ class BLINN_PHONG_PT_render_effects(_EnginePanel, bpy.types.Panel):  # noqa: N80
         settings = context.scene.blinn_phong
         layout = self.layout
         layout.use_property_split = True
+        layout.prop(settings, "tolerance")
         layout.prop(settings, "transparency")
         if settings.transparency == "DEPTH_PEELING":
             layout.prop(settings, "peel_layers")

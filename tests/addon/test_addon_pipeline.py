@@ -11,7 +11,7 @@ import pytest
 
 from addon.pipeline import EffectOptions, render_frame
 from blinn_phong.render import render
-from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, Scene, look_at
+from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
 
 
 def _quad(z: float, half: float, material: Material, centre: tuple[float, float] = (0.0, 0.0)) -> Mesh:
@@ -196,3 +196,20 @@ def test_without_embree_shadows_fall_back_to_shadow_maps(monkeypatch: pytest.Mon
     lit = ((np.abs(x) > 0.45) | (np.abs(y) > 0.45)) & ((np.abs(x + 1.0) > 0.35) | (np.abs(y) > 0.35))
     np.testing.assert_allclose(got.rgba[..., 0][umbra], 0.0, atol=1e-6)
     np.testing.assert_allclose(got.rgba[..., 0][lit], 1 / math.sqrt(2), atol=1e-6)
+
+
+def test_auto_shading_is_exact_on_flat_faces_under_a_sun() -> None:
+    # Planar faces, a directional light and an orthographic camera: flat shading is exact, so the
+    # planner's per-mesh choice must give the per-pixel (Phong) image.
+    material = Material(diffuse=(0.6, 0.5, 0.4), specular=(0.3, 0.3, 0.3), shininess=20.0)
+    scene = Scene(
+        (_quad(0.0, 1.5, material),),
+        (DirectionalLight((0.3, -0.2, -1.0), intensity=1.2),),
+        _top_camera(),
+        ambient=(0.1, 0.1, 0.1),
+        light_model=LightModel(local_viewer=False),
+    )
+    auto = render_frame(scene, 24, 24, shading="auto", samples=4)
+    phong = render_frame(scene, 24, 24, shading="phong", samples=4)
+    assert any("flat" in reason for reason in auto.choices["reasons"])
+    np.testing.assert_allclose(auto.rgba, phong.rgba, atol=1e-6)
