@@ -30,8 +30,20 @@ from .samples import sample_paths
 __all__ = ["checkerboard", "contact_sheet", "main", "run_demo"]
 
 
-def checkerboard(shape: tuple[int, int], square: int = 16, levels=(0.2, 0.4)) -> np.ndarray:
-    """Opaque grey checkerboard (linear premultiplied RGBA), the usual backdrop for transparency."""
+def checkerboard(
+    shape: tuple[int, int], square: int = 16, levels: tuple[float, float] = (0.2, 0.4)
+) -> np.ndarray:
+    """Opaque grey checkerboard (linear premultiplied RGBA), the usual backdrop for transparency.
+
+    Args:
+        shape: ``(height, width)`` in pixels.
+        square: side of one square in pixels.
+        levels: linear grey of the squares whose ``row // square + column // square`` is even,
+            then odd (the top-left square takes the first).
+
+    Returns:
+        ``(height, width, 4)`` float32, alpha 1.
+    """
     rows, cols = np.indices(shape)
     grey = np.where((rows // square + cols // square) % 2 == 0, levels[0], levels[1]).astype(np.float32)
     return np.stack([grey, grey, grey, np.ones_like(grey)], axis=-1)

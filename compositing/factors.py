@@ -29,6 +29,15 @@ op             value                            Blender Math node
 ``lt``         1 if a < b else 0                LESS_THAN
 ``gt``         1 if a > b else 0                GREATER_THAN
 =============  ===============================  ==========================
+
+Zero denominators: ``safe_div`` tests ``b == 0`` exactly, as Blender's ``safe_divide``
+(``b != 0 ? a / b : 0``) does, and the node groups are verified against Blender. Recent
+pixman (``get_factor`` in ``pixman-combine-float.c`` with ``FLOAT_IS_ZERO`` of
+``pixman-private.h``: ``-FLT_MIN < x < FLT_MIN``) also applies its zero-denominator
+default when ``|x| < FLT_MIN`` (1.18e-38), i.e. for subnormal float32 alphas; older pixman
+tests ``== 0.0f``. So the disjoint/conjoint operators can differ from current pixman only
+where an alpha is a nonzero subnormal: there we divide (and clamp as pixman does) while
+pixman takes its default factor.
 """
 
 from __future__ import annotations

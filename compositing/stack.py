@@ -51,9 +51,23 @@ def composite_stack_front_to_back(
 ) -> tuple[np.ndarray, int]:
     """Front-to-back ``over`` of ``layers`` (``layers[0]`` backmost) with early termination.
 
+    ``acc ← acc over L[i]`` (Porter-Duff ``dst_over``) from the front layer back, stopping
+    once every pixel has ``α ≥ opaque_threshold``. Equal to back-to-front ``over`` because
+    premultiplied ``over`` is associative (Porter & Duff 1984, §4; Blinn, "Compositing,
+    Part 1", IEEE CG&A 1994); the early termination is that of front-to-back volume
+    rendering (Levoy, "Efficient ray tracing of volume data", ACM TOG 9(3), 1990).
+
+    Args:
+        layers: premultiplied linear RGBA arrays ``(..., 4)`` that broadcast together,
+            float32 or float64, alpha in [0, 1], backmost first.
+        opaque_threshold: alpha in (0, 1] at which a pixel counts as opaque. With 1 the
+            result equals back to front up to rounding; below 1 the error is at most
+            ``1 − opaque_threshold`` times the brightest layer not read.
+
     Returns:
-        ``(image, used)``: the composite and how many layers were read (fewer than
-        ``len(layers)`` when the accumulated alpha saturated first).
+        ``(image, used)``: the composite (premultiplied RGBA of the broadcast shape) and how
+        many layers were read (fewer than ``len(layers)`` when the accumulated alpha
+        saturated first).
     """
     _check_layers(layers)
     if not 0.0 < opaque_threshold <= 1.0:
