@@ -25,7 +25,6 @@ render farms and scripts see the failure.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -59,7 +58,7 @@ LIGHT_PASSES: tuple[tuple[str, str], ...] = (
     ("Diffuse", "diffuse"),
     ("Specular", "specular"),
 )
-"""Blender pass name and the ``RenderResult.passes`` key it is filled from."""
+"""Blender pass name and the ``pipeline.FrameResult.passes`` key it is filled from (3 channels, RGB)."""
 
 LAST_RENDER: dict[str, Any] = {}
 """Status of the most recent render in this process: ``ok``, ``error``, ``seconds``, ``notes``,
@@ -268,11 +267,6 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             )
             sys.stdout.flush()
             os._exit(1)
-
-
-def last_render_json() -> str:
-    """:data:`LAST_RENDER` as JSON text (for logs and reports)."""
-    return json.dumps(LAST_RENDER, default=str)
 
 
 classes = (BlinnPhongRenderEngine,)
