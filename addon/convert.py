@@ -467,9 +467,14 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
         positions, normals, triangles, material_index, slots = geometry_cache[key]
         if len(triangles) == 0:
             continue
-        if abs(np.linalg.det(matrix[:3, :3])) < 1e-12:
+        determinant = np.linalg.det(matrix[:3, :3])
+        if abs(determinant) < 1e-12:
             notes.append(f"{obj.name}: zero scale; skipped")
             continue
+        if determinant < 0:
+            # A mirroring transform (negative scale) turns counter-clockwise faces clockwise on
+            # screen; Blender keeps them front-facing, so the winding is reversed here.
+            triangles = triangles[:, ::-1]
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
             material, extra, material_notes = material_from_blender(blender_material)

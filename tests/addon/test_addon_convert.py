@@ -54,6 +54,12 @@ quad_obj = bpy.data.objects.new("Quad", quad)
 quad_obj.location = (5.0, 0.0, 0.0)
 scene.collection.objects.link(quad_obj)
 
+# A mirrored copy (negative scale) of the triangle.
+mirror = bpy.data.objects.new("Mirror", new_mesh("MirrorTri", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)]))
+mirror.scale = (-1.0, 1.0, 1.0)
+mirror.location = (-5.0, 0.0, 0.0)
+scene.collection.objects.link(mirror)
+
 # Two faces folded 90° along a sharp edge, shaded smooth: corners keep their own face's normal.
 fold = new_mesh("Fold", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, -1), (0, 0, -1)],
                 [(0, 1, 2, 3), (5, 4, 1, 0)])
@@ -117,8 +123,13 @@ properties.unregister()
 
 def mesh_info(m):
     used = np.unique(m.triangles)
+    world = (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
+    winding = np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0])
+    normal_matrix = np.linalg.inv(m.transform[:3, :3]).T
+    world_normals = m.normals[m.triangles[:, 0]] @ normal_matrix.T
     return {"transform": m.transform.tolist(), "positions": m.positions[used].tolist(),
-            "normals": m.normals[used].tolist(), "n_triangles": len(m.triangles)}
+            "normals": m.normals[used].tolist(), "n_triangles": len(m.triangles),
+            "winding_agrees": bool((np.einsum("ij,ij->i", winding, world_normals) > 0).all())}
 
 light = c.scene.lights[0]
 emit({
@@ -191,6 +202,12 @@ def test_custom_split_normals_reach_the_renderer(converted: dict) -> None:
     }
     for position, normal in custom.items():
         np.testing.assert_allclose(by_position[tuple(float(v) for v in position)], normal, atol=2e-3)
+
+
+def test_mirrored_object_keeps_its_faces_front_facing(converted: dict) -> None:
+    # Counter-clockwise winding in world space must agree with the (inverse-transpose) world normal.
+    assert converted["meshes"]["Mirror/(none)"]["winding_agrees"] is True
+    assert converted["meshes"]["Child/(none)"]["winding_agrees"] is True
 
 
 def test_sharp_edge_splits_normals_and_smooth_edge_shares_them(converted: dict) -> None:
