@@ -36,6 +36,7 @@ __all__ = [
     "compositor_tree",
     "configure_alpha_convert",
     "configure_alpha_over",
+    "light_emission",
     "link_alpha_over",
     "math_node_type",
     "new_group_tree",
@@ -213,3 +214,17 @@ def world_uses_nodes(world: bpy.types.World) -> bool:
     if any(issubclass(w.category, DeprecationWarning) for w in caught):
         return True
     return use_nodes
+
+
+def light_emission(light: bpy.types.Light) -> tuple[float, tuple[float, float, float]]:
+    """A light's effective power (W, or W/m² for a sun) and linear RGB colour.
+
+    5.0 adds ``exposure`` (power × 2^exposure) and a blackbody colour (``use_temperature``: the
+    colour is multiplied by ``temperature_color``); 4.2/4.5 have neither, so power and colour are
+    ``energy`` and ``color``.
+    """
+    energy = float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+    colour = [float(c) for c in light.color]
+    if getattr(light, "use_temperature", False):
+        colour = [c * float(t) for c, t in zip(colour, light.temperature_color, strict=True)]
+    return energy, (colour[0], colour[1], colour[2])

@@ -276,52 +276,39 @@ def light_from_object(
     Sun -> DirectionalLight (``S/π``); point -> PointLight (``P/(4π²)``, inverse square softened
     by the radius); spot -> SpotLight (cutoff = half the cone, exponent from Spot Blend);
     area -> SpotLight with cutoff 90° and exponent 1 (the Lambertian ``cos θ`` lobe, ``P/π²``).
+    Power and colour come from ``compat.light_emission`` (exposure and blackbody colour where
+    Blender has them); the light's Diffuse and Specular factors scale the OpenGL diffuse and
+    specular colours.
     """
     m = np.asarray(matrix_world, dtype=np.float64)
     position = m[:3, 3]
     axis = -m[:3, 2]
     settings = getattr(light, "blinn_phong", None)
     scale = float(settings.intensity_scale) if settings is not None else 1.0
-    color = tuple(light.color)
+    power, colour = compat.light_emission(light)
     if light.type == "SUN":
-        return DirectionalLight(
-            direction=axis, color=color, intensity=mapping.sun_light_intensity(light.energy) * scale
-        )
+        intensity = mapping.sun_light_intensity(power)
+    elif light.type in ("POINT", "SPOT"):
+        intensity = mapping.point_light_intensity(power)
+    elif light.type == "AREA":
+        intensity = mapping.area_light_intensity(power)
+    else:
+        raise ValueError(f"light.type: expected SUN, POINT, SPOT or AREA, got {light.type!r}")
+    rgb = np.asarray(colour) * intensity * scale
+    colours = {
+        "diffuse": tuple(float(c) for c in rgb * float(light.diffuse_factor)),
+        "specular": tuple(float(c) for c in rgb * float(light.specular_factor)),
+    }
+    if light.type == "SUN":
+        return DirectionalLight(direction=axis, **colours)
     kc, kl, kq, exponent = _light_falloff(light)
+    falloff = {"constant": kc, "linear": kl, "quadratic": kq}
     if light.type == "POINT":
-        return PointLight(
-            position=position,
-            color=color,
-            intensity=mapping.point_light_intensity(light.energy) * scale,
-            constant=kc,
-            linear=kl,
-            quadratic=kq,
-        )
-    if light.type == "SPOT":
-        return SpotLight(
-            position=position,
-            direction=axis,
-            cutoff=mapping.spot_cutoff_degrees(light.spot_size),
-            exponent=exponent,
-            color=color,
-            intensity=mapping.point_light_intensity(light.energy) * scale,
-            constant=kc,
-            linear=kl,
-            quadratic=kq,
-        )
-    if light.type == "AREA":
-        return SpotLight(
-            position=position,
-            direction=axis,
-            cutoff=90.0,
-            exponent=exponent,
-            color=color,
-            intensity=mapping.area_light_intensity(light.energy) * scale,
-            constant=kc,
-            linear=kl,
-            quadratic=kq,
-        )
-    raise ValueError(f"light.type: expected SUN, POINT, SPOT or AREA, got {light.type!r}")
+        return PointLight(position=position, **falloff, **colours)
+    cutoff = mapping.spot_cutoff_degrees(light.spot_size) if light.type == "SPOT" else 90.0
+    return SpotLight(
+        position=position, direction=axis, cutoff=cutoff, exponent=exponent, **falloff, **colours
+    )
 
 
 def world_ambient(world: bpy.types.World | None) -> tuple[float, float, float]:

@@ -108,6 +108,11 @@ spot.data.energy = 500.0
 spot.data.spot_size = math.radians(60.0)
 spot.data.spot_blend = 0.3
 spot.data.shadow_soft_size = 0.2
+spot.data.diffuse_factor = 0.5
+spot.data.specular_factor = 2.0
+exposure = 1.0 if hasattr(spot.data, "exposure") else 0.0  # Blender 5.0: power × 2^exposure
+if exposure:
+    spot.data.exposure = exposure
 spot.location = (0.0, 0.0, 4.0)
 scene.collection.objects.link(spot)
 
@@ -142,6 +147,7 @@ emit({
     "border_region": list(b.region), "border_projection": b.scene.camera.projection.tolist(),
     "light": {"type": type(light).__name__, "position": light.position, "direction": light.direction,
               "cutoff": light.cutoff, "exponent": light.exponent, "diffuse": light.diffuse,
+              "specular": light.specular, "exposure": exposure,
               "k": [light.constant, light.linear, light.quadratic]},
 })
 """
@@ -280,7 +286,9 @@ def test_spot_light_conversion(converted: dict) -> None:
     np.testing.assert_allclose(light["position"], (0, 0, 4), atol=1e-6)
     np.testing.assert_allclose(light["direction"], (0, 0, -1), atol=1e-6)
     assert light["cutoff"] == pytest.approx(30.0)
-    np.testing.assert_allclose(light["diffuse"], [500.0 / (4 * math.pi**2)] * 3, rtol=1e-6)
+    intensity = 500.0 * 2 ** light["exposure"] / (4 * math.pi**2)
+    np.testing.assert_allclose(light["diffuse"], [0.5 * intensity] * 3, rtol=1e-6)  # Diffuse factor 0.5
+    np.testing.assert_allclose(light["specular"], [2.0 * intensity] * 3, rtol=1e-6)  # Specular factor 2
     np.testing.assert_allclose(light["k"], [0.2**2, 0.0, 1.0], rtol=1e-6)
     # Same light in the cone as Blender's smoothstep mask (mean over cos θ, by quadrature).
     c = math.cos(math.radians(30.0))
