@@ -24,9 +24,11 @@ Alpha is the material opacity (the alpha of ``d_cm``). Colours are linear and
 not clamped here; the GL-compatibility clamp is the separate, explicit
 :func:`gl_clamp`.
 
-:func:`shade` has two engines: ``"numpy"`` (the reference, vectorised over points)
-and ``"numba"``, a compiled per-point loop over the same equation, written out
-below the reference and tested to agree with it to 1e-12.
+:func:`shade` has two engines: ``"numpy"`` (vectorised over points) and ``"numba"``
+(a compiled per-point loop). Both evaluate the per-light terms with the same two
+functions, :func:`_view_vector`, :func:`_light_direction` and :func:`_reflection`, written
+once on numbers that may be arrays (numpy) or scalars (compiled by numba); the engines
+agree to 1e-12.
 """
 
 from __future__ import annotations
@@ -265,38 +267,26 @@ def shade(
     alpha = np.full(count, material.opacity)
     dpl = np.zeros((count, n_lights, 3)) if per_light else None
     spl = np.zeros((count, n_lights, 3)) if per_light else None
-    if model.local_viewer:
-        v = normalize(-p)
-        v[~v.any(axis=1)] = (0.0, 0.0, 1.0)  # a point at the eye: any direction; use the axis
-    else:
-        v = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (count, 3))
+    px, py, pz = p[:, 0], p[:, 1], p[:, 2]
+    vx, vy, vz = _view_vector(px, py, pz, model.local_viewer)
+    blinn = model.specular == "blinn"
     for i in range(n_lights):
-        pos = lights.position[i]
-        if pos[3] == 0.0:
-            l = np.broadcast_to(pos[:3], (count, 3))
-            att = np.ones(count)
-        else:
-            to_light = pos[:3] / pos[3] - p
-            dist = np.sqrt(np.einsum("ij,ij->i", to_light, to_light))
-            l = normalize(to_light)
-            kc, kl, kq = lights.attenuation[i]
-            att = 1.0 / (kc + kl * dist + kq * dist * dist)
-        if np.isfinite(lights.cos_cutoff[i]):
-            cos_angle = -np.einsum("ij,j->i", l, lights.spot_direction[i])
-            inside = cos_angle >= lights.cos_cutoff[i]
-            spot = np.where(inside, np.maximum(cos_angle, 0.0) ** lights.spot_exponent[i], 0.0)
-            att = att * spot
-        n_dot_l = np.einsum("ij,ij->i", n, l)
-        lambert = np.maximum(n_dot_l, 0.0)
-        if model.specular == "blinn":
-            base = np.einsum("ij,ij->i", n, normalize(l + v))
-        else:
-            r = 2.0 * n_dot_l[:, None] * n - l
-            base = np.einsum("ij,ij->i", r, v)
-        highlight = np.where(n_dot_l > 0, np.maximum(base, 0.0) ** material.shininess, 0.0)
-        ambient += att[:, None] * (a_cm * lights.ambient[i])
-        d_i = (att * lambert)[:, None] * (d_cm * lights.diffuse[i])
-        s_i = (att * highlight)[:, None] * (s_cm * lights.specular[i])
+        lx, ly, lz, att = _light_direction(
+            px,
+            py,
+            pz,
+            lights.position[i],
+            lights.spot_direction[i],
+            lights.cos_cutoff[i],
+            lights.spot_exponent[i],
+            lights.attenuation[i],
+        )
+        lambert, highlight = _reflection(
+            n[:, 0], n[:, 1], n[:, 2], lx, ly, lz, vx, vy, vz, att, material.shininess, blinn
+        )
+        ambient += np.broadcast_to(att, (count,))[:, None] * (a_cm * lights.ambient[i])
+        d_i = lambert[:, None] * (d_cm * lights.diffuse[i])
+        s_i = highlight[:, None] * (s_cm * lights.specular[i])
         if per_light:
             dpl[:, i] = d_i
             spl[:, i] = s_i
@@ -369,6 +359,104 @@ def shade_many(
     return ShadingTerms(out["ambient"], out["diffuse"], out["specular"], alpha)
 
 
+#: A float64 array (numpy engine) or a float scalar (inside the numba kernel).
+_Num = np.ndarray | float
+
+
+def _view_vector(px: _Num, py: _Num, pz: _Num, local_viewer: bool) -> tuple[_Num, _Num, _Num]:
+    """Unit vector ``v`` from eye-space point(s) to the eye, as three components.
+
+    ``-p/|p|`` for a local viewer, ``(0, 0, 1)`` at the eye itself (any direction would do);
+    ``(0, 0, 1)`` for a viewer at infinity (OpenGL 2.1 §2.14.1). The plain length
+    ``sqrt(x² + y² + z²)``: eye-space distances of a scene are far from its float64
+    under/overflow (below 1e-154 or above 1e154).
+
+    Written once for both engines: on (N,) float64 arrays for the numpy engine, and on
+    float scalars inside the numba kernel (only arithmetic, comparisons and ``np.sqrt``,
+    ``np.abs``, ``np.maximum``; a comparison's bool acts as 0 or 1).
+    """
+    if local_viewer:
+        length = np.sqrt(px * px + py * py + pz * pz)
+        at_eye = length == 0.0
+        length = length + at_eye
+        return -px / length, -py / length, -pz / length + at_eye
+    zero = 0.0 * px
+    return zero, zero, zero + 1.0
+
+
+def _light_direction(
+    px: _Num,
+    py: _Num,
+    pz: _Num,
+    position: np.ndarray,
+    spot_direction: np.ndarray,
+    cos_cutoff: float,
+    spot_exponent: float,
+    attenuation: np.ndarray,
+) -> tuple[_Num, _Num, _Num, _Num]:
+    """Unit vector ``l`` from point(s) ``p`` towards one light, and its ``att·spot`` (OpenGL 2.1 §2.14.1).
+
+    ``l = position.xyz`` for a directional light (``position.w = 0``, xyz already the unit
+    direction towards it), else ``normalize(position.xyz/w − p)`` (zero at the light itself;
+    plain length, as in :func:`_view_vector`); ``att = 1/(k_c + k_l·d + k_q·d²)`` with ``d``
+    the distance for positional lights, 1 for directional ones; ``spot = max(−l·s, 0)^exponent``
+    inside the cone ``−l·s ≥ cos(cutoff)``, 0 outside, 1 for non-spots (``cos_cutoff = −inf``).
+
+    ``position`` (4,), ``spot_direction`` (3,), ``cos_cutoff``, ``spot_exponent`` and
+    ``attenuation`` (3,) are one light's rows of :class:`EyeLights`. Written once for both
+    engines (see :func:`_view_vector`): ``p`` is (N,) arrays or float scalars.
+    """
+    w = position[3]
+    if w == 0.0:
+        lx, ly, lz = position[0] + 0.0 * px, position[1] + 0.0 * py, position[2] + 0.0 * pz
+        att = 1.0 + 0.0 * px
+    else:
+        tx, ty, tz = position[0] / w - px, position[1] / w - py, position[2] / w - pz
+        dist = np.sqrt(tx * tx + ty * ty + tz * tz)
+        length = dist + (dist == 0.0)
+        lx, ly, lz = tx / length, ty / length, tz / length
+        att = 1.0 / (attenuation[0] + attenuation[1] * dist + attenuation[2] * dist * dist)
+    if np.isfinite(cos_cutoff):
+        c = -(lx * spot_direction[0] + ly * spot_direction[1] + lz * spot_direction[2])
+        att = att * ((c >= cos_cutoff) * np.maximum(c, 0.0) ** spot_exponent)
+    return lx, ly, lz, att
+
+
+def _reflection(
+    nx: _Num,
+    ny: _Num,
+    nz: _Num,
+    lx: _Num,
+    ly: _Num,
+    lz: _Num,
+    vx: _Num,
+    vy: _Num,
+    vz: _Num,
+    att: _Num,
+    shininess: float,
+    blinn: bool,
+) -> tuple[_Num, _Num]:
+    """One light's diffuse and specular factors ``(att·(n ⊙ l), att·f·spec^s_rm)`` (OpenGL 2.1 §2.14.1).
+
+    They multiply the colours ``d_cm·d_cli`` and ``s_cm·s_cli``. ``f = 1`` if ``n·l > 0``
+    else 0; ``spec = n ⊙ h`` with ``h = normalize(l + v)`` (Blinn 1977, ``blinn`` true) or
+    ``r ⊙ v`` with ``r = 2(n·l)n − l`` (Phong 1975). Both factors are 0 where ``att = 0``
+    or ``n·l ≤ 0`` (the compiled kernel skips those lights). Written once for both engines
+    (see :func:`_view_vector`).
+    """
+    n_dot_l = nx * lx + ny * ly + nz * lz
+    if blinn:
+        hx, hy, hz = lx + vx, ly + vy, lz + vz
+        h_length = np.sqrt(hx * hx + hy * hy + hz * hz)
+        base = (nx * hx + ny * hy + nz * hz) / (h_length + (h_length == 0.0))
+    else:
+        base = (
+            (2.0 * n_dot_l * nx - lx) * vx + (2.0 * n_dot_l * ny - ly) * vy + (2.0 * n_dot_l * nz - lz) * vz
+        )
+    highlight = (n_dot_l > 0.0) * np.maximum(base, 0.0) ** shininess
+    return att * np.maximum(n_dot_l, 0.0), att * highlight
+
+
 def _shade_compiled(
     p: np.ndarray,
     n: np.ndarray,
@@ -417,10 +505,13 @@ def _shade_compiled(
 
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
-    """The lighting equation as a compiled per-point loop (the twin of :func:`shade`'s numpy body)."""
-    import math
-
+    """The lighting equation as a compiled per-point loop over the shared per-light functions."""
     import numba
+    from numba.extending import overload
+
+    # The same Python functions as the numpy engine's, compiled for scalars and inlined.
+    for shared in (_view_vector, _light_direction, _reflection):
+        overload(shared, strict=False, inline="always")(lambda *args, f=shared: f)
 
     @numba.njit(parallel=True, cache=True)
     def kernel(
@@ -459,56 +550,21 @@ def _kernel() -> object:  # a numba dispatcher
             d_cm = d_cms[mid]
             s_cm = s_cms[mid]
             shininess = shininesses[mid]
-            if local_viewer:
-                vl = math.sqrt(px * px + py * py + pz * pz)
-                if vl > 0:
-                    vx, vy, vz = -px / vl, -py / vl, -pz / vl
-                else:
-                    vx, vy, vz = 0.0, 0.0, 1.0
-            else:
-                vx, vy, vz = 0.0, 0.0, 1.0
+            vx, vy, vz = _view_vector(px, py, pz, local_viewer)
             ar, ag, ab = base[0], base[1], base[2]
             dr = dg = db = 0.0
             sr = sg = sb = 0.0
             for i in range(n_lights):
-                if pos[i, 3] == 0.0:
-                    lx, ly, lz = pos[i, 0], pos[i, 1], pos[i, 2]
-                    att = 1.0
-                else:
-                    tx = pos[i, 0] / pos[i, 3] - px
-                    ty = pos[i, 1] / pos[i, 3] - py
-                    tz = pos[i, 2] / pos[i, 3] - pz
-                    dist = math.sqrt(tx * tx + ty * ty + tz * tz)
-                    if dist > 0:
-                        lx, ly, lz = tx / dist, ty / dist, tz / dist
-                    else:
-                        lx, ly, lz = 0.0, 0.0, 0.0
-                    att = 1.0 / (atten[i, 0] + atten[i, 1] * dist + atten[i, 2] * dist * dist)
-                if math.isfinite(cos_cut[i]):
-                    c = -(lx * spot_dir[i, 0] + ly * spot_dir[i, 1] + lz * spot_dir[i, 2])
-                    if c >= cos_cut[i]:
-                        att *= max(c, 0.0) ** spot_exp[i]
-                    else:
-                        att = 0.0
+                lx, ly, lz, att = _light_direction(
+                    px, py, pz, pos[i], spot_dir[i], cos_cut[i], spot_exp[i], atten[i]
+                )
                 ar += att * (a_cm[0] * l_amb[i, 0])
                 ag += att * (a_cm[1] * l_amb[i, 1])
                 ab += att * (a_cm[2] * l_amb[i, 2])
-                ndl = nx * lx + ny * ly + nz * lz
-                if ndl <= 0 or att == 0.0:
-                    continue
-                if blinn:
-                    hx, hy, hz = lx + vx, ly + vy, lz + vz
-                    hl = math.sqrt(hx * hx + hy * hy + hz * hz)
-                    if hl > 0:
-                        hx, hy, hz = hx / hl, hy / hl, hz / hl
-                    base_s = nx * hx + ny * hy + nz * hz
-                else:
-                    rx, ry, rz = 2.0 * ndl * nx - lx, 2.0 * ndl * ny - ly, 2.0 * ndl * nz - lz
-                    base_s = rx * vx + ry * vy + rz * vz
-                highlight = max(base_s, 0.0) ** shininess
+                if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
+                    continue  # _reflection gives exactly 0 here
+                fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
                 w = vis[q, i] if has_vis else 1.0
-                fd = att * ndl
-                fs = att * highlight
                 dr += fd * (d_cm[0] * l_dif[i, 0]) * w
                 dg += fd * (d_cm[1] * l_dif[i, 1]) * w
                 db += fd * (d_cm[2] * l_dif[i, 2]) * w

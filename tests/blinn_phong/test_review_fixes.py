@@ -11,7 +11,7 @@ from blinn_phong.lighting import lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import normalize
 from blinn_phong.oit import resolve_weighted_blended, transparency_pass, wboit_weights
 from blinn_phong.raster import Fragments
-from blinn_phong.scene import DirectionalLight, Material
+from blinn_phong.scene import DirectionalLight, LightModel, Material, PointLight, SpotLight
 from blinn_phong.transparency import (
     TRANSPARENCY_MODELS,
     blend_transparent_surface,
@@ -252,3 +252,51 @@ def test_wboit_one_layer_is_exact_above_the_floor_and_scaled_below_it():
     above = accum_a >= 1e-5
     assert above.any() and (~above).any()
     np.testing.assert_allclose(out[above, 0], colour * alpha[above], rtol=1e-12)
+
+
+# ------------------------------------------------------------ one lighting equation, two engines
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("specular", ["blinn", "phong"])
+def test_guarded_cases_of_the_shared_light_terms(engine, specular):
+    # OpenGL 2.1 §2.14.1 by hand, identity view (eye space = world), local viewer, d_cm = s_cm = 1
+    material = Material(ambient=(0, 0, 0), diffuse=(1, 1, 1), specular=(1, 1, 1), shininess=1)
+    model = LightModel(local_viewer=True, specular=specular)
+    up = (0.0, 0.0, 1.0)
+    cases = [
+        # point at the eye (v defaults to +z), light straight ahead: n·l = 1, h = r = (0, 0, 1)
+        ([DirectionalLight(direction=(0, 0, -1))], (0, 0, 0), up, 1.0, 1.0),
+        # point at a point light: l = 0, so no diffuse or specular (and no NaN)
+        ([PointLight(position=(0, 0, -2))], (0, 0, -2), up, 0.0, 0.0),
+        # outside a 10° spot cone (45° off its axis): nothing
+        (
+            [SpotLight(position=(0, 0, 0), direction=(0, 0, -1), cutoff=10, exponent=2)],
+            (1, 0, -1),
+            up,
+            0.0,
+            0.0,
+        ),
+        # on the spot axis at d = 3 with k_l = 0.5: att = 1/(1 + 1.5) = 0.4, spot = 1^2
+        (
+            [SpotLight(position=(0, 0, 0), direction=(0, 0, -1), cutoff=10, exponent=2, linear=0.5)],
+            (0, 0, -3),
+            up,
+            0.4,
+            0.4,
+        ),
+        # zero normal: ambient and emission only
+        ([DirectionalLight(direction=(0, 0, -1))], (0, 0, -1), (0, 0, 0), 0.0, 0.0),
+    ]
+    for lights, point, normal, diffuse, highlight in cases:
+        terms = shade(
+            np.array([point], float),
+            np.array([normal], float),
+            material,
+            lights_in_eye_space(lights, np.eye(4)),
+            global_ambient=(0, 0, 0),
+            model=model,
+            engine=engine,
+        )
+        np.testing.assert_allclose(terms.diffuse[0], diffuse, atol=1e-15)
+        np.testing.assert_allclose(terms.specular[0], highlight, atol=1e-15)
