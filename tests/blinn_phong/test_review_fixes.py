@@ -71,6 +71,16 @@ def test_fragment_over_an_opaque_background_is_the_model(model):
     )
 
 
+def test_transparency_inputs_are_checked_in_the_shared_style():
+    bad = np.array([[np.nan, 0.0, 0.0], [0.0, np.inf, 0.0]])
+    with pytest.raises(ValueError, match=r"^surface_rgb: expected finite values; got 1 NaN and 1 Inf of 6"):
+        blend_transparent_surface(bad, OPAQUE_BEHIND, "emission")
+    with pytest.raises(ValueError, match=r"^opacity: expected values in \[0, 1\]; got 1 of 2 outside"):
+        blend_transparent_surface(LIT, OPAQUE_BEHIND, "partial_occlusion", opacity=np.array([0.5, 1.5]))
+    with pytest.raises(TypeError, match=r"^behind: expected real numbers, got dtype <U1"):
+        blend_transparent_surface(LIT, np.array(["a", "b", "c", "d"]), "emission")
+
+
 def test_fragments_of_emission_and_partial_occlusion_match_over_any_background():
     for model in ("emission", "partial_occlusion"):
         frag = transparent_fragment(LIT, ALPHA, model)
