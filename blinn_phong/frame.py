@@ -42,7 +42,7 @@ from blinn_phong.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.render import FragmentShading, PreparedScene, resolve_nearest_buffers, resolve_samples
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS, light_visibility
-from blinn_phong.transparency import kay_greenberg_transparency, washed_out_opacity
+from blinn_phong.transparency import kay_greenberg_transparency, transparent_fragment, washed_out_opacity
 
 __all__ = [
     "SHADOW_CHOICES",
@@ -66,7 +66,6 @@ SHADOW_CHOICES: tuple[str, ...] = (*SHADOW_METHODS, "soft")
 WBOIT_WEIGHTS: tuple[str, ...] = ("eq10", "constant")
 _AUTO = (None, "auto")
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. ITU-R BT.709 luminance of linear RGB
-_MODEL_ID = {"partial_occlusion": 0, "emission": 1, "absorption": 2}
 
 
 @dataclass(frozen=True)
@@ -452,11 +451,13 @@ def _fragment_rgba(
     """Premultiplied fragment RGBA by each material's transparency model, and the opacity used.
 
     Opacity is the material's, or Kay–Greenberg's ``1 − t(N_z)``; wash-out raises it to
-    ``min(1, α + luminance(specular))``. Models (``Material.transparency_model``):
-    partial occlusion ``(α·c, α)``, emission ``(α·c, 0)``, absorption ``(c, α)``.
+    ``min(1, α + luminance(specular))``. The fragment is
+    :func:`blinn_phong.transparency.transparent_fragment` of ``Material.transparency_model``
+    (partial occlusion ``(α·c, α)``, emission ``(α·c, 0)``, absorption ``(c, α)``); opaque
+    materials give ``(c, 1)``.
     """
     alpha = shaded.alpha.copy()
-    model = np.zeros(len(alpha), dtype=np.int64)
+    rgba = np.empty((len(alpha), 4))
     for s in np.unique(side):
         material = materials[s]
         here = side == s
@@ -468,12 +469,9 @@ def _fragment_rgba(
         if material.specular_washout:
             highlight = np.maximum(shaded.specular[here] @ _LUMINANCE, 0.0)
             alpha[here] = washed_out_opacity(1.0 - alpha[here], highlight)
-        if material.transparent:
-            model[here] = _MODEL_ID[material.transparency_model]
-    a = alpha[:, None]
-    rgb = np.where((model == 2)[:, None], shaded.rgb, shaded.rgb * a)
-    out_alpha = np.where(model == 1, 0.0, alpha)
-    return np.c_[rgb, out_alpha], alpha
+        model = material.transparency_model if material.transparent else "partial_occlusion"
+        rgba[here] = transparent_fragment(shaded.rgb[here], alpha[here], model)
+    return rgba, alpha
 
 
 def render_effects(

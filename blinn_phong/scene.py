@@ -68,7 +68,7 @@ class Material:
         transparency_model: how a transparent surface (``opacity < 1`` or
             ``kay_greenberg`` set) of lit colour ``c`` and opacity ``α`` combines with what
             lies behind it; each is the fragment ``src over`` the background
-            (:mod:`blinn_phong.transparency`):
+            (:func:`blinn_phong.transparency.transparent_fragment`):
 
             * ``"partial_occlusion"`` (default) — covers the fraction α:
               premultiplied ``(α·c, α)``, i.e. ``α·c + (1 − α)·behind`` (Porter & Duff 1984);
