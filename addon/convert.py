@@ -436,6 +436,8 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
             continue
         if obj.type not in ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"):
             continue
+        if not instance.show_self:  # an instancer whose "Show Instancer" is off for this depsgraph
+            continue
         key = obj.name
         if key not in geometry_cache:
             try:

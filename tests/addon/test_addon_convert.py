@@ -391,3 +391,60 @@ def test_materials_from_principled_and_custom_settings(tmp_path: Path) -> None:
     np.testing.assert_allclose(g["kay"], (0.2, 0.7, 3.0), rtol=1e-6)
     # No material: the default grey derived like a Principled BSDF of base colour 0.8.
     np.testing.assert_allclose(got["none"]["diffuse"], (0.8, 0.8, 0.8), rtol=1e-6)
+
+
+INSTANCES_IN_RENDER = """
+import sys
+import bpy
+import numpy as np
+from addon import convert, engine, properties
+
+properties.register()
+engine.register()
+bpy.ops.wm.read_factory_settings(use_empty=True)
+scene = bpy.context.scene
+
+def new_mesh(name, verts, faces):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    return me
+
+# A small triangle "Dot" instanced at the vertices of "Dots" (moved by 7 in z).
+dots = bpy.data.objects.new("Dots", new_mesh("DotsTri", [(0, 0, 0), (2, 0, 0), (0, 2, 0)], [(0, 1, 2)]))
+dots.instance_type = "VERTS"
+dots.location = (0.0, 0.0, 7.0)
+dots.show_instancer_for_render = sys.argv[1] == "show"
+dot = bpy.data.objects.new("Dot", new_mesh("DotTri", [(0, 0, 0), (0.1, 0, 0), (0, 0.1, 0)], [(0, 1, 2)]))
+dot.parent = dots
+cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+cam.location = (1.0, 1.0, 20.0)
+for ob in (dots, dot, cam):
+    scene.collection.objects.link(ob)
+scene.camera = cam
+scene.render.engine = "BLINN_PHONG"
+scene.render.resolution_x, scene.render.resolution_y = 16, 16
+seen = []
+convert_scene = convert.scene_from_depsgraph
+def recording(depsgraph):  # what the engine converts from the render depsgraph
+    converted = convert_scene(depsgraph)
+    seen.extend((n, np.round(m.transform[:3, 3], 6).tolist()) for n, m in zip(converted.mesh_names,
+                                                                               converted.scene.meshes))
+    return converted
+convert.scene_from_depsgraph = recording
+bpy.ops.render.render()
+ok = engine.LAST_RENDER["ok"]
+engine.unregister()
+properties.unregister()
+emit({"ok": ok, "seen": sorted(seen)})
+"""
+
+
+@pytest.mark.parametrize("instancer", ["show", "hide"])
+def test_vertex_instances_in_the_render_depsgraph(tmp_path: Path, instancer: str) -> None:
+    got = run_bpy(INSTANCES_IN_RENDER, tmp_path, args=(instancer,))
+    assert got["ok"] is True
+    dots = [position for name, position in got["seen"] if name == "Dot/(none)"]
+    # One Dot per vertex of Dots, (0,0,0), (2,0,0), (0,2,0), moved with Dots to z = 7; no original.
+    assert dots == [[0.0, 0.0, 7.0], [0.0, 2.0, 7.0], [2.0, 0.0, 7.0]]
+    assert ("Dots/(none)" in [name for name, _ in got["seen"]]) is (instancer == "show")
