@@ -357,6 +357,19 @@ def _default_blend_and_frame() -> tuple[str | None, int | None]:
     return (bpy.data.filepath or None), bpy.context.scene.frame_current
 
 
+def _inside_blender_binary() -> bool:
+    """True under ``blender -b ... -P``: Blender's own executable, not the ``bpy`` module.
+
+    Worker processes start ``sys.executable``, which in a Blender binary is its bundled Python
+    without ``bpy``. ``bpy.app.binary_path`` is empty in the ``bpy`` module.
+    """
+    if "bpy" not in sys.modules:
+        return False
+    import bpy
+
+    return bool(bpy.app.binary_path)
+
+
 def make_tasks(args: argparse.Namespace, blends: Iterable[str], default_frame: int | None) -> list[Task]:
     """One task per (file, frame)."""
     frames = parse_frames(args.frames) if args.frames else [default_frame if default_frame is not None else 1]
@@ -383,6 +396,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(list(argv))
     if args.workers < 1 or args.dask_local < 0:
         parser.error("--workers must be >= 1 and --dask-local >= 0")
+    if (args.workers > 1 or args.scheduler or args.dask_local) and _inside_blender_binary():
+        parser.error(
+            "--workers, --scheduler and --dask-local start Python processes with the bpy module; "
+            "inside Blender (blender -P) tasks run in this process: run python -m addon.batch instead"
+        )
     open_file, current_frame = _default_blend_and_frame()
     blends = args.blend or ([open_file] if open_file else [])
     if not blends:
