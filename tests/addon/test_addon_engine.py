@@ -243,15 +243,16 @@ emit(True)
     np.testing.assert_allclose(_read_exr(out), expected, atol=2e-5)
 
 
-def test_render_border_writes_the_cropped_region(tmp_path: Path) -> None:
+@pytest.mark.parametrize("crop", [True, False])
+def test_render_border_renders_only_the_border(tmp_path: Path, crop: bool) -> None:
     from blinn_phong import render
 
     out = tmp_path / "border.exr"
     got = run_bpy(
         CUBE_SCENE
-        + """
+        + f"""
 scene.render.use_border = True
-scene.render.use_crop_to_border = True
+scene.render.use_crop_to_border = {crop}
 scene.render.border_min_x, scene.render.border_max_x = 0.25, 0.75
 scene.render.border_min_y, scene.render.border_max_y = 0.0, 0.5
 status = bpy.ops.render.render(write_still=True)
@@ -263,13 +264,19 @@ emit(sorted(status))
         args=(str(out),),
     )
     assert got == ["FINISHED"]
-    combined = _read_exr(out)
+    image = _read_exr(out)
     # 96×64 frame, x 0.25–0.75 -> columns 24..72; y 0–0.5 from the bottom -> rows 32..64 from the top.
-    assert combined.shape == (32, 48, 4)
-    scene, _ = _hand_scene()
-    reference = render(scene, 96, 64, shading="phong", samples=4).rgba[32:64, 24:72]
-    assert reference[..., 3].max() == 1.0
-    np.testing.assert_allclose(combined, reference, atol=2e-5)
+    full = render(_hand_scene()[0], 96, 64, shading="phong", samples=4).rgba
+    assert full[32:64, 24:72, 3].max() == 1.0 and full[:32, 24:72, 3].max() == 1.0  # cube on both sides
+    if crop:
+        assert image.shape == (32, 48, 4)
+        np.testing.assert_allclose(image, full[32:64, 24:72], atol=2e-5)
+    else:  # the full frame, empty outside the border
+        assert image.shape == (64, 96, 4)
+        np.testing.assert_allclose(image[32:64, 24:72], full[32:64, 24:72], atol=2e-5)
+        outside = np.ones((64, 96), bool)
+        outside[32:64, 24:72] = False
+        assert (image[outside] == 0).all()
 
 
 def test_failure_exits_non_zero_in_background_and_is_never_black(tmp_path: Path) -> None:
