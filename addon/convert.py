@@ -160,9 +160,23 @@ _PRINCIPLED_SOCKETS = {
 }
 
 
+def _surface_principled(tree: bpy.types.NodeTree, name: str, notes: list[str]) -> bpy.types.Node | None:
+    """The Principled BSDF that feeds the active Material Output's Surface, else the first one."""
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
+    output = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+    surface = output.inputs.get("Surface") if output is not None else None
+    if surface is not None and surface.is_linked:
+        source = surface.links[0].from_node
+        if source.type == "BSDF_PRINCIPLED":
+            return source
+        notes.append(f"{name}: the surface is a {source.bl_label} node; the first Principled BSDF is used")
+    return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
 def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, object], list[str]]:
-    """Unlinked input values of the material's Principled BSDF, as keyword arguments of
-    ``mapping.blinn_phong_from_principled``; plus notes on what was ignored.
+    """Unlinked input values of the material's Principled BSDF (the one feeding the active Material
+    Output), as keyword arguments of ``mapping.blinn_phong_from_principled``; plus notes on what
+    was ignored.
 
     Without a node tree or a Principled BSDF node, the viewport display values
     (``diffuse_color``, ``metallic``, ``roughness``) are used.
@@ -171,9 +185,7 @@ def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, ob
     if material is None:
         return {"base_color": (0.8, 0.8, 0.8)}, notes
     tree = material.node_tree
-    node = None
-    if tree is not None:
-        node = next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    node = None if tree is None else _surface_principled(tree, material.name, notes)
     if node is None:
         return {
             "base_color": tuple(material.diffuse_color[:3]),

@@ -343,7 +343,12 @@ bpy.ops.wm.read_factory_settings(use_empty=True)
 properties.register()
 principled = bpy.data.materials.new("Principled")
 principled.use_nodes = True
-bsdf = principled.node_tree.nodes["Principled BSDF"]
+# The default Principled BSDF (first in the tree) stays as a green decoy; a second one, linked to
+# the Material Output's Surface, is the one to read.
+tree = principled.node_tree
+tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.0, 1.0, 0.0, 1.0)
+bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+tree.links.new(bsdf.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
 bsdf.inputs["Base Color"].default_value = (0.5, 0.25, 0.125, 1.0)
 bsdf.inputs["Metallic"].default_value = 0.5
 bsdf.inputs["Roughness"].default_value = 0.6
