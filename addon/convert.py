@@ -450,6 +450,8 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
             continue
         if not instance.show_self:  # an instancer whose "Show Instancer" is off for this depsgraph
             continue
+        if not getattr(obj, "visible_camera", True):  # Object > Visibility > Ray Visibility > Camera
+            continue
         key = obj.name
         if key not in geometry_cache:
             try:

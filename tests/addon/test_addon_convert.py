@@ -54,6 +54,11 @@ quad_obj = bpy.data.objects.new("Quad", quad)
 quad_obj.location = (5.0, 0.0, 0.0)
 scene.collection.objects.link(quad_obj)
 
+# An object hidden from the camera (Visibility > Camera off) is not rendered.
+hidden = bpy.data.objects.new("Hidden", new_mesh("HiddenTri", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)]))
+hidden.visible_camera = False
+scene.collection.objects.link(hidden)
+
 # A mirrored copy (negative scale) of the triangle.
 mirror = bpy.data.objects.new("Mirror", new_mesh("MirrorTri", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)]))
 mirror.scale = (-1.0, 1.0, 1.0)
@@ -208,6 +213,11 @@ def test_custom_split_normals_reach_the_renderer(converted: dict) -> None:
     }
     for position, normal in custom.items():
         np.testing.assert_allclose(by_position[tuple(float(v) for v in position)], normal, atol=2e-3)
+
+
+def test_object_hidden_from_the_camera_is_not_converted(converted: dict) -> None:
+    assert "Hidden/(none)" not in converted["names"]
+    assert "Mirror/(none)" in converted["names"]
 
 
 def test_mirrored_object_keeps_its_faces_front_facing(converted: dict) -> None:
