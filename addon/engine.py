@@ -136,6 +136,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
     bl_use_preview = False
     bl_use_postprocess = True
     bl_use_shading_nodes_custom = False
+    bl_use_eevee_viewport = True  # Material Preview in the 3D viewport uses EEVEE
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         # Blender 4.4+ passes arguments to RenderEngine.__init__; 4.2 passes none. Forward both.
