@@ -1,6 +1,7 @@
 """The calibrated error models hold on scenes that were not used to fit them.
 
-``blinn_phong/calibration.json`` is fitted by :mod:`benchmarks.error_models` to the
+``blinn_phong/calibration.json`` (read by :mod:`blinn_phong.calibration`) is fitted by
+:mod:`benchmarks.error_models` to the
 measurements of ``python -m benchmarks`` (layered quads with seed 7, layer counts 2–16 and
 opacities 0.2/0.5/0.8; one shadow scene; a sphere with shininess 40 and segments 8–128).
 Here other scenes — other seeds, layer counts, opacities, casters, light directions,
@@ -19,9 +20,10 @@ import blinn_phong as bp
 from benchmarks import error_models as em
 from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from benchmarks.tradeoffs import layered_scene, transparency_methods, transparent_fragments, visible_points
+from blinn_phong import calibration as cal
 from blinn_phong.primitives import grid_plane, uv_sphere
 
-MODELS = em.load()
+MODELS = cal.shipped_models()
 
 
 @pytest.mark.parametrize(("layers", "opacity", "seed"), [(6, 0.6, 21), (12, 0.35, 5), (3, 0.9, 2)])
@@ -30,14 +32,14 @@ def test_depth_peeling_model_bounds_held_out_scenes(layers: int, opacity: float,
     background = np.tile([0.5, 0.5, 0.5, 1.0], (fr["n_pixels"], 1))
     methods = transparency_methods(fr, background, peel=tuple(range(1, layers)))
     reference = methods["a_buffer"]()
-    brightest = em.brightest_radiance(fr["rgba"])
+    brightest = cal.brightest_radiance(fr["rgba"])
     for k in range(1, layers):
         image = methods[f"depth_peeling_{k}"]()
         assert not has_nonfinite(image)
         measured = error_metrics(image, reference)["max_steps"]
-        assert measured <= em.predict_depth_peeling(MODELS, k, opacity, brightest) + 1e-9
+        assert measured <= cal.predict_depth_peeling(MODELS, k, opacity, brightest) + 1e-9
     for tolerance in (2.0, 8.0, 32.0):
-        choice = em.choose_depth_peeling(MODELS, tolerance, opacity, brightest, max_layers=layers)
+        choice = cal.choose_depth_peeling(MODELS, tolerance, opacity, brightest, max_layers=layers)
         if choice["method"] == "depth_peeling":
             image = methods[f"depth_peeling_{choice['layers']}"]()
         else:
@@ -75,7 +77,7 @@ def test_shadow_map_model_bounds_a_held_out_scene() -> None:
     points, normals = points[facing], normals[facing]
     exact = directional_light_visibility(RayScene(tris), points, normals, to_light)
     shadowed = float(1 - exact.mean())
-    diameter = em.scene_extent(tris)
+    diameter = cal.scene_extent(tris)
     m = MODELS["shadow_map"]
     for res in (128, 256, 512, 1024):
         maps = light_shadow_maps(
@@ -84,9 +86,9 @@ def test_shadow_map_model_bounds_a_held_out_scene() -> None:
         vis = shadow_map_visibility(light, maps, points, normals, kernel=m["kernel"])
         assert not has_nonfinite(vis)
         measured = error_metrics(vis, exact)["mean_steps"]
-        assert measured <= em.predict_shadow_map(MODELS, res, diameter, r_min, shadowed)
+        assert measured <= cal.predict_shadow_map(MODELS, res, diameter, r_min, shadowed)
     for tolerance in (0.5, 2.0):
-        choice = em.choose_shadow_map(MODELS, tolerance, diameter, r_min, shadowed)
+        choice = cal.choose_shadow_map(MODELS, tolerance, diameter, r_min, shadowed)
         if choice["method"] == "shadow_map":
             maps = light_shadow_maps(light, tris, choice["resolution"], constant_bias=1e-4, slope_bias=2.0)
             vis = shadow_map_visibility(light, maps, points, normals, kernel="nearest")
@@ -116,13 +118,13 @@ def test_shading_model_bounds_held_out_tessellations() -> None:
     for segments in (20, 40, 80):
         scene = _held_out_sphere(segments)
         mesh = scene.meshes[0]
-        theta = em.max_normal_angle(mesh.normals, mesh.triangles)
+        theta = cal.max_normal_angle(mesh.normals, mesh.triangles)
         for method in ("flat", "gouraud", "phong"):
             image = bp.render(scene, size, size, shading=method, samples=4).rgba
             assert not has_nonfinite(image)
             measured = error_metrics(image, reference, interior & (image[..., 3] >= 1.0))["max_steps"]
-            assert measured <= em.predict_shading(MODELS, method, theta), (segments, method)
-        choice = em.choose_shading(MODELS, 16.0, theta)
+            assert measured <= cal.predict_shading(MODELS, method, theta), (segments, method)
+        choice = cal.choose_shading(MODELS, 16.0, theta)
         if choice["predicted_steps"] <= 16.0:
             image = bp.render(scene, size, size, shading=choice["method"], samples=4).rgba
             assert error_metrics(image, reference, interior & (image[..., 3] >= 1.0))["max_steps"] <= 16.0
@@ -159,3 +161,27 @@ def test_plan_within_keeps_shadows_within_the_tolerance(tolerance: float) -> Non
     exact = light_visibility("ray_traced", light, tris, points, normals)
     assert not has_nonfinite(vis)
     assert error_metrics(vis, exact)["mean_steps"] <= tolerance, choice
+
+
+def test_the_shipped_models_are_the_fit_of_the_committed_measurements() -> None:
+    import json
+    from pathlib import Path
+
+    measured = Path(em.__file__).resolve().parent / "results" / "tradeoffs.json"
+    refit = em.fit(json.loads(measured.read_text()))
+    assert refit == cal.load(cal.CALIBRATION_PATH) == cal.shipped_models()
+
+
+def test_bad_model_inputs_name_the_argument() -> None:
+    with pytest.raises(ValueError, match="tolerance"):
+        cal.choose_depth_peeling(MODELS, 0.0, 0.5, 1.0, 4)
+    with pytest.raises(ValueError, match="tolerance"):
+        cal.choose_shadow_map(MODELS, float("nan"), 10.0, 1.0)
+    with pytest.raises(ValueError, match="alpha_min"):
+        cal.choose_depth_peeling(MODELS, 1.0, 0.0, 1.0, 4)
+    with pytest.raises(ValueError, match="caster_radius"):
+        cal.choose_shadow_map(MODELS, 1.0, 10.0, 0.0)
+    with pytest.raises(ValueError, match="method"):
+        cal.predict_shading(MODELS, "toon", 0.1)
+    with pytest.raises(ValueError, match="normals"):
+        cal.max_normal_angle(np.zeros((3, 2)), np.zeros((1, 3), int))

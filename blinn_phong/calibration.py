@@ -1,0 +1,280 @@
+"""Measured error and cost models of the approximate methods, for choosing one by a tolerance.
+
+``calibration.json`` (next to this module) holds models fitted by
+:mod:`benchmarks.error_models` to the measurements of ``python -m benchmarks`` (each
+approximate method against its exact reference, times as ratios to the exact method
+measured in the same run). This module reads them and predicts, for one setting, its error
+in **8-bit steps** (1/255 of the unit range) and its time relative to the exact method;
+the ``choose_*`` functions return the cheapest setting predicted within a tolerance. The
+planner (:func:`blinn_phong.planner.plan`) uses them; nothing here renders.
+
+Models (each states the error metric it predicts):
+
+* ``depth_peeling`` — max error after peeling ``k`` layers. What lies behind them is at
+  most ``(1 − α_min)^k`` of the brightest straight radiance ``B`` (every further layer's
+  contribution is scaled by the transmittance of the first ``k``), so the error is at most
+  ``255·c·B·(1 − α_min)^k`` steps; ``c`` is the largest measured/bound ratio over the
+  calibration cases (≤ 1 when the bound holds). Cost: ``t₀ + t₁·k`` times the A-buffer's.
+* ``shadow_map`` — mean error of light visibility over the visible points facing the light
+  (misclassified share × 255), nearest-texel lookup with bias ``1e-4 + 2·slope``. A
+  shadow's edge band is one texel (``D/R`` for a map of resolution ``R`` over a scene of
+  diameter ``D``) and its area/perimeter ratio about ``r/2`` for a caster of radius ``r``,
+  so the error is ``255·c·s·D/(r·R)`` with ``s`` the shadowed share of the points; ``c``
+  fitted (largest ratio). Calibrated with a directional light. Cost: ``t₀ + t₂·R²`` times
+  Embree ray tracing.
+* ``shading`` — max error on interior pixels of a curved mesh against per-pixel shading of
+  the exact surface, per method, as a power law ``a·θ^b`` of the angle ``θ`` between the
+  vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
+  envelope of a log-space least-squares fit, times a safety ``margin``. Calibrated at
+  shininess 40: valid for shininess ≤ ``shininess_calibrated``. Cost: ``ratio_to_phong``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "CALIBRATION_PATH",
+    "brightest_radiance",
+    "choose_depth_peeling",
+    "choose_shading",
+    "choose_shadow_map",
+    "depth_peeling_cost",
+    "load",
+    "max_normal_angle",
+    "predict_depth_peeling",
+    "predict_shading",
+    "predict_shadow_map",
+    "scene_extent",
+    "shadow_map_cost",
+    "shipped_models",
+]
+
+#: The models shipped with the package (written by ``benchmarks/error_models.py``).
+CALIBRATION_PATH = Path(__file__).resolve().with_name("calibration.json")
+
+#: Shadow-map resolutions the chooser considers (powers of two).
+SHADOW_MAP_RESOLUTIONS = (64, 128, 256, 512, 1024, 2048, 4096)
+
+
+def load(path: Path | str = CALIBRATION_PATH) -> dict:
+    """Read models written by ``benchmarks.error_models.save`` (JSON) from ``path``."""
+    return json.loads(Path(path).read_text())
+
+
+@lru_cache(maxsize=1)
+def _shipped() -> str:
+    return CALIBRATION_PATH.read_text()
+
+
+def shipped_models() -> dict:
+    """The shipped models (``calibration.json`` next to this module), a fresh copy on each call."""
+    return json.loads(_shipped())
+
+
+def _check_tolerance(tolerance: float) -> float:
+    if isinstance(tolerance, bool) or not (
+        isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance > 0
+    ):
+        raise ValueError(f"tolerance: expected a finite number of 8-bit steps > 0, got {tolerance!r}")
+    return float(tolerance)
+
+
+def _check_positive(value: float, name: str) -> float:
+    if isinstance(value, bool) or not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+        raise ValueError(f"{name}: expected a finite number > 0, got {value!r}")
+    return float(value)
+
+
+# --------------------------------------------------------------------------- scene features
+
+
+def scene_extent(world_triangles: np.ndarray) -> float:
+    """Diameter ``D`` (world units) of the axis-aligned box around world-space triangles ``(n, 3, 3)``."""
+    pts = np.asarray(world_triangles, dtype=np.float64).reshape(-1, 3)
+    if pts.size == 0 or not np.isfinite(pts).all():
+        raise ValueError(f"world_triangles: expected finite (n, 3, 3) triangles, got shape {pts.shape}")
+    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+
+
+def max_normal_angle(normals: np.ndarray, triangles: np.ndarray) -> float:
+    """Largest angle (radians) between the vertex normals at the two ends of any triangle edge.
+
+    Args:
+        normals: (V, 3) vertex normals (any length > 0; zero vectors count as angle 0).
+        triangles: (T, 3) vertex indices.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    if n.ndim != 2 or n.shape[1] != 3 or t.ndim != 2 or t.shape[1] != 3:
+        raise ValueError(
+            f"normals, triangles: expected shapes (V, 3) and (T, 3), got {n.shape} and {t.shape}"
+        )
+    unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    worst = 0.0
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        cos = np.einsum("ij,ij->i", unit[t[:, a]], unit[t[:, b]])
+        worst = max(worst, float(np.arccos(np.clip(cos, -1.0, 1.0)).max(initial=0.0)))
+    return worst
+
+
+def brightest_radiance(fragments_rgba: np.ndarray) -> float:
+    """Largest straight colour channel (``rgb/α`` where α > 0) of premultiplied fragments ``(n, 4)``."""
+    rgba = np.asarray(fragments_rgba, dtype=np.float64)
+    if rgba.ndim != 2 or rgba.shape[1] != 4:
+        raise ValueError(f"fragments_rgba: expected shape (n, 4), got {rgba.shape}")
+    a = rgba[:, 3:4]
+    straight = rgba[:, :3] / np.where(a > 0, a, 1.0)
+    return float(straight[a[:, 0] > 0].max(initial=0.0))
+
+
+# --------------------------------------------------------------------------- depth peeling
+
+
+def predict_depth_peeling(models: dict, k: int, alpha_min: float, brightest: float) -> float:
+    """Predicted max error (8-bit steps) of peeling ``k`` layers: ``255·c·B·(1 − α_min)^k``.
+
+    ``alpha_min`` is the smallest opacity in [0, 1]; ``brightest`` (``B``) bounds the straight
+    radiance of what lies behind the peeled layers (≥ 1 when alpha counts: coverage is 1).
+    """
+    return 255.0 * models["depth_peeling"]["c"] * brightest * (1.0 - alpha_min) ** k
+
+
+def depth_peeling_cost(models: dict, k: int) -> float:
+    """Predicted time of peeling ``k`` layers relative to the A-buffer's: ``t₀ + t₁·k``."""
+    m = models["depth_peeling"]
+    return m["t0"] + m["t1"] * k
+
+
+def choose_depth_peeling(
+    models: dict, tolerance: float, alpha_min: float, brightest: float, max_layers: int
+) -> dict:
+    """The fewest layers predicted within ``tolerance`` and faster than the A-buffer, else the A-buffer.
+
+    Args:
+        models: from :func:`load` or :func:`shipped_models`.
+        tolerance: acceptable max error in 8-bit steps (> 0).
+        alpha_min: smallest opacity of the transparent surfaces, in (0, 1].
+        brightest: bound of the straight radiance behind the peeled layers (≥ 0).
+        max_layers: an upper bound of the depth complexity (peeling that many is exact).
+
+    Returns:
+        ``{"method": "depth_peeling", "layers": k, "predicted_steps", "predicted_cost"}`` or
+        ``{"method": "a_buffer", "predicted_steps": 0.0, "predicted_cost": 1.0}``; costs are
+        relative to the A-buffer.
+    """
+    tol = _check_tolerance(tolerance)
+    if isinstance(alpha_min, bool) or not (isinstance(alpha_min, int | float) and 0 < alpha_min <= 1):
+        raise ValueError(f"alpha_min: expected a value in (0, 1], got {alpha_min!r}")
+    if isinstance(brightest, bool) or not (
+        isinstance(brightest, int | float) and math.isfinite(brightest) and brightest >= 0
+    ):
+        raise ValueError(f"brightest: expected a finite radiance >= 0, got {brightest!r}")
+    for k in range(1, max_layers):
+        cost = depth_peeling_cost(models, k)
+        if cost >= 1.0:
+            break
+        err = predict_depth_peeling(models, k, alpha_min, brightest)
+        if err <= tol:
+            return {"method": "depth_peeling", "layers": k, "predicted_steps": err, "predicted_cost": cost}
+    return {"method": "a_buffer", "predicted_steps": 0.0, "predicted_cost": 1.0}
+
+
+# --------------------------------------------------------------------------- shadow maps
+
+
+def predict_shadow_map(
+    models: dict, resolution: int, diameter: float, caster_radius: float, shadowed_share: float = 0.5
+) -> float:
+    """Predicted mean visibility error (8-bit steps) of a nearest-texel map: ``255·c·s·D/(r·R)``.
+
+    ``diameter`` (``D``) and ``caster_radius`` (``r``, the smallest caster) in world units;
+    ``shadowed_share`` (``s``) the share of lit-side points in shadow, in [0, 1].
+    """
+    return 255.0 * models["shadow_map"]["c"] * shadowed_share * diameter / (caster_radius * resolution)
+
+
+def shadow_map_cost(models: dict, resolution: int) -> float:
+    """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing: ``t₀ + t₂·R²``."""
+    m = models["shadow_map"]
+    return m["t0"] + m["t2"] * resolution**2
+
+
+def choose_shadow_map(
+    models: dict,
+    tolerance: float,
+    diameter: float,
+    caster_radius: float,
+    shadowed_share: float = 0.5,
+    weight: float = 1.0,
+) -> dict:
+    """The cheapest power-of-two map (64–4096) predicted within ``tolerance`` mean steps, else ray tracing.
+
+    The error predicted is :func:`predict_shadow_map` times ``weight`` (≥ 0): the largest
+    change of a pixel (in the unit range) between lit and shadowed, which turns visibility
+    steps into image steps (1 compares visibilities). ``shadowed_share`` defaults to 0.5,
+    which over-predicts for mostly lit scenes; 1 is the bound for any scene.
+
+    Returns:
+        ``{"method": "shadow_map", "resolution", "predicted_steps", "predicted_cost"}`` or
+        ``{"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}``; costs
+        relative to ray tracing.
+    """
+    tol = _check_tolerance(tolerance)
+    _check_positive(diameter, "diameter")
+    _check_positive(caster_radius, "caster_radius")
+    if not (0 <= shadowed_share <= 1):
+        raise ValueError(f"shadowed_share: expected a value in [0, 1], got {shadowed_share!r}")
+    if not (math.isfinite(weight) and weight >= 0):
+        raise ValueError(f"weight: expected a finite number >= 0, got {weight!r}")
+    for res in SHADOW_MAP_RESOLUTIONS:
+        cost = shadow_map_cost(models, res)
+        if cost >= 1.0:
+            break
+        err = weight * predict_shadow_map(models, res, diameter, caster_radius, shadowed_share)
+        if err <= tol:
+            return {"method": "shadow_map", "resolution": res, "predicted_steps": err, "predicted_cost": cost}
+    return {"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}
+
+
+# --------------------------------------------------------------------------- shading frequency
+
+
+def predict_shading(models: dict, method: str, theta: float) -> float:
+    """Predicted interior max error (8-bit steps) of ``method`` against the exact surface: ``margin·a·θ^b``.
+
+    ``theta`` is :func:`max_normal_angle` in radians.
+    """
+    shading = models["shading"]
+    if method not in shading["methods"]:
+        raise ValueError(f"method: expected one of {sorted(shading['methods'])}, got {method!r}")
+    m = shading["methods"][method]
+    return shading.get("margin", 1.0) * m["a"] * theta ** m["b"]
+
+
+def choose_shading(models: dict, tolerance: float, theta: float) -> dict:
+    """The cheapest of flat/Gouraud predicted within ``tolerance`` steps and faster than Phong, else Phong.
+
+    Returns:
+        ``{"method", "predicted_steps", "predicted_cost"}``, the cost relative to Phong's.
+    """
+    tol = _check_tolerance(tolerance)
+    methods = models["shading"]["methods"]
+    for method in sorted(("flat", "gouraud"), key=lambda name: methods[name]["ratio_to_phong"]):
+        err = predict_shading(models, method, theta)
+        if err <= tol and methods[method]["ratio_to_phong"] < 1.0:
+            return {
+                "method": method,
+                "predicted_steps": err,
+                "predicted_cost": methods[method]["ratio_to_phong"],
+            }
+    return {
+        "method": "phong",
+        "predicted_steps": predict_shading(models, "phong", theta),
+        "predicted_cost": 1.0,
+    }
