@@ -46,6 +46,7 @@ __all__ = [
     "choose_shading",
     "choose_shadow_map",
     "depth_peeling_cost",
+    "depth_peeling_factor",
     "load",
     "max_normal_angle",
     "predict_depth_peeling",
@@ -147,7 +148,12 @@ def predict_depth_peeling(models: dict, k: int, alpha_min: float, brightest: flo
     peeled layers reaches the bound itself (``c = 1``, e.g. 0.72 measured in
     ``tests/effects/test_planner.py``), so the prediction never uses less than 1.
     """
-    return 255.0 * max(models["depth_peeling"]["c"], 1.0) * brightest * (1.0 - alpha_min) ** k
+    return 255.0 * depth_peeling_factor(models) * brightest * (1.0 - alpha_min) ** k
+
+
+def depth_peeling_factor(models: dict) -> float:
+    """The factor :func:`predict_depth_peeling` applies to the bound: ``max(c, 1)``, ``c`` measured."""
+    return max(float(models["depth_peeling"]["c"]), 1.0)
 
 
 def depth_peeling_cost(models: dict, k: int) -> float:
