@@ -428,7 +428,7 @@ def test_no_nan_or_inf_under_any_combination() -> None:
     configurations = [
         {"transparency": method, "shadows": shadow}
         for method in bp.frame.TRANSPARENCY_CHOICES
-        for shadow in ("none", "shadow_map", "ray_traced")
+        for shadow in ("none", bp.ShadowOptions("shadow_map", resolution=128), "ray_traced")
     ]
     configurations += [
         {"shadows": bp.ShadowOptions("soft", radius=0.3, samples=4), "fog": bp.Fog("exp2", density=0.3)},
