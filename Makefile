@@ -11,7 +11,7 @@ VENV45 := .venv-blender45
 LOCK45 := requirements/blender45.lock
 OUT ?= out
 
-.PHONY: setup demo test lint bench test-blender42 test-blender45 clean
+.PHONY: setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 clean
 
 $(VENV)/.synced: $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -21,8 +21,14 @@ $(VENV)/.synced: $(LOCK)
 
 setup: $(VENV)/.synced
 
+# The main job: render the bundled showcase with the Blender engine, composite it over the
+# bundled backplate with our core and with Blender's Alpha Over, print errors and timings.
 demo: setup
-	$(PY) -m compositing.demo --out $(OUT)/demo
+	$(PY) -m addon.demo --out $(OUT)/demo
+
+# Every compositing operator on the two bundled sample images.
+demo-compositing: setup
+	$(PY) -m compositing.demo --out $(OUT)/demo-compositing
 
 lint: setup
 	$(VENV)/bin/ruff check .
@@ -33,6 +39,14 @@ test: setup
 
 bench: setup
 	$(PY) -m benchmarks --out benchmarks/results --charts docs
+
+# The trade-off families on small scenes (about 30 s), written outside the repository.
+bench-quick: setup
+	$(PY) -m benchmarks --quick --out $(OUT)/bench --charts $(OUT)/bench
+
+# The Blender tests only (bpy 5.0.1).
+test-blender: setup
+	$(PY) -m pytest -q -m blender
 
 $(VENV42)/.synced: $(LOCK42)
 	test -x $(VENV42)/bin/python || $(PYTHON) -m venv $(VENV42)
