@@ -18,7 +18,7 @@ from types import ModuleType
 
 #: Sub-modules with their own ``register()``/``unregister()``, registered in this order and
 #: unregistered in reverse (the pattern of ``bpy.utils.register_submodule_factory``).
-SUBMODULES: tuple[str, ...] = ("properties", "engine", "render_ui", "operators", "ui")
+SUBMODULES: tuple[str, ...] = ("properties", "engine", "render_ui", "verify_operator", "operators", "ui")
 
 
 def _submodules() -> list[ModuleType]:

@@ -97,6 +97,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
                                                           enable_on_install=True)
         import addon_utils
         enabled = list(addon_utils.check("bl_ext.test_repo.blinn_phong_render"))
+        operators = [hasattr(bpy.ops.blinn_phong, n) for n in ("verify_composite", "copy_derived_material")]
         pkg = "bl_ext.test_repo.blinn_phong_render"
         installed = pathlib.Path(repo_dir) / "blinn_phong_render"
         imported = []
@@ -119,6 +120,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         emit({
             "result": sorted(result),
             "enabled": enabled,
+            "operators": operators,
             "render_ok": last.get("ok"),
             "imported": imported,
             "ortho_module": mapping.orthographic_matrix.__module__,
@@ -131,6 +133,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
     assert got["result"] == ["FINISHED"]
     assert got["enabled"] == [True, True]  # (loaded by default, loaded now)
     assert got["render_ok"] is True
+    assert got["operators"] == [True, True]  # the add-on registers the panels' and the Verify operators
     from compositing.io import read_image
 
     image = read_image(tmp_path / "installed.exr")
