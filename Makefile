@@ -11,7 +11,7 @@ VENV45 := .venv-blender45
 LOCK45 := requirements/blender45.lock
 OUT ?= out
 
-.PHONY: setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 clean
+.PHONY: extension scenes setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 clean
 
 $(VENV)/.synced: $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -47,6 +47,14 @@ bench-quick: setup
 # The Blender tests only (bpy 5.0.1).
 test-blender: setup
 	$(PY) -m pytest -q -m blender
+
+# The installable extension zip (core packages vendored), validated by Blender's own CLI.
+extension: setup
+	$(PY) tools/build_extension.py --out dist
+
+# Rebuild the sample .blend files (saved by Blender 4.2 so that 4.2, 4.5 and 5.0 open them).
+scenes: $(VENV42)/.synced
+	$(VENV42)/bin/python blend_files/make_scenes.py
 
 $(VENV42)/.synced: $(LOCK42)
 	test -x $(VENV42)/bin/python || $(PYTHON) -m venv $(VENV42)
