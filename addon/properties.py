@@ -77,10 +77,11 @@ class BLINN_PHONG_RenderSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blende
     tolerance: FloatProperty(
         name="Tolerance",
         min=0.0,
-        soft_max=0.05,
+        soft_max=64.0,
         default=0.0,
-        precision=4,
-        description="Error the planner may accept to choose a faster method (linear radiance; 0: exact only)",
+        precision=1,
+        description="Error the planner may accept to choose a faster method, in 8-bit steps "
+        "(1/255; max for transparency, mean for shadows; 0: exact only)",
     )
     samples_per_axis: IntProperty(
         name="Anti-Aliasing", min=1, max=8, default=2, description="k×k ordered-grid samples per pixel"

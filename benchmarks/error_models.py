@@ -30,7 +30,7 @@ import numpy as np
 
 from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load, scene_extent
 
-__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "plan_within", "save"]
+__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save"]
 
 #: Safety factor on the shading envelope for scenes other than the calibration sphere (other
 #: lights, views, shininess ≤ 40): the fit has one light and one view, so its largest
@@ -147,84 +147,6 @@ def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
     """Write the models as JSON (default: ``blinn_phong/calibration.json``, shipped with the package)."""
     path.write_text(json.dumps(models, indent=1) + "\n")
     return path
-
-
-# --------------------------------------------------------------------------- planning
-
-
-def plan_within(scene: object, tolerance_steps: float, models: dict | None = None) -> object:
-    """A :class:`blinn_phong.planner.Plan` whose choices are the fastest predicted within ``tolerance_steps``.
-
-    The planner's own tolerance is in linear radiance for transparency (what depth peeling
-    leaves out) and in misclassified share of the shadowed area for shadow maps; the
-    calibrated models convert a tolerance in 8-bit steps into each: depth peeling's measured
-    max error is ``c·255`` times the planner's bound, so the planner gets ``T/(255·c)``; a
-    shadow map's measured mean error is ``255·c·s/2`` times the planner's area share (its
-    bound is ``2·D/(r·R)``, ours ``c·s·D/(r·R)`` with the shadowed share ``s`` ≤ 1), so it gets
-    ``2·T/(255·c)``. The cost models then replace a choice by the exact method when that is
-    predicted to be faster (depth peeling against the A-buffer, a shadow map against ray tracing).
-    Shading: flat or Gouraud where predicted within the tolerance and cheaper, else the planner's.
-
-    Args:
-        scene: a :class:`blinn_phong.Scene`.
-        tolerance_steps: acceptable error in 8-bit steps (> 0): the max error of the
-            transparency resolve, the mean error of shadow visibility (a hard shadow edge is
-            255 steps off at some point for any map), the max error of shading.
-        models: from :func:`load` (default: ``blinn_phong/calibration.json``).
-
-    Returns:
-        The plan; every replaced choice says why in its reason.
-    """
-    from blinn_phong.calibration import choose_shading, max_normal_angle
-    from blinn_phong.normals import vertex_normals
-    from blinn_phong.planner import Choice, Plan, plan
-
-    tol = float(tolerance_steps)
-    if not (math.isfinite(tol) and tol > 0):
-        raise ValueError(
-            f"tolerance_steps: expected a finite number of 8-bit steps > 0, got {tolerance_steps!r}"
-        )
-    m = models if models is not None else load()
-    peel, smap = m["depth_peeling"], m["shadow_map"]
-    transparency = plan(scene, tolerance=tol / (255.0 * peel["c"])).transparency
-    if transparency.method == "depth_peeling":
-        k = int(transparency.params["layers"])
-        cost = peel["t0"] + peel["t1"] * k
-        if cost >= 1.0:
-            transparency = Choice("a_buffer", f"{k} peeled layers would cost {cost:.2f}× the exact A-buffer")
-        else:
-            transparency = Choice(
-                "depth_peeling",
-                f"{transparency.reason}; calibrated: ≤ {tol:g} steps, about {cost:.2f}× the A-buffer's time",
-                dict(transparency.params),
-            )
-    shadows = []
-    for choice in plan(scene, tolerance=2.0 * tol / (255.0 * smap["c"])).shadows:
-        if choice.method == "shadow_map":
-            res = int(choice.params["resolution"])
-            cost = smap["t0"] + smap["t2"] * res**2
-            if cost >= 1.0:
-                choice = Choice(
-                    "ray_traced",
-                    f"a {res}² map would be within {tol:g} mean steps but cost {cost:.2f}× ray tracing",
-                )
-        shadows.append(choice)
-    base = plan(scene)
-    shading = []
-    for mesh, choice in zip(scene.meshes, base.shading, strict=True):  # type: ignore[attr-defined]
-        if choice.method == "phong" and mesh.shading is None and len(mesh.triangles):
-            normals = (
-                mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
-            )
-            pick = choose_shading(m, tol, max_normal_angle(normals, mesh.triangles))
-            if pick["method"] != "phong":
-                choice = Choice(
-                    pick["method"],
-                    f"calibrated: predicted {pick['predicted_steps']:.3g} ≤ {tol:g} steps at "
-                    f"{pick['predicted_cost']:.2f}× Phong's time",
-                )
-        shading.append(choice)
-    return Plan(transparency, tuple(shadows), tuple(shading), tol)
 
 
 def main() -> None:

@@ -302,7 +302,7 @@ def frame_plan(
 
     Args:
         scene: the scene.
-        tolerance: the planner's tolerance (see :func:`blinn_phong.planner.plan`), ≥ 0.
+        tolerance: the planner's tolerance in 8-bit steps (see :func:`blinn_phong.planner.plan`), ≥ 0.
         shading: ``"auto"`` — the planner's per-mesh shading frequency; otherwise the render's
             ``shading`` (a mesh's own ``shading`` still wins), as :func:`blinn_phong.render.render` uses it.
         transparency: ``None``/``"auto"`` or one of :data:`TRANSPARENCY_CHOICES`.

@@ -1,9 +1,19 @@
-"""The planner: per concern, the cheapest method that is exact (or within a tolerance) for a scene.
+"""The planner: per concern, the fastest method that is exact or predicted within a tolerance.
 
 :func:`plan` inspects a :class:`~blinn_phong.scene.Scene` — geometry, materials, lights,
-camera — and returns a :class:`Plan`: one :class:`Choice` (method, parameters and a
-sentence saying why) for transparency, one per light for shadows and one per mesh for the
-shading frequency. It renders nothing; all tests are conservative geometric facts.
+camera — and returns a :class:`Plan`: one :class:`Choice` (method, parameters, a sentence
+saying why, and for approximations the predicted error and relative cost) for
+transparency, one per light for shadows and one per mesh for the shading frequency. It
+renders nothing. Exact methods are picked from conservative geometric facts; with a
+tolerance ``T > 0`` in **8-bit steps** (1/255 of the unit range) an approximate method is
+picked where the measured error model of :mod:`blinn_phong.calibration` predicts at most
+``T`` and its measured cost model predicts it faster than the exact method. ``T = 0``
+means exact methods only. The error ``T`` bounds, per concern:
+
+* transparency: the max error of any channel of the resolved image against the A-buffer;
+* shadows: the mean error, over the covered pixels, against ray-traced shadows (any shadow
+  map is a whole light's contribution off somewhere on a hard edge, so the max is no use);
+* shading: the max error on interior pixels against per-pixel shading of the exact surface.
 
 Transparency (methods of :mod:`blinn_phong.oit`):
 
@@ -14,9 +24,12 @@ Transparency (methods of :mod:`blinn_phong.oit`):
 * ``sort_objects`` — several transparent meshes, each planar or convex, and every pair
   whose screen rectangles overlap is separated in eye depth: drawing them back to front
   (each as in ``draw_last``) follows the per-pixel order everywhere.
-* ``depth_peeling`` — with a tolerance: ``k`` layers such that what the dropped layers
-  change, at most ``(1 − α_min)^k`` times the brightest radiance in the scene, is below
-  the tolerance.
+* ``depth_peeling`` — with a tolerance: the fewest layers ``k`` whose predicted max error
+  ``255·c·B·(1 − α_min)^k`` is within it (what lies behind ``k`` layers is scaled by their
+  transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them,
+  at least 1 because alpha counts too, divided by ``α_min`` for the absorption model whose
+  fragments are not premultiplied by their opacity; ``c`` measured), if its predicted cost
+  ``t₀ + t₁·k`` is below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
 Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
@@ -27,11 +40,11 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   convex, whose self-shadowed faces face away from the light and are unlit anyway).
 * ``planar`` — every receiver that can be shadowed is a planar mesh on one common plane and
   every caster lies between that plane and the light: Blinn's projected shadows are exact.
-* ``shadow_map`` — with a tolerance: the map spans the scene's bounding sphere (diameter
-  D), its edge band is one texel (D/resolution) wide, and a shadow of a caster of radius r
-  has a perimeter/area ratio of about 2/r, so about ``2·D/(r·resolution)`` of the shadowed
-  area is misclassified; the resolution is the next power of two that brings this under
-  the tolerance (smallest caster radius r), if that is at most 4096.
+* ``shadow_map`` — with a tolerance, directional lights (the calibrated case): the smallest
+  power-of-two resolution ``R`` whose predicted mean error ``255·c·w·D/(r·R)`` is within it
+  (``D`` the scene's diameter, ``r`` the smallest caster's radius, ``w`` the largest change
+  a pixel sees between lit and shadowed, the shadowed share taken as 1), if its predicted
+  cost ``t₀ + t₂·R²`` is below ray tracing's.
 * ``ray_traced`` — otherwise: exact hard shadows.
 
 Shading frequency, per mesh (:mod:`blinn_phong.render`):
@@ -40,6 +53,9 @@ Shading frequency, per mesh (:mod:`blinn_phong.render`):
   lights are directional or ambient and the viewer is at infinity
   (``LightModel(local_viewer=False)``, what an orthographic camera should use): L, H and N
   are constant over each face, so the lighting is.
+* ``flat`` or ``gouraud`` — with a tolerance, shininess within the calibrated range: the
+  cheaper one whose predicted max error ``margin·a·θ^b`` (``θ`` the largest angle between
+  adjacent vertex normals) is within it, if it is measured faster than Phong.
 * ``phong`` — otherwise (per-pixel evaluation, the reference).
 """
 
@@ -50,7 +66,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .scene import AmbientLight, DirectionalLight, Mesh, PointLight, Scene, SpotLight
+from . import calibration
+from .normals import vertex_normals
+from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
 
 __all__ = ["Choice", "Plan", "plan"]
 
@@ -59,16 +77,21 @@ _EPS = 1e-9
 
 @dataclass(frozen=True)
 class Choice:
-    """One decision: ``method``, its ``params`` and the ``reason``.
+    """One decision: ``method``, its ``params``, the ``reason`` and, for approximations, predictions.
 
     ``params`` are keyword arguments of the function that carries the method out:
     ``layers`` for :func:`blinn_phong.oit.resolve_transparency`, ``plane`` or ``resolution``
-    for :func:`blinn_phong.shadows.light_visibility`.
+    for :func:`blinn_phong.shadows.light_visibility`. ``predicted_steps`` is the error the
+    calibrated model predicts (8-bit steps, in the concern's metric, see :func:`plan`; 0 for
+    the exact method of a concern) and ``relative_cost`` the predicted time relative to that
+    exact method (A-buffer, ray tracing, Phong); both None where no model applies.
     """
 
     method: str
     reason: str
     params: dict[str, object] = field(default_factory=dict)
+    predicted_steps: float | None = None
+    relative_cost: float | None = None
 
     def __str__(self) -> str:
         extra = ", ".join(f"{k}={v}" for k, v in self.params.items())
@@ -83,7 +106,7 @@ class Plan:
         transparency: how transparent fragments are resolved.
         shadows: one choice per entry of ``scene.lights`` (same order).
         shading: one choice per entry of ``scene.meshes`` (same order).
-        tolerance: the tolerance the plan was made for.
+        tolerance: the tolerance the plan was made for, in 8-bit steps (0: exact only).
     """
 
     transparency: Choice
@@ -222,7 +245,7 @@ def _light_side_distance(
 # --------------------------------------------------------------------------- decisions
 
 
-def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float) -> Choice:
+def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, models: dict) -> Choice:
     transparent = [i for i, m in enumerate(scene.meshes) if m.material.opacity < 1.0 and len(m.triangles)]
     if not transparent:
         return Choice("zbuffer", "no transparent objects: a plain z-buffer is exact")
@@ -254,27 +277,50 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float) 
         if conflicts
         else "a transparent object can overlap itself (neither planar nor convex)"
     )
-    if tolerance > 0:
-        alpha_min = min(scene.meshes[i].material.opacity for i in transparent)
-        # what the dropped layers hide is a mix of transparent and opaque colour behind them
-        brightest = max(_max_radiance(scene, m) for m in scene.meshes)
-        layers_bound = sum(
-            1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
+    exact = Choice(
+        "a_buffer",
+        f"{why}: only a per-pixel sort (A-buffer) is exact",
+        predicted_steps=0.0,
+        relative_cost=1.0,
+    )
+    if tolerance <= 0:
+        return exact
+    alpha_min = min(scene.meshes[i].material.opacity for i in transparent)
+    if alpha_min <= 0:
+        return Choice(
+            "a_buffer",
+            f"{why}: a surface of opacity 0 (or the emission model) attenuates nothing behind it, so no "
+            "number of peeled layers bounds the rest; the A-buffer is exact",
+            predicted_steps=0.0,
+            relative_cost=1.0,
         )
-        if 0 < alpha_min and brightest > 0:
-            k = (
-                max(1, math.ceil(math.log(tolerance / brightest) / math.log(1 - alpha_min)))
-                if alpha_min < 1
-                else 1
-            )
-            if k < layers_bound:
-                return Choice(
-                    "depth_peeling",
-                    f"{why}; {k} layers leave at most (1 − {alpha_min:g})^{k}·{brightest:g} "
-                    f"≤ {tolerance:g} unaccounted",
-                    {"layers": k},
-                )
-    return Choice("a_buffer", f"{why}: only a per-pixel sort (A-buffer) is exact")
+    # what the dropped layers hide: transparent and opaque colour behind them, and coverage (alpha)
+    brightest = max(1.0, *(_max_radiance(scene, m) for m in scene.meshes))
+    if any(scene.meshes[i].material.transparency_model == "absorption" for i in transparent):
+        brightest /= alpha_min  # c + (1 − α)·behind: a stack behind adds up to B·Σ(1 − α)^j ≤ B/α
+    layers_bound = sum(
+        1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
+    )
+    pick = calibration.choose_depth_peeling(models, tolerance, alpha_min, brightest, layers_bound)
+    c = calibration.depth_peeling_factor(models)
+    if pick["method"] == "depth_peeling":
+        k, err, cost = pick["layers"], pick["predicted_steps"], pick["predicted_cost"]
+        return Choice(
+            "depth_peeling",
+            f"{why}; depth peeling, {k} layers: predicted max error {err:.2g} steps ≤ tolerance "
+            f"{tolerance:g}, cost {cost:.2f}× A-buffer (255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
+            {"layers": k},
+            predicted_steps=err,
+            relative_cost=cost,
+        )
+    return Choice(
+        "a_buffer",
+        f"{why}: no number of peeled layers is predicted within {tolerance:g} steps and faster than the "
+        f"A-buffer (peeling k of at most {layers_bound} layers costs ({models['depth_peeling']['t0']:.2f} + "
+        f"{models['depth_peeling']['t1']:.3f}·k)× the A-buffer); the A-buffer is exact",
+        predicted_steps=0.0,
+        relative_cost=1.0,
+    )
 
 
 def _max_radiance(scene: Scene, mesh: Mesh) -> float:
@@ -291,7 +337,7 @@ def _max_radiance(scene: Scene, mesh: Mesh) -> float:
     return float(np.max(total))
 
 
-def _plan_shadow(scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float) -> Choice:
+def _plan_shadow(scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict) -> Choice:
     light = scene.lights[index]
     if isinstance(light, AmbientLight):
         return Choice("none", "an ambient light has no direction and casts no shadow")
@@ -338,65 +384,172 @@ def _plan_shadow(scene: Scene, facts: list[_MeshFacts], index: int, tolerance: f
                 )
     a, b = pairs[0]
     what = f"mesh {a} can shade itself" if a == b else f"mesh {a} can shadow mesh {b}"
-    if tolerance > 0:
-        everything = np.concatenate([f.world for f in facts if len(f.tris)])
-        diameter = float(np.linalg.norm(everything.max(axis=0) - everything.min(axis=0)))
-        r_min = min(facts[c].radius for c in casters)
-        needed = 2 * diameter / (max(r_min, 1e-300) * tolerance)
-        if needed <= 4096:
-            res = 1 << max(6, math.ceil(math.log2(needed)))
-            return Choice(
-                "shadow_map",
-                f"{what}; a {res}² map misclassifies about 2·{diameter:.3g}/({r_min:.3g}·{res}) "
-                f"≤ {tolerance:g} of the shadowed area",
-                {"resolution": res},
-            )
-    return Choice("ray_traced", f"{what}: ray-traced shadows are exact")
+    exact = Choice(
+        "ray_traced", f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
+    )
+    if tolerance <= 0:
+        return exact
+    if not isinstance(light, DirectionalLight):
+        return Choice(
+            "ray_traced",
+            f"{what}: ray-traced shadows are exact (the shadow-map error model is calibrated for "
+            "directional lights only)",
+            predicted_steps=0.0,
+            relative_cost=1.0,
+        )
+    everything = np.concatenate([f.tris.reshape(-1, 3) for f in facts if len(f.tris)])
+    diameter = calibration.scene_extent(everything)
+    r_min = min(facts[c].radius for c in casters)
+    weight = _shadow_weight(scene, light)
+    if diameter <= 0 or r_min <= 0:
+        return exact
+    pick = calibration.choose_shadow_map(models, tolerance, diameter, r_min, 1.0, weight)
+    formula = (
+        f"255·{models['shadow_map']['c']:.3g}·{weight:.3g}·{diameter:.3g}/({r_min:.3g}·R), "
+        "nearest texel, bias 1e-4 + 2·slope"
+    )
+    if pick["method"] == "shadow_map":
+        res, err, cost = pick["resolution"], pick["predicted_steps"], pick["predicted_cost"]
+        return Choice(
+            "shadow_map",
+            f"{what}; a {res}² shadow map: predicted mean error {err:.2g} steps ≤ tolerance {tolerance:g}, "
+            f"cost {cost:.2f}× ray tracing ({formula})",
+            {"resolution": res},
+            predicted_steps=err,
+            relative_cost=cost,
+        )
+    faster = [r for r in calibration.SHADOW_MAP_RESOLUTIONS if calibration.shadow_map_cost(models, r) < 1]
+    if not faster:
+        why = "no shadow map is predicted faster than ray tracing"
+    else:
+        err = weight * calibration.predict_shadow_map(models, faster[-1], diameter, r_min, 1.0)
+        why = (
+            f"the largest shadow map predicted faster ({faster[-1]}²) is predicted at {err:.2g} mean "
+            f"steps > tolerance {tolerance:g} ({formula})"
+        )
+    return Choice(
+        "ray_traced",
+        f"{what}: ray-traced shadows are exact; {why}",
+        predicted_steps=0.0,
+        relative_cost=1.0,
+    )
 
 
-def _plan_shading(scene: Scene, facts: list[_MeshFacts], index: int) -> Choice:
+def _shadow_weight(scene: Scene, light: DirectionalLight) -> float:
+    """Largest change of a pixel channel between lit and shadowed by ``light``: max over materials of
+    ``diffuse·light.diffuse + specular·light.specular`` (N·L ≤ 1 and the specular factor ≤ 1)."""
+    weight = 0.0
+    for mesh in scene.meshes:
+        materials: list[Material] = [mesh.material]
+        if mesh.back_material is not None and scene.light_model.two_sided:
+            materials.append(mesh.back_material)
+        for m in materials:
+            term = np.asarray(m.diffuse) * np.asarray(light.diffuse)
+            term = term + np.asarray(m.specular) * np.asarray(light.specular)
+            weight = max(weight, float(np.max(term)))
+    return weight
+
+
+def _plan_shading(
+    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict
+) -> Choice:
     mesh = scene.meshes[index]
     if mesh.shading is not None:
         return Choice(mesh.shading, "set on the mesh by the caller")
     positional = [type(light).__name__ for light in scene.lights if isinstance(light, PointLight | SpotLight)]
     infinite_viewer = not scene.light_model.local_viewer
     if not facts[index].flat_normals:
-        return Choice("phong", "normals vary across faces: per-pixel shading is the reference")
-    if positional:
-        return Choice(
+        choice = Choice("phong", "normals vary across faces: per-pixel shading is the reference")
+    elif positional:
+        choice = Choice(
             "phong", f"planar faces, but a {positional[0]} changes the light direction across each face"
         )
-    if not infinite_viewer:
-        return Choice(
+    elif not infinite_viewer:
+        choice = Choice(
             "phong",
             "planar faces, but a local viewer changes the view direction across each face "
             "(an orthographic camera should set LightModel(local_viewer=False))",
         )
+    else:
+        return Choice(
+            "flat",
+            "planar faces under directional light with a distant viewer: lighting is constant per face, "
+            "flat shading is exact",
+        )
+    if tolerance <= 0 or len(mesh.triangles) == 0 or facts[index].flat_normals:
+        return choice  # the shading model is calibrated on curved meshes (vertex normals that vary)
+    calibrated = models["shading"]["shininess_calibrated"]
+    if mesh.material.shininess > calibrated:
+        return Choice(
+            "phong",
+            f"{choice.reason}; shininess {mesh.material.shininess:g} is beyond the calibrated {calibrated:g}",
+        )
+    theta = calibration.max_normal_angle(_world_normals(mesh), mesh.triangles)
+    theta_max = min(m["theta_range"][1] for m in models["shading"]["methods"].values())
+    if theta > theta_max:
+        return Choice(
+            "phong",
+            f"{choice.reason}; adjacent normals {math.degrees(theta):.3g}° apart, beyond the calibrated "
+            f"{math.degrees(theta_max):.3g}°",
+        )
+    pick = calibration.choose_shading(models, tolerance, theta)
+    err, cost = pick["predicted_steps"], pick["predicted_cost"]
+    if pick["method"] != "phong":
+        return Choice(
+            pick["method"],
+            f"{pick['method']} shading: predicted max error {err:.2g} steps ≤ tolerance {tolerance:g}, "
+            f"cost {cost:.2f}× Phong (adjacent normals up to {math.degrees(theta):.3g}° apart)",
+            {},
+            predicted_steps=err,
+            relative_cost=cost,
+        )
+    methods = models["shading"]["methods"]
+    others = ", ".join(
+        f"{name} {calibration.predict_shading(models, name, theta):.2g} steps at "
+        f"{methods[name]['ratio_to_phong']:.2f}×"
+        for name in ("flat", "gouraud")
+    )
     return Choice(
-        "flat",
-        "planar faces under directional light with a distant viewer: lighting is constant per face, "
-        "flat shading is exact",
+        "phong",
+        f"{choice.reason}; predicted: {others} Phong's time, none both within {tolerance:g} steps and faster",
+        predicted_steps=err,
+        relative_cost=1.0,
     )
 
 
-def plan(scene: Scene, tolerance: float = 0.0) -> Plan:
-    """Pick, per concern, the cheapest method that is exact (or within ``tolerance``) for ``scene``.
+def _world_normals(mesh: Mesh) -> np.ndarray:
+    """Vertex normals in world space (the inverse transpose of the linear part), as the renderer uses them."""
+    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
+    return np.asarray(normals, dtype=np.float64) @ np.linalg.inv(mesh.transform[:3, :3])
+
+
+def plan(scene: Scene, tolerance: float = 0.0, models: dict | None = None) -> Plan:
+    """Pick, per concern, the fastest method that is exact or predicted within ``tolerance`` for ``scene``.
 
     Args:
         scene: the scene to plan for.
-        tolerance: acceptable error, ≥ 0, in linear radiance for transparency (what depth
-            peeling may leave out) and as the fraction of shadowed area a shadow map may
-            misclassify; 0 asks for exact methods only.
+        tolerance: acceptable error in 8-bit steps (1/255 of the unit range), ≥ 0: the max
+            error of the transparency resolve against the A-buffer, the mean error of the
+            shadows against ray tracing over the covered pixels, the max interior error of the
+            shading frequency against per-pixel shading of the exact surface. 0 asks for exact
+            methods only.
+        models: error and cost models (default: :func:`blinn_phong.calibration.shipped_models`,
+            fitted to ``python -m benchmarks`` measurements).
 
     Returns:
-        :class:`Plan` with a choice and a reason per concern.
+        :class:`Plan` with a choice and a reason per concern; approximate choices carry their
+        predicted error and cost relative to the exact method.
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a blinn_phong.Scene, got {type(scene).__name__}")
-    if not (isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0):
-        raise ValueError(f"tolerance must be a finite number >= 0, got {tolerance!r}")
-    facts = [_mesh_facts(m) for m in scene.meshes]
-    transparency = _plan_transparency(scene, facts, float(tolerance))
-    shadows = tuple(_plan_shadow(scene, facts, i, float(tolerance)) for i in range(len(scene.lights)))
-    shading = tuple(_plan_shading(scene, facts, i) for i in range(len(scene.meshes)))
-    return Plan(transparency, shadows, shading, float(tolerance))
+    if isinstance(tolerance, bool) or not (
+        isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0
+    ):
+        raise ValueError(f"tolerance must be a finite number of 8-bit steps >= 0, got {tolerance!r}")
+    tol = float(tolerance)
+    m = models if models is not None else calibration.shipped_models()
+    facts = [_mesh_facts(mesh) for mesh in scene.meshes]
+    transparency = _plan_transparency(scene, facts, tol, m)
+    shadows = tuple(_plan_shadow(scene, facts, i, tol, m) for i in range(len(scene.lights)))
+    shading = tuple(_plan_shading(scene, facts, i, tol, m) for i in range(len(scene.meshes)))
+    return Plan(transparency, shadows, shading, tol)

@@ -662,7 +662,8 @@ def render(
             (method and parameters) for every light, or a list with one such entry per
             ``scene.lights`` entry.
         fog: a :class:`blinn_phong.frame.Fog` applied per fragment before blending, or None.
-        tolerance: the planner's tolerance (0: exact methods only).
+        tolerance: the planner's tolerance in 8-bit steps (0: exact methods only; see
+            :func:`blinn_phong.planner.plan` for the error each concern bounds).
 
     ``shading="auto"`` uses the planner's per-mesh shading frequency (flat where it is exact).
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them

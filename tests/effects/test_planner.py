@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from blinn_phong.calibration import shipped_models
 from blinn_phong.planner import plan
 from blinn_phong.render import render
 from blinn_phong.scene import AmbientLight, DirectionalLight, LightModel, Material, Mesh, PointLight
@@ -106,16 +107,26 @@ def test_interpenetrating_transparent_objects_need_the_a_buffer():
 
 def test_with_a_tolerance_depth_peeling_stops_when_the_rest_is_invisible():
     scene = scene_of(crossing_quads(0.9), [AmbientLight((1, 1, 1), 1.0)])
-    tolerance = 0.05
+    tolerance = 4.0  # 8-bit steps
     choice = plan(scene, tolerance=tolerance).transparency
     assert choice.method == "depth_peeling"
     k = choice.params["layers"]
-    assert k == 2  # 0.1^k·(brightest radiance 1.2) <= 0.05 first holds at k = 2
+    # closed form: the rest behind k layers of opacity 0.9 is at most 0.1^k of the brightest
+    # radiance 1.2 (ambient 1 + the scene's 0.2): 255·1.2·0.1^k <= 4 first holds at k = 2 (30.6
+    # steps at k = 1, 3.06 at k = 2); the planner multiplies by max(c, 1) with c measured
+    c = max(shipped_models()["depth_peeling"]["c"], 1.0)
+    assert k == next(j for j in range(1, 10) if 255 * c * 1.2 * 0.1**j <= tolerance) == 2
+    assert choice.predicted_steps == pytest.approx(255 * c * 1.2 * 0.1**2)
+    assert f"predicted max error {choice.predicted_steps:.2g} steps ≤ tolerance 4" in choice.reason
+    assert 0 < choice.relative_cost < 1 and "× A-buffer" in choice.reason
     err = np.abs(
         render_transparency(scene, "depth_peeling", layers=k) - render_transparency(scene, "a_buffer")
     )
-    assert err.max() <= tolerance
+    assert 255 * err.max() <= tolerance
     assert err.max() > 0  # it is an approximation, and the bound is not vacuous
+    # a looser tolerance peels fewer layers, predicted cheaper
+    loose = plan(scene, tolerance=40.0).transparency
+    assert loose.params["layers"] == 1 and loose.relative_cost < choice.relative_cost
     assert plan(scene).transparency.method == "a_buffer"  # exact was asked for
 
 
@@ -172,13 +183,28 @@ def test_objects_shadowing_each_other_need_ray_tracing_or_a_fine_enough_map():
     )
     exact_choice = plan(scene).shadows[0]
     assert exact_choice.method == "ray_traced"
-    tolerance = 0.05
+    # a map fast enough (at most 128², by the cost model) is predicted within 64 mean steps, not 8
+    assert plan(scene, tolerance=8.0).shadows[0].method == "ray_traced"
+    tolerance = 64.0
     choice = plan(scene, tolerance=tolerance).shadows[0]
     assert choice.method == "shadow_map"
+    assert choice.predicted_steps <= tolerance and choice.relative_cost < 1
     cheap, exact = shadow_agreement(scene, choice)
     shadowed = exact == 0
     assert shadowed.sum() > 100
-    assert np.sum(cheap != exact) / shadowed.sum() <= tolerance
+    assert np.sum(cheap != exact) > 0  # the map is an approximation
+    # a pixel changes by at most diffuse·1 + specular·1 = 1.3 between lit and shadowed (the
+    # spheres' materials, a white light), so the image's mean error over these points is at most
+    assert 255 * 1.3 * np.mean(np.abs(cheap - exact)) <= tolerance
+
+
+def test_shadow_maps_for_point_lights_are_outside_the_calibration_so_ray_tracing_stays():
+    scene = scene_of(
+        [FLOOR, sphere((0.0, 0.0, 1.2), 0.5), sphere((-0.3, -0.2, -0.2), 0.6)], [PointLight((0.3, 0.2, 5.0))]
+    )
+    choice = plan(scene, tolerance=255.0).shadows[0]
+    assert choice.method == "ray_traced"
+    assert "directional lights only" in choice.reason
 
 
 # --------------------------------------------------------------------------- shading frequency
@@ -227,5 +253,7 @@ def test_plan_explains_every_concern_and_rejects_bad_tolerance():
     assert all(": " in line for line in lines)
     with pytest.raises(ValueError, match="tolerance"):
         plan(scene, tolerance=-1.0)
+    with pytest.raises(ValueError, match="8-bit steps"):
+        plan(scene, tolerance=float("inf"))
     with pytest.raises(TypeError, match="scene"):
         plan("scene")  # type: ignore[arg-type]

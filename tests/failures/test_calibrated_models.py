@@ -1,14 +1,15 @@
 """The calibrated error models hold on scenes that were not used to fit them.
 
 ``blinn_phong/calibration.json`` (read by :mod:`blinn_phong.calibration`) is fitted by
-:mod:`benchmarks.error_models` to the
-measurements of ``python -m benchmarks`` (layered quads with seed 7, layer counts 2–16 and
-opacities 0.2/0.5/0.8; one shadow scene; a sphere with shininess 40 and segments 8–128).
-Here other scenes — other seeds, layer counts, opacities, casters, light directions,
-tessellations and shininess — are measured against their exact references (the A-buffer,
-Embree ray tracing, supersampled per-pixel shading of a fine mesh): every predicted error
-must bound the measured one, and every method chosen for a tolerance (in 8-bit steps) must
-stay within it.
+:mod:`benchmarks.error_models` to the measurements of ``python -m benchmarks`` (layered
+quads with seed 7, layer counts 2–16 and opacities 0.2/0.5/0.8; one shadow scene; a sphere
+with shininess 40 and segments 8–128). Here other scenes — other seeds, layer counts,
+opacities, casters, light directions, tessellations and shininess — are measured against
+their exact references (the A-buffer, Embree ray tracing, supersampled per-pixel shading of
+a fine mesh): every predicted error must bound the measured one, and every method chosen
+for a tolerance in 8-bit steps (by the ``choose_*`` functions and by
+:func:`blinn_phong.plan`) must stay within it. ``test_planner_calibrated.py`` checks whole
+renders that follow the plan.
 """
 
 from __future__ import annotations
@@ -131,10 +132,10 @@ def test_shading_model_bounds_held_out_tessellations() -> None:
 
 
 @pytest.mark.parametrize("tolerance", [1.0, 4.0, 16.0])
-def test_plan_within_keeps_transparency_within_the_tolerance(tolerance: float) -> None:
+def test_the_planner_keeps_transparency_within_the_tolerance(tolerance: float) -> None:
     for layers, opacity, seed in ((6, 0.6, 21), (10, 0.3, 4)):
         scene = layered_scene(layers, opacity, seed=seed)
-        choice = em.plan_within(scene, tolerance).transparency
+        choice = bp.plan(scene, tolerance).transparency
         assert choice.method in ("depth_peeling", "a_buffer")
         fr = transparent_fragments(scene, 64)
         background = np.tile([0.5, 0.5, 0.5, 1.0], (fr["n_pixels"], 1))
@@ -146,7 +147,7 @@ def test_plan_within_keeps_transparency_within_the_tolerance(tolerance: float) -
 
 
 @pytest.mark.parametrize("tolerance", [1.0, 16.0, 64.0])
-def test_plan_within_keeps_shadows_within_the_tolerance(tolerance: float) -> None:
+def test_the_planner_keeps_shadows_within_the_tolerance(tolerance: float) -> None:
     from blinn_phong.raytrace import world_triangles
     from blinn_phong.shadows import light_visibility
 
@@ -156,7 +157,7 @@ def test_plan_within_keeps_shadows_within_the_tolerance(tolerance: float) -> Non
     points, normals = visible_points(scene, 128)
     facing = normals @ -np.asarray(light.direction, float) > 0
     points, normals = points[facing], normals[facing]
-    choice = em.plan_within(scene, tolerance).shadows[0]
+    choice = bp.plan(scene, tolerance).shadows[0]
     vis = light_visibility(choice.method, light, tris, points, normals, **choice.params)
     exact = light_visibility("ray_traced", light, tris, points, normals)
     assert not has_nonfinite(vis)
