@@ -281,6 +281,8 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             "radius": options.radius,
             "offset": options.offset,
         }
+    if method == planned.method and reason == planned.reason:
+        return replace(planned, params=params)  # the planner's choice keeps its predictions
     return Choice(method, reason, params)
 
 
@@ -352,11 +354,11 @@ def frame_plan(
             t_choice = Choice(str(transparency), _overridden(t_choice, "set by the caller"))
         if t_choice.method == "depth_peeling":
             layers = peel_layers or planned.transparency.params.get("layers", 8)
-            t_choice = Choice(t_choice.method, t_choice.reason, {"layers": int(layers)})  # type: ignore[arg-type]
+            t_choice = replace(t_choice, params={"layers": int(layers)})  # type: ignore[arg-type]
         elif t_choice.method == "weighted_blended":
-            t_choice = Choice(t_choice.method, t_choice.reason, {"wboit_equation": wboit_weight})
+            t_choice = replace(t_choice, params={"wboit_equation": wboit_weight})
         else:
-            t_choice = Choice(t_choice.method, t_choice.reason)  # sorting and the A-buffer take no parameters
+            t_choice = replace(t_choice, params={})  # sorting and the A-buffer take no parameters
         s_choices = tuple(
             _shadow_choice(light, options, c)
             for light, options, c in zip(scene.lights, per_light, planned.shadows, strict=True)
