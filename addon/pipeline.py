@@ -47,7 +47,7 @@ class EffectOptions:
 
     Attributes:
         transparency: key of :data:`TRANSPARENCY_SETTINGS`.
-        peel_layers: layers for depth peeling.
+        peel_layers: layers for depth peeling when it is set explicitly (Auto keeps the planner's).
         shadows: key of :data:`SHADOW_SETTINGS`.
         shadow_samples: rays per point toward a light for soft shadows (rounded to m×m).
         shadow_bias: ray-origin offset along the normal for soft shadows, scene units.
@@ -159,7 +159,7 @@ def render_frame(
         samples=samples,
         progress=progress,
         transparency=TRANSPARENCY_SETTINGS[options.transparency],
-        peel_layers=options.peel_layers,
+        peel_layers=options.peel_layers if options.transparency == "DEPTH_PEELING" else None,
         shadows=shadows,
         fog=fog,
         tolerance=options.tolerance,
