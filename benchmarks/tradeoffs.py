@@ -583,7 +583,11 @@ def scaling(quick: bool = False, repeat: int = 3) -> dict:
     mesa_reason = mesa_available()
 
     def measure(scene: bp.Scene, size: int) -> dict:
-        runs: dict[str, Callable] = {"phong": lambda: bp.render(scene, size, size, shading="phong")}
+        runs: dict[str, Callable] = {
+            "phong": lambda: bp.render(
+                scene, size, size, shading="phong", shadows="none", transparency="zbuffer"
+            )
+        }
         times = time_interleaved(runs, repeat=repeat)
         row = {"ours_s": times["phong"]["median_s"]}
         if mesa_reason is None:
