@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from addon.verify import ALPHA_OVER_OPERATORS, Case, sample_images, standard_cases, verify_cases
+from tests.porter_duff_paper import PAPER
 
 pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]
 
@@ -39,22 +40,6 @@ LEGACY_CPU_COMPOSITOR = BPY_VERSION < (4, 4)
 EXPECTED_MODES = ALPHA_OVER_OPERATORS if HAS_ALPHA_OVER_MODES else ("src_over",)
 CASES = standard_cases(EXPECTED_MODES)
 TOLERANCE = 1e-6
-
-PAPER = {  # (Fa, Fb) of Porter & Duff 1984, table 1 (plus: Fa = Fb = 1)
-    "clear": (lambda s, d: 0 * s, lambda s, d: 0 * s),
-    "src": (lambda s, d: 1 + 0 * s, lambda s, d: 0 * s),
-    "dst": (lambda s, d: 0 * s, lambda s, d: 1 + 0 * s),
-    "src_over": (lambda s, d: 1 + 0 * s, lambda s, d: 1 - s),
-    "dst_over": (lambda s, d: 1 - d, lambda s, d: 1 + 0 * s),
-    "src_in": (lambda s, d: d, lambda s, d: 0 * s),
-    "dst_in": (lambda s, d: 0 * s, lambda s, d: s),
-    "src_out": (lambda s, d: 1 - d, lambda s, d: 0 * s),
-    "dst_out": (lambda s, d: 0 * s, lambda s, d: 1 - s),
-    "src_atop": (lambda s, d: d, lambda s, d: 1 - s),
-    "dst_atop": (lambda s, d: 1 - d, lambda s, d: s),
-    "xor": (lambda s, d: 1 - d, lambda s, d: 1 - s),
-    "plus": (lambda s, d: 1 + 0 * s, lambda s, d: 1 + 0 * s),
-}
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ import pytest
 from addon.factor_graph import CHANNELS, plan_operator
 from compositing import composite
 from compositing.factors import ALL_OPERATORS, EXTRA_OPERATORS, OPERATORS
+from tests.porter_duff_paper import PAPER
 
 # Blender Math node operations (source/blender/nodes/shader/node_shader_math.cc, safe DIVIDE).
 MATH = {
@@ -25,21 +26,6 @@ MATH = {
     "GREATER_THAN": lambda a, b: (a > b).astype(np.float64),
 }
 
-PAPER = {  # (Fa, Fb) of Porter & Duff 1984, table 1
-    "clear": (lambda s, d: 0 * s, lambda s, d: 0 * s),
-    "src": (lambda s, d: 1 + 0 * s, lambda s, d: 0 * s),
-    "dst": (lambda s, d: 0 * s, lambda s, d: 1 + 0 * s),
-    "src_over": (lambda s, d: 1 + 0 * s, lambda s, d: 1 - s),
-    "dst_over": (lambda s, d: 1 - d, lambda s, d: 1 + 0 * s),
-    "src_in": (lambda s, d: d, lambda s, d: 0 * s),
-    "dst_in": (lambda s, d: 0 * s, lambda s, d: s),
-    "src_out": (lambda s, d: 1 - d, lambda s, d: 0 * s),
-    "dst_out": (lambda s, d: 0 * s, lambda s, d: 1 - s),
-    "src_atop": (lambda s, d: d, lambda s, d: 1 - s),
-    "dst_atop": (lambda s, d: 1 - d, lambda s, d: s),
-    "xor": (lambda s, d: 1 - d, lambda s, d: 1 - s),
-    "plus": (lambda s, d: 1 + 0 * s, lambda s, d: 1 + 0 * s),
-}
 
 RNG = np.random.default_rng(7)
 SRC = RNG.uniform(-0.5, 3.0, (64, 4))

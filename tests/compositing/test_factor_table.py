@@ -8,28 +8,14 @@ import numpy as np
 import pytest
 
 from compositing.factors import ALL_OPERATORS, OPERATORS, PORTER_DUFF, evaluate
+from tests.porter_duff_paper import PAPER, TWELVE
 
 ALPHAS = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
 SA, DA = (a.ravel() for a in np.meshgrid(ALPHAS, ALPHAS))
 
-PAPER = {  # operator: (Fa, Fb) as functions of (sa, da), Porter & Duff table 1
-    "clear": (lambda s, d: 0 * s, lambda s, d: 0 * s),
-    "src": (lambda s, d: 1 + 0 * s, lambda s, d: 0 * s),
-    "dst": (lambda s, d: 0 * s, lambda s, d: 1 + 0 * s),
-    "src_over": (lambda s, d: 1 + 0 * s, lambda s, d: 1 - s),
-    "dst_over": (lambda s, d: 1 - d, lambda s, d: 1 + 0 * s),
-    "src_in": (lambda s, d: d, lambda s, d: 0 * s),
-    "dst_in": (lambda s, d: 0 * s, lambda s, d: s),
-    "src_out": (lambda s, d: 1 - d, lambda s, d: 0 * s),
-    "dst_out": (lambda s, d: 0 * s, lambda s, d: 1 - s),
-    "src_atop": (lambda s, d: d, lambda s, d: 1 - s),
-    "dst_atop": (lambda s, d: 1 - d, lambda s, d: s),
-    "xor": (lambda s, d: 1 - d, lambda s, d: 1 - s),
-}
-
 
 def test_twelve_operators_in_paper_order():
-    assert OPERATORS == tuple(PAPER)
+    assert OPERATORS == TWELVE
 
 
 @pytest.mark.parametrize("name", OPERATORS)
