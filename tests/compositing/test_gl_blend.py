@@ -15,25 +15,7 @@ from hypothesis import strategies as st
 
 from compositing.factors import ALL_OPERATORS, PORTER_DUFF
 from compositing.gl_blend import GL_BLEND_EQUATIONS, GL_BLEND_FACTORS, gl_blend, gl_factors
-
-FACTOR_NAMES = (
-    "ZERO",
-    "ONE",
-    "SRC_COLOR",
-    "ONE_MINUS_SRC_COLOR",
-    "DST_COLOR",
-    "ONE_MINUS_DST_COLOR",
-    "SRC_ALPHA",
-    "ONE_MINUS_SRC_ALPHA",
-    "DST_ALPHA",
-    "ONE_MINUS_DST_ALPHA",
-    "CONSTANT_COLOR",
-    "ONE_MINUS_CONSTANT_COLOR",
-    "CONSTANT_ALPHA",
-    "ONE_MINUS_CONSTANT_ALPHA",
-    "SRC_ALPHA_SATURATE",
-)
-EQUATION_NAMES = ("FUNC_ADD", "FUNC_SUBTRACT", "FUNC_REVERSE_SUBTRACT", "MIN", "MAX")
+from tests.gl_spec import EQUATION_NAMES, FACTOR_NAMES
 
 
 def spec_factor(name, s, d, c):

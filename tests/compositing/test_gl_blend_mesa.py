@@ -21,27 +21,12 @@ import pytest
 
 from compositing.gl_blend import gl_blend, gl_factors
 from oracles.egl import EGLUnavailable, gl_context
+from tests.gl_spec import EQUATION_NAMES, FACTOR_NAMES
 
 pytestmark = pytest.mark.mesa
 
-FACTORS = (
-    "ZERO",
-    "ONE",
-    "SRC_COLOR",
-    "ONE_MINUS_SRC_COLOR",
-    "DST_COLOR",
-    "ONE_MINUS_DST_COLOR",
-    "SRC_ALPHA",
-    "ONE_MINUS_SRC_ALPHA",
-    "DST_ALPHA",
-    "ONE_MINUS_DST_ALPHA",
-    "CONSTANT_COLOR",
-    "ONE_MINUS_CONSTANT_COLOR",
-    "CONSTANT_ALPHA",
-    "ONE_MINUS_CONSTANT_ALPHA",
-    "SRC_ALPHA_SATURATE",
-)
-EQUATIONS = ("FUNC_ADD", "FUNC_SUBTRACT", "FUNC_REVERSE_SUBTRACT", "MIN", "MAX")
+FACTORS = FACTOR_NAMES
+EQUATIONS = EQUATION_NAMES
 COMBINATIONS = list(itertools.product(FACTORS, FACTORS, EQUATIONS))
 PIXELS = 256
 STEP = 1 / 255
