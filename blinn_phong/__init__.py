@@ -11,7 +11,7 @@ row 0 at the top.
 from blinn_phong.frame import Fog, ShadowOptions
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
 from blinn_phong.planner import Choice, Plan, plan
-from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest, visible_fragments
+from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
 from blinn_phong.render import (
     FragmentShading,
     PreparedScene,
@@ -36,6 +36,7 @@ from blinn_phong.scene import (
     orthographic_matrix,
     perspective_matrix,
 )
+from blinn_phong.visibility import visible_fragments
 
 __all__ = [
     "AmbientLight",

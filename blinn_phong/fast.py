@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from blinn_phong.raster import Fragments, _setup_triangles
+from blinn_phong.raster import Fragments, _setup_triangles, _TriangleSetup
 
 __all__ = [
     "numba_available",
@@ -45,6 +45,41 @@ def numba_available() -> bool:
 def _kernel() -> object:  # a numba dispatcher
     import numba
 
+    @numba.njit(inline="always", cache=True)
+    def sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z):  # pragma: no cover - compiled
+        """Window depth of sub-triangle t at fine sample (px, py), or -1 where not covered / beyond far.
+
+        The edge tests with the top-left rule and the exact (unsnapped) barycentrics of
+        raster._exact_barycentrics, then depth linear in screen space, clamped at 0.
+        """
+        cx = px + 0.5
+        cy = py + 0.5
+        e0 = a[t, 0] * cx + (b[t, 0] * cy + c[t, 0])
+        if e0 < 0 or (e0 == 0 and not top_left[t, 0]):
+            return -1.0
+        e1 = a[t, 1] * cx + (b[t, 1] * cy + c[t, 1])
+        if e1 < 0 or (e1 == 0 and not top_left[t, 1]):
+            return -1.0
+        e2 = a[t, 2] * cx + (b[t, 2] * cy + c[t, 2])
+        if e2 < 0 or (e2 == 0 and not top_left[t, 2]):
+            return -1.0
+        ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+            ye[t, 1] - ye[t, 0]
+        )
+        if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+            l0 = ((xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])) / ex_area
+            l1 = ((xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])) / ex_area
+            l2 = ((xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])) / ex_area
+        else:
+            abs_area = abs(area[t])
+            l0 = e0 / abs_area
+            l1 = e1 / abs_area
+            l2 = e2 / abs_area
+        depth = l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2]
+        if depth > 1.0:
+            return -1.0
+        return max(depth, 0.0)
+
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
         n_bands, fine_w, fine_h, selected, x0, x1, y0, y1, a, b, c, top_left, xe, ye, area, z, source
@@ -62,52 +97,75 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
-                # Exact (unsnapped) barycentric set-up, as _exact_barycentrics.
-                ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-                    ye[t, 1] - ye[t, 0]
-                )
-                exact = ex_area * area[t] > 0 and abs(ex_area) > 1e-12
-                abs_area = abs(area[t])
                 for py in range(lo, hi + 1):
-                    cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        cx = px + 0.5
-                        e0 = a[t, 0] * cx + (b[t, 0] * cy + c[t, 0])
-                        if e0 < 0 or (e0 == 0 and not top_left[t, 0]):
+                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        if depth < 0.0:
                             continue
-                        e1 = a[t, 1] * cx + (b[t, 1] * cy + c[t, 1])
-                        if e1 < 0 or (e1 == 0 and not top_left[t, 1]):
-                            continue
-                        e2 = a[t, 2] * cx + (b[t, 2] * cy + c[t, 2])
-                        if e2 < 0 or (e2 == 0 and not top_left[t, 2]):
-                            continue
-                        if exact:
-                            l0 = (
-                                (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1])
-                                - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
-                            ) / ex_area
-                            l1 = (
-                                (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2])
-                                - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
-                            ) / ex_area
-                            l2 = (
-                                (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0])
-                                - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
-                            ) / ex_area
-                        else:
-                            l0 = e0 / abs_area
-                            l1 = e1 / abs_area
-                            l2 = e2 / abs_area
-                        depth = l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2]
-                        if depth > 1.0:
-                            continue
-                        depth = max(depth, 0.0)
                         key = py * fine_w + px
                         old = winner[key]
                         if depth < zbuf[key] or (depth == zbuf[key] and old >= 0 and source[t] < source[old]):
                             zbuf[key] = depth
                             winner[key] = t
-        return winner
+        return winner, zbuf
+
+    @numba.njit(parallel=True, cache=True, fastmath=False)
+    def in_front(
+        fill,
+        n_bands,
+        fine_w,
+        fine_h,
+        k,
+        width,
+        selected,
+        x0,
+        x1,
+        y0,
+        y1,
+        a,
+        b,
+        c,
+        top_left,
+        xe,
+        ye,
+        area,
+        z,
+        zbuf,
+        winner,
+        counts,
+        offsets,
+        out_sub,
+        out_fine,
+    ):  # pragma: no cover - compiled
+        # Transparent fragments in front of the opaque depth (GL_LESS against 1.0 where empty),
+        # counted per sample key (fill=False) or written into their sample's slots (fill=True),
+        # in the order of ``selected`` (draw order). Bands own fine rows, hence sample keys.
+        band_h = (fine_h + n_bands - 1) // n_bands
+        n_samples = k * k
+        for band in numba.prange(n_bands):
+            r0 = band * band_h
+            r1 = min(fine_h, r0 + band_h) - 1
+            for s in range(selected.shape[0]):
+                t = selected[s]
+                lo = max(y0[t], r0)
+                hi = min(y1[t], r1)
+                if lo > hi:
+                    continue
+                for py in range(lo, hi + 1):
+                    for px in range(x0[t], x1[t] + 1):
+                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        if depth < 0.0:
+                            continue
+                        fine = py * fine_w + px
+                        limit = zbuf[fine] if winner[fine] >= 0 else 1.0
+                        if not depth < limit:
+                            continue
+                        key = ((py // k) * width + px // k) * n_samples + (py % k) * k + px % k
+                        if fill:
+                            slot = offsets[key] + counts[key]
+                            out_sub[slot] = t
+                            out_fine[slot] = fine
+                        counts[key] += 1
 
     @numba.njit(parallel=True, cache=True)
     def finish(
@@ -168,7 +226,7 @@ def _kernel() -> object:  # a numba dispatcher
             pixel[i] = (fy // k) * width + fx // k
             sample[i] = (fy % k) * k + fx % k
 
-    return zbuffer, finish
+    return zbuffer, finish, in_front
 
 
 def visible_fragments_compiled(
@@ -191,8 +249,8 @@ def visible_fragments_compiled(
     fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
     threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
     n_bands = max(1, min(fine_h, 4 * threads))
-    zbuffer, finish = _kernel()
-    winner = zbuffer(
+    zbuffer, finish, _ = _kernel()
+    winner, _ = zbuffer(
         n_bands,
         fine_w,
         fine_h,
@@ -363,4 +421,390 @@ def scatter_samples_compiled(
         np.ones(n_keys, np.float32),
     )
     _scatter_kernel()(keys, rgb, alpha, ambient, diffuse, specular, normal, depth, *out)
+    return out
+
+
+def _bands(fine_h: int) -> int:
+    threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
+    return max(1, min(fine_h, 4 * threads))
+
+
+def frame_fragments_compiled(
+    setup: _TriangleSetup, sub_opaque: np.ndarray | None
+) -> tuple[Fragments, int, np.ndarray, np.ndarray]:
+    """The fragments a frame can see, by compiled loops (twin of the numpy visibility stage).
+
+    Args:
+        setup: :func:`blinn_phong.raster._setup_triangles` of the frame.
+        sub_opaque: (S,) bool per sub-triangle, True where it is opaque (writes depth); None:
+            every triangle is opaque (the plain z-buffer).
+
+    Returns:
+        ``(fragments, n_opaque, opaque_of, offsets)`` as
+        :class:`blinn_phong.visibility.FrameFragments` holds them: the nearest opaque
+        fragment of every covered sample (ordered by sample key), then the transparent
+        fragments in front of the opaque depth, grouped by sample key and in draw order inside
+        a sample. No array of all rasterized fragments is built: memory is the per-sample
+        z-buffer plus the fragments that survive the depth test.
+    """
+    fine_w, fine_h, k = setup.width * setup.k, setup.height * setup.k, setup.k
+    n_samples = k * k
+    n_keys = setup.width * setup.height * n_samples
+    n_bands = _bands(fine_h)
+    zbuffer, finish, in_front = _kernel()
+    sel = setup.selected.astype(np.int64)
+    if sub_opaque is None:
+        op_sel, tr_sel = sel, np.zeros(0, np.int64)
+    else:
+        flags = np.asarray(sub_opaque, dtype=bool)[sel]
+        op_sel, tr_sel = sel[flags], sel[~flags]
+        tr_sel = tr_sel[np.argsort(setup.source[tr_sel], kind="stable")]  # draw order = source order
+    geometry = (
+        setup.x0, setup.x1, setup.y0, setup.y1, setup.a, setup.b, setup.c,
+        setup.top_left, setup.x_exact, setup.y_exact, setup.area, setup.z,
+    )  # fmt: skip
+    winner, zbuf = zbuffer(n_bands, fine_w, fine_h, op_sel, *geometry, setup.source)
+    fine_key = np.flatnonzero(winner >= 0)
+    sub = winner[fine_key]
+    offsets = np.zeros(n_keys + 1, np.int64)
+    t_sub = t_fine = np.zeros(0, np.int64)
+    if len(tr_sel):
+        counts = np.zeros(n_keys, np.int64)
+        args = (n_bands, fine_w, fine_h, k, setup.width, tr_sel, *geometry, zbuf, winner, counts)
+        in_front(False, *args, offsets, t_sub, t_fine)
+        np.cumsum(counts, out=offsets[1:])
+        t_sub = np.empty(int(offsets[-1]), np.int64)
+        t_fine = np.empty(int(offsets[-1]), np.int64)
+        counts[:] = 0
+        in_front(True, *args, offsets, t_sub, t_fine)
+    del winner, zbuf
+    n_opaque = len(fine_key)
+    all_fine = np.concatenate([fine_key, t_fine])
+    all_sub = np.concatenate([sub, t_sub])
+    n = len(all_fine)
+    depth = np.empty(n)
+    bary = np.empty((n, 3))
+    pixel = np.empty(n, np.int64)
+    sample = np.empty(n, np.int64)
+    finish(
+        all_fine, all_sub, fine_w, k, setup.width, setup.x_exact, setup.y_exact, setup.area,
+        setup.a, setup.b, setup.c, setup.z, setup.w, setup.weights, depth, bary, pixel, sample,
+    )  # fmt: skip
+    frags = Fragments(
+        setup.width,
+        setup.height,
+        n_samples,
+        pixel,
+        sample,
+        depth,
+        setup.source[all_sub],
+        bary,
+        setup.front[all_sub],
+    )
+    if k > 1 and n_opaque:  # fine keys -> sample keys: reorder the opaque winners
+        order = np.argsort(frags.sample_key[:n_opaque], kind="stable")
+        frags = frags.subset(np.concatenate([order, np.arange(n_opaque, n)]))
+    opaque_of = np.full(n_keys, -1, np.int64)
+    opaque_of[frags.sample_key[:n_opaque]] = np.arange(n_opaque)
+    return frags, n_opaque, opaque_of, offsets
+
+
+#: Fog modes of the compiled colour kernel (index = code), as :data:`blinn_phong.fog.FOG_MODES`.
+_FOG_CODES = ("linear", "exp", "exp2")
+#: Transparency models of the compiled colour kernel (index = code).
+_MODEL_CODES = ("partial_occlusion", "emission", "absorption")
+
+
+@functools.lru_cache(maxsize=1)
+def _colour_kernel() -> object:  # a numba dispatcher
+    import math
+
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def colours(
+        tri,
+        bary,
+        triangles,
+        eye_pos,
+        eye_n,
+        side,
+        rgb,
+        alpha_in,
+        specular,
+        kg,
+        washout,
+        model,
+        fog_mode,
+        fog_radial,
+        fog_par,
+        fog_colour,
+        out_rgba,
+        out_alpha,
+    ):  # pragma: no cover - compiled
+        for i in numba.prange(tri.shape[0]):
+            t = tri[i]
+            v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+            b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
+            s = side[i]
+            alpha = alpha_in[i]
+            if kg[s, 0] > 0.0:  # Kay–Greenberg: opacity 1 − t(|N_z|) of the unit eye-space normal
+                nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                big = max(abs(nx), abs(ny), abs(nz))
+                unit_z = 0.0
+                if big > 0.0:
+                    sx, sy, sz = nx / big, ny / big, nz / big
+                    unit_z = sz / math.sqrt(sx * sx + sy * sy + sz * sz)
+                m = min(abs(min(max(unit_z, -1.0), 1.0)), 1.0)
+                alpha = 1.0 - (kg[s, 1] + (kg[s, 2] - kg[s, 1]) * (1.0 - (1.0 - m) ** kg[s, 3]))
+            if washout[s]:  # specular wash-out: min(1, (1 − t) + luminance(specular))
+                lum = specular[i, 0] * 0.2126 + specular[i, 1] * 0.7152 + specular[i, 2] * 0.0722
+                alpha = min(1.0, (1.0 - (1.0 - alpha)) + max(lum, 0.0))
+            out_alpha[i] = alpha
+            code = model[s]
+            for ch in range(3):  # (α·c, α) partial occlusion, (α·c, 0) emission, (c, α) absorption
+                out_rgba[i, ch] = rgb[i, ch] if code == 2 else alpha * rgb[i, ch]
+            out_rgba[i, 3] = 0.0 if code == 1 else alpha
+            if fog_mode >= 0:  # OpenGL 2.1 §3.10 on premultiplied colour: f·rgb + (1 − f)·α·C_f
+                px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
+                dist = math.sqrt(px * px + py * py + pz * pz) if fog_radial else abs(pz)
+                if fog_mode == 0:
+                    f = (fog_par[2] - dist) / (fog_par[2] - fog_par[1])
+                elif fog_mode == 1:
+                    f = math.exp(-(fog_par[0] * dist))
+                else:
+                    dc = fog_par[0] * dist
+                    f = math.exp(-(dc * dc))
+                f = min(max(f, 0.0), 1.0)
+                a = out_rgba[i, 3]
+                for ch in range(3):
+                    out_rgba[i, ch] = f * out_rgba[i, ch] + (1.0 - f) * a * fog_colour[ch]
+
+    return colours
+
+
+def fragment_colours_compiled(
+    triangle: np.ndarray,
+    bary: np.ndarray,
+    triangles: np.ndarray,
+    eye_position: np.ndarray,
+    eye_normal: np.ndarray,
+    side: np.ndarray,
+    rgb: np.ndarray,
+    alpha: np.ndarray,
+    specular: np.ndarray,
+    side_params: tuple[np.ndarray, np.ndarray, np.ndarray],
+    fog: tuple[str, bool, tuple[float, float, float], np.ndarray] | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled twin of :func:`blinn_phong.resolve.fragment_colours` (same formulas, one pass).
+
+    ``side_params`` are per material side: (n, 4) Kay–Greenberg ``(on, t_min, t_max, power)``,
+    (n,) wash-out flags and (n,) transparency-model codes; ``fog`` is ``(mode, radial,
+    (density, start, end), colour)`` or None. Returns (N, 4) premultiplied RGBA and (N,) opacity.
+    """
+    n = len(triangle)
+    out_rgba = np.empty((n, 4))
+    out_alpha = np.empty(n)
+    kg, washout, model = side_params
+    if fog is None:
+        mode, radial, par, colour = -1, False, np.zeros(3), np.zeros(3)
+    else:
+        mode = _FOG_CODES.index(fog[0])
+        radial, par, colour = bool(fog[1]), np.asarray(fog[2], np.float64), np.asarray(fog[3], np.float64)
+    _colour_kernel()(
+        np.ascontiguousarray(triangle, dtype=np.int64),
+        np.ascontiguousarray(bary),
+        np.ascontiguousarray(triangles, dtype=np.int64),
+        np.ascontiguousarray(eye_position),
+        np.ascontiguousarray(eye_normal),
+        np.ascontiguousarray(side, dtype=np.int64),
+        np.ascontiguousarray(rgb),
+        np.ascontiguousarray(alpha, dtype=np.float64),
+        np.ascontiguousarray(specular),
+        kg,
+        washout,
+        model,
+        mode,
+        radial,
+        par,
+        colour,
+        out_rgba,
+        out_alpha,
+    )
+    return out_rgba, out_alpha
+
+
+#: Transparency resolves of the compiled kernel: 0 none (z-buffer), 1 front to back by a sort
+#: key (A-buffer, depth peeling, the draw orders), 2 weighted blended.
+RESOLVE_CODES = {"zbuffer": 0, "front_to_back": 1, "weighted_blended": 2}
+
+
+@functools.lru_cache(maxsize=1)
+def _resolve_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def resolve(
+        width,
+        height,
+        n_samples,
+        code,
+        max_layers,
+        max_list,
+        n_opaque,
+        opaque_of,
+        offsets,
+        sort_key,
+        weight,
+        rgba,
+        alpha,
+        ambient,
+        diffuse,
+        specular,
+        normal,
+        depth,
+        has_vis,
+        vis_mean,
+        o_rgba,
+        o_amb,
+        o_dif,
+        o_spe,
+        o_nrm,
+        o_depth,
+        o_shadow,
+    ):  # pragma: no cover - compiled
+        for row in numba.prange(height):
+            order = np.empty(max(max_list, 1), np.int64)
+            res = np.empty(4)
+            acc = np.empty(4)
+            for col in range(width):
+                sum_c = np.zeros(4)
+                sum_a = np.zeros(3)
+                sum_d = np.zeros(3)
+                sum_s = np.zeros(3)
+                sum_n = np.zeros(3)
+                sum_v = 0.0
+                zmin = np.float32(1.0)
+                for smp in range(n_samples):
+                    key = (row * width + col) * n_samples + smp
+                    o = opaque_of[key]
+                    for ch in range(4):
+                        res[ch] = rgba[o, ch] if o >= 0 else 0.0
+                    start = offsets[key]
+                    count = offsets[key + 1] - start
+                    nearest = o
+                    if count > 0:
+                        nearest = n_opaque + start
+                        for j in range(1, count):  # the first of the smallest depths (draw order)
+                            if depth[n_opaque + start + j] < depth[nearest]:
+                                nearest = n_opaque + start + j
+                    if count > 0 and code == 1:
+                        for j in range(count):  # insertion sort by (sort key, draw position): stable
+                            f = n_opaque + start + j
+                            pos = j
+                            while pos > 0 and sort_key[order[pos - 1]] > sort_key[f]:
+                                order[pos] = order[pos - 1]
+                                pos -= 1
+                            order[pos] = f
+                        for ch in range(4):
+                            acc[ch] = 0.0
+                        for j in range(min(count, max_layers)):  # B over A: the farther one goes under
+                            f = order[j]
+                            cover = 1.0 - acc[3]
+                            for ch in range(4):
+                                acc[ch] = rgba[f, ch] * cover + acc[ch]
+                        cover = 1.0 - acc[3]  # src over the opaque sample
+                        for ch in range(4):
+                            res[ch] = acc[ch] + res[ch] * cover
+                    elif count > 0 and code == 2:
+                        for ch in range(4):
+                            acc[ch] = 0.0
+                        reveal = 1.0
+                        for j in range(count):  # ONE, ONE accumulation and the product of (1 − α)
+                            f = n_opaque + start + j
+                            for ch in range(4):
+                                acc[ch] += rgba[f, ch] * weight[f]
+                            reveal *= 1.0 - rgba[f, 3]
+                        cover = 1.0 - reveal
+                        safe = max(acc[3], 1e-5)
+                        for ch in range(3):
+                            res[ch] = acc[ch] / safe * cover + res[ch] * (1.0 - cover)
+                        res[3] = cover + res[3] * (1.0 - cover)
+                    for ch in range(4):
+                        sum_c[ch] += np.float32(res[ch])
+                    if nearest >= 0:
+                        a = alpha[nearest]
+                        for ch in range(3):
+                            sum_a[ch] += np.float32(ambient[nearest, ch] * a)
+                            sum_d[ch] += np.float32(diffuse[nearest, ch] * a)
+                            sum_s[ch] += np.float32(specular[nearest, ch] * a)
+                            sum_n[ch] += np.float32(normal[nearest, ch])
+                        if has_vis:
+                            sum_v += np.float32(vis_mean[nearest] * a)
+                        zmin = min(zmin, np.float32(depth[nearest]))
+                for ch in range(4):  # the box filter: the mean, as numpy's (sum, then divide)
+                    o_rgba[row, col, ch] = sum_c[ch] / n_samples
+                for ch in range(3):
+                    o_amb[row, col, ch] = sum_a[ch] / n_samples
+                    o_dif[row, col, ch] = sum_d[ch] / n_samples
+                    o_spe[row, col, ch] = sum_s[ch] / n_samples
+                    o_nrm[row, col, ch] = sum_n[ch] / n_samples
+                o_depth[row, col] = zmin
+                if has_vis:
+                    o_shadow[row, col, 0] = sum_v / n_samples
+
+    return resolve
+
+
+def resolve_frame_compiled(
+    width: int,
+    height: int,
+    n_samples: int,
+    code: int,
+    max_layers: int,
+    n_opaque: int,
+    opaque_of: np.ndarray,
+    offsets: np.ndarray,
+    sort_key: np.ndarray,
+    weight: np.ndarray,
+    rgba: np.ndarray,
+    alpha: np.ndarray,
+    ambient: np.ndarray,
+    diffuse: np.ndarray,
+    specular: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+    vis_mean: np.ndarray | None,
+) -> tuple[np.ndarray, ...]:
+    """Compiled twin of :func:`blinn_phong.resolve.resolve_frame`: transparency resolve + box filter.
+
+    One pass per pixel (rows in parallel; every pixel is written by one thread, and its samples
+    are summed in sample order, so the result does not depend on the thread count). Returns
+    float32 ``(rgba, ambient, diffuse, specular, normal_sum_mean, depth, shadow)`` images; the
+    normal is the mean of the samples' unit normals (not renormalised).
+    """
+    f32 = np.float32
+    out = (
+        np.empty((height, width, 4), f32),
+        np.empty((height, width, 3), f32),
+        np.empty((height, width, 3), f32),
+        np.empty((height, width, 3), f32),
+        np.empty((height, width, 3), f32),
+        np.empty((height, width), f32),
+        np.zeros((height, width, 1), f32) if vis_mean is not None else np.zeros((0, 0, 1), f32),
+    )
+    max_list = int(np.diff(offsets).max()) if len(offsets) > 1 else 0
+    _resolve_kernel()(
+        width, height, n_samples, code, max_layers, max_list, n_opaque, opaque_of, offsets,
+        np.ascontiguousarray(sort_key, dtype=np.float64), np.ascontiguousarray(weight, dtype=np.float64),
+        np.ascontiguousarray(rgba), np.ascontiguousarray(alpha), np.ascontiguousarray(ambient),
+        np.ascontiguousarray(diffuse), np.ascontiguousarray(specular), np.ascontiguousarray(normal),
+        np.ascontiguousarray(depth), vis_mean is not None,
+        np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean),
+        *out,
+    )  # fmt: skip
     return out

@@ -1,48 +1,24 @@
-"""Effects inside :func:`blinn_phong.render`: the plan, the caller's overrides and the frame.
+"""The plan of a frame: the planner's choices, the caller's overrides, and the effect options.
 
 :func:`blinn_phong.render` asks :func:`blinn_phong.planner.plan` for one method per concern and
-replaces a concern's choice only where the caller set one (:func:`frame_plan`). When the final
-plan needs no effect — transparency ``zbuffer`` with no per-fragment transparency model,
-every light's shadow ``none``, no fog — the frame is the plain z-buffer pipeline of
-:mod:`blinn_phong.render`, unchanged. Otherwise :func:`render_effects` runs the order of the
-effects issue on the same stages:
-
-1. rasterize every fragment (:func:`blinn_phong.raster.rasterize`);
-2. find the fragments that can be seen: the nearest opaque one per sample and the transparent
-   ones in front of it (the same depth tests :func:`blinn_phong.oit.transparency_pass` makes);
-3. per light, the visibility of those fragments by the chosen shadow method, once per light
-   and frame (:func:`blinn_phong.shadows.light_visibility`, or
-   :func:`blinn_phong.raytrace.area_light_visibility` for soft shadows);
-4. shade them with that visibility (:func:`blinn_phong.render.shade_fragments`), turn each into
-   a premultiplied fragment by its material's transparency model (Kay–Greenberg opacity and
-   specular wash-out included), then fog it (:func:`blinn_phong.fog.apply_fog`: per fragment,
-   before blending, as OpenGL does);
-5. resolve opaque and transparent fragments with the chosen transparency method
-   (:func:`blinn_phong.oit.transparency_pass`) and box-filter the samples.
-
-The depth, normal and light-pass buffers describe the nearest surface of each sample (opaque or
-transparent), exactly as the plain pipeline does; light passes carry the shadowing, not the fog.
+replaces a concern's choice only where the caller set one (:func:`frame_plan`); :class:`Fog` and
+:class:`ShadowOptions` are the options it accepts. The frame itself — the same stages with or
+without effects — is :mod:`blinn_phong.pipeline`; this module decides, it does not render.
 """
 
 from __future__ import annotations
 
 import math
-import time
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from blinn_phong._checks import colour3, number
-from blinn_phong.fog import FOG_MODES, apply_fog, eye_distance
-from blinn_phong.normals import normalize
-from blinn_phong.oit import TRANSPARENCY_METHODS, transparency_pass
+from blinn_phong.fog import FOG_MODES
+from blinn_phong.oit import TRANSPARENCY_METHODS
 from blinn_phong.planner import Choice, Plan, plan
-from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.render import FragmentShading, PreparedScene, resolve_nearest_buffers, resolve_samples
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
-from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS, light_visibility
-from blinn_phong.transparency import kay_greenberg_transparency, transparent_fragment, washed_out_opacity
+from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS
 
 __all__ = [
     "SHADOW_CHOICES",
@@ -53,7 +29,6 @@ __all__ = [
     "embree_available",
     "frame_plan",
     "needs_effects",
-    "render_effects",
     "scene_with_planned_shading",
 ]
 
@@ -65,7 +40,6 @@ SHADOW_CHOICES: tuple[str, ...] = (*SHADOW_METHODS, "soft")
 #: McGuire & Bavoil's eq. 10 and the depth-free α weight.
 WBOIT_WEIGHTS: tuple[str, ...] = ("eq10", "constant")
 _AUTO = (None, "auto")
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. ITU-R BT.709 luminance of linear RGB
 
 
 @dataclass(frozen=True)
@@ -393,230 +367,6 @@ def needs_effects(scene: Scene, the_plan: Plan, fog: Fog | None) -> bool:
         and (m.transparency_model != "partial_occlusion" or m.kay_greenberg is not None or m.specular_washout)
         for m in materials
     )
-
-
-# --------------------------------------------------------------------------- the frame
-
-
-def _world_triangles(scene: Scene) -> np.ndarray:
-    """(T, 3, 3) world-space triangles in scene order, as :func:`blinn_phong.raytrace.world_triangles`.
-
-    Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
-    :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
-    """
-    parts = [
-        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
-        for m in scene.meshes
-    ]
-    return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
-
-
-def _soft_visibility(
-    light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
-) -> np.ndarray:
-    """Area-light visibility: a square of side ``2·radius`` at the light, facing the receivers' centroid."""
-    from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
-
-    radius = float(params["radius"])  # type: ignore[arg-type]
-    centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
-    axis = points.mean(axis=0) - centre
-    axis /= max(float(np.linalg.norm(axis)), 1e-12)
-    helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
-    return area_light_visibility(
-        ray_scene,
-        points,
-        normals,
-        centre - radius * (u + v),
-        2 * radius * u,
-        2 * radius * v,
-        samples_per_axis=int(params["samples_per_axis"]),  # type: ignore[call-overload]
-        offset=float(params["offset"]),  # type: ignore[arg-type]
-    )
-
-
-def _side_tables(scene: Scene) -> tuple[list[Material], np.ndarray]:
-    """Materials indexed ``2·mesh + back`` (back faces under two-sided lighting), and their opacity flag."""
-    materials = [m for mesh in scene.meshes for m in (mesh.material, mesh.back_material or mesh.material)]
-    opaque = np.array([not m.transparent for m in materials], dtype=bool)
-    return materials, opaque
-
-
-def _fragment_rgba(
-    shaded: FragmentShading,
-    eye_normal_z: np.ndarray,
-    side: np.ndarray,
-    materials: list[Material],
-) -> tuple[np.ndarray, np.ndarray]:
-    """Premultiplied fragment RGBA by each material's transparency model, and the opacity used.
-
-    Opacity is the material's, or Kay–Greenberg's ``1 − t(N_z)``; wash-out raises it to
-    ``min(1, α + luminance(specular))``. The fragment is
-    :func:`blinn_phong.transparency.transparent_fragment` of ``Material.transparency_model``
-    (partial occlusion ``(α·c, α)``, emission ``(α·c, 0)``, absorption ``(c, α)``); opaque
-    materials give ``(c, 1)``.
-    """
-    alpha = shaded.alpha.copy()
-    rgba = np.empty((len(alpha), 4))
-    for s in np.unique(side):
-        material = materials[s]
-        here = side == s
-        if material.kay_greenberg is not None:
-            t_min, t_max, power = material.kay_greenberg
-            alpha[here] = 1.0 - kay_greenberg_transparency(
-                np.clip(eye_normal_z[here], -1.0, 1.0), t_min, t_max, power
-            )
-        if material.specular_washout:
-            highlight = np.maximum(shaded.specular[here] @ _LUMINANCE, 0.0)
-            alpha[here] = washed_out_opacity(1.0 - alpha[here], highlight)
-        model = material.transparency_model if material.transparent else "partial_occlusion"
-        rgba[here] = transparent_fragment(shaded.rgb[here], alpha[here], model)
-    return rgba, alpha
-
-
-def render_effects(
-    prepared: PreparedScene,
-    width: int,
-    height: int,
-    the_plan: Plan,
-    *,
-    shade: Callable[..., FragmentShading],
-    samples: int = 1,
-    cull_backfaces: bool = False,
-    fog: Fog | None = None,
-    seconds: dict[str, float],
-    report: Callable[[str, float], None],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray], int]:
-    """Render ``prepared`` with the transparency and shadow methods of ``the_plan`` and ``fog``.
-
-    Args:
-        prepared: from :func:`blinn_phong.render.prepare_scene`.
-        width: image width in pixels.
-        height: image height in pixels.
-        the_plan: from :func:`frame_plan` (choices carry their parameters).
-        shade: ``shade(fragments, visibility) -> FragmentShading`` — the render's
-            :func:`~blinn_phong.render.shade_fragments` with its shading and engine bound.
-        samples: k² samples per pixel, as for :func:`blinn_phong.render.render`.
-        cull_backfaces: discard clockwise triangles.
-        fog: per-fragment fog, or None.
-        seconds: per-stage wall times are added to this dict.
-        report: ``report(stage, fraction_done)``.
-
-    Returns:
-        ``(rgba, depth, normal, passes, shaded)``: (H, W, 4) float32 premultiplied linear RGBA,
-        (H, W) float32 nearest window depth (1 = empty), (H, W, 3) float32 world normal of the
-        nearest surface, ``ambient``/``diffuse``/``specular`` (H, W, 3) float32 premultiplied
-        passes of the nearest surface (plus ``shadow`` (H, W, 1), the mean light visibility
-        weighted like them, when a light casts shadows), and the number of fragments shaded.
-    """
-    scene = prepared.scene
-    t = time.perf_counter()
-    fragments = rasterize(
-        prepared.clip, prepared.triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
-    )
-    seconds["visibility"] = time.perf_counter() - t
-    report("visibility", 0.3)
-
-    # Which fragments can be seen: the opaque z-buffer, then transparent ones in front of it.
-    materials, side_opaque = _side_tables(scene)
-    two_sided = scene.light_model.two_sided
-    back = ~fragments.front_facing if two_sided else np.zeros(len(fragments), dtype=bool)
-    side = 2 * prepared.triangle_mesh[fragments.triangle] + back
-    method = the_plan.transparency.method
-    opaque = np.ones(len(fragments), dtype=bool) if method == "zbuffer" else side_opaque[side]
-    key = fragments.sample_key
-    n_keys = width * height * fragments.samples
-    opaque_depth = np.ones(n_keys)
-    np.minimum.at(opaque_depth, key[opaque], fragments.depth[opaque])
-    seen = np.where(opaque, fragments.depth == opaque_depth[key], fragments.depth < opaque_depth[key])
-    needed = np.flatnonzero(seen)
-    row_of = np.full(len(fragments), -1, dtype=np.int64)
-    row_of[needed] = np.arange(len(needed))
-    visible = fragments.subset(needed)
-    eye = interpolate(visible, prepared.triangles, prepared.eye_position)
-
-    # Shadows: per light, the visibility of every fragment that can be seen, once.
-    t = time.perf_counter()
-    lit = [
-        (light, c)
-        for light, c in zip(scene.lights, the_plan.shadows, strict=True)
-        if not isinstance(light, AmbientLight)
-    ]
-    visibility = None
-    if any(c.method != "none" for _, c in lit):
-        world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
-        normal = prepared.face_world_normal[visible.triangle]
-        tris = _world_triangles(scene)
-        ray_scene: list[object] = []
-        columns = []
-        for light, c in lit:
-            if c.method == "soft":
-                if not ray_scene:
-                    from blinn_phong.raytrace import RayScene  # Embree: imported only when used
-
-                    ray_scene.append(RayScene(tris))
-                columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
-            else:
-                columns.append(light_visibility(c.method, light, tris, world, normal, **c.params))  # type: ignore[arg-type]
-        visibility = np.stack(columns, axis=1) if columns else None
-    seconds["shadows"] = time.perf_counter() - t
-    report("shadows", 0.5)
-
-    # Shade what can be seen, once; fragments by transparency model; fog per fragment.
-    t = time.perf_counter()
-    shaded = shade(visible, visibility)
-    eye_nz = normalize(interpolate(visible, prepared.triangles, prepared.eye_normal))[:, 2]
-    frag_rgba, frag_alpha = _fragment_rgba(shaded, eye_nz, side[needed], materials)
-    if fog is not None:
-        frag_rgba = apply_fog(
-            frag_rgba,
-            eye_distance(eye, fog.distance),  # type: ignore[arg-type]
-            fog.color,
-            fog.mode,  # type: ignore[arg-type]
-            density=fog.density,
-            start=fog.start,
-            end=fog.end,
-        )
-    seconds["shade"] = time.perf_counter() - t
-    report("shade", 0.8)
-
-    t = time.perf_counter()
-    per_sample, _ = transparency_pass(
-        fragments,
-        opaque,
-        lambda index: frag_rgba[row_of[index]],
-        method,
-        triangle_mesh=prepared.triangle_mesh,
-        triangle_eye_distance=-prepared.face_eye_centroid[:, 2],
-        **the_plan.transparency.params,  # type: ignore[arg-type]
-    )
-    seconds["transparency"] = time.perf_counter() - t
-
-    # The nearest surface of each sample (opaque or transparent): depth, normal and light passes.
-    t = time.perf_counter()
-    winner = resolve_nearest(visible)
-    covered = np.flatnonzero(winner >= 0)
-    nearest = winner[covered]
-    near = FragmentShading(
-        shaded.rgb[nearest],
-        frag_alpha[nearest],
-        shaded.ambient[nearest],
-        shaded.diffuse[nearest],
-        shaded.specular[nearest],
-        shaded.normal[nearest],
-    )
-    _, passes, normal_img, depth = resolve_nearest_buffers(
-        near, covered, visible.depth[nearest], width, height, fragments.samples, "numpy"
-    )
-    if visibility is not None:
-        buf = np.zeros((n_keys, 1), np.float32)
-        buf[covered, 0] = visibility[nearest].mean(axis=1) * frag_alpha[nearest]
-        passes["shadow"] = resolve_samples(buf, width, height, fragments.samples)
-    rgba = resolve_samples(per_sample, width, height, fragments.samples).astype(np.float32)
-    seconds["resolve_samples"] = time.perf_counter() - t
-    return rgba, depth, normal_img, passes, len(needed)
 
 
 def scene_with_planned_shading(scene: Scene, the_plan: Plan, shading: str) -> Scene:

@@ -51,6 +51,7 @@ __all__ = [
     "WBOIT_EQUATIONS",
     "depth_complexity",
     "depth_test",
+    "draw_order",
     "object_draw_order",
     "resolve_a_buffer",
     "resolve_depth_peeling",
@@ -481,6 +482,44 @@ def resolve_transparency(
         if weights is None:
             raise ValueError("weighted_blended needs weights (see wboit_weights)")
         return resolve_weighted_blended(pixel, weights, rgba, n_pixels, background)
+    if method in ("draw_last", "sort_objects", "sort_triangles"):
+        order = draw_order(
+            method,
+            tri,
+            triangle_mesh=triangle_mesh,
+            triangle_eye_distance=triangle_eye_distance,
+            front_facing=front_facing,
+        )
+        return resolve_in_draw_order(pixel, order, rgba, n_pixels, background)
+    raise ValueError(f"method must be one of {TRANSPARENCY_METHODS}, got {method!r}")
+
+
+def draw_order(
+    method: str,
+    triangle: np.ndarray,
+    *,
+    triangle_mesh: np.ndarray,
+    triangle_eye_distance: np.ndarray,
+    front_facing: np.ndarray | None = None,
+) -> np.ndarray:
+    """Per-fragment drawing position of a sorted-drawing method (0 = drawn first).
+
+    ``draw_last`` and ``sort_objects``: meshes back to front by the mean eye distance of their
+    triangles' centroids, inside a mesh back faces first (with ``front_facing``), then mesh
+    order (:func:`object_draw_order`); ``sort_triangles``: triangles back to front by their
+    centroid's eye distance (:func:`triangle_draw_order`).
+
+    Args:
+        method: ``draw_last``, ``sort_objects`` or ``sort_triangles``.
+        triangle: (n,) triangle index of each fragment.
+        triangle_mesh: (T,) mesh index of every triangle.
+        triangle_eye_distance: (T,) eye distance of every triangle's centroid (world units).
+        front_facing: optional (n,) bool per fragment.
+
+    Returns:
+        (n,) int64 drawing positions (comparable between fragments).
+    """
+    tri = np.asarray(triangle)
     dist = np.asarray(triangle_eye_distance, dtype=np.float64)
     if method in ("draw_last", "sort_objects"):
         owner = np.asarray(triangle_mesh)
@@ -488,11 +527,10 @@ def resolve_transparency(
         mesh_dist = np.bincount(owner, weights=dist, minlength=n_mesh) / np.maximum(
             np.bincount(owner, minlength=n_mesh), 1
         )
-        order = object_draw_order(owner[tri], tri, mesh_dist, front_facing)
-        return resolve_in_draw_order(pixel, order, rgba, n_pixels, background)
+        return object_draw_order(owner[tri], tri, mesh_dist, front_facing)
     if method == "sort_triangles":
-        return resolve_in_draw_order(pixel, triangle_draw_order(tri, dist), rgba, n_pixels, background)
-    raise ValueError(f"method must be one of {TRANSPARENCY_METHODS}, got {method!r}")
+        return triangle_draw_order(tri, dist)
+    raise ValueError(f"method: expected 'draw_last', 'sort_objects' or 'sort_triangles', got {method!r}")
 
 
 def transparency_pass(

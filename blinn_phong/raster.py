@@ -50,7 +50,6 @@ __all__ = [
     "rasterize",
     "resolve_nearest",
     "sample_offsets",
-    "visible_fragments",
 ]
 
 #: Vertex window coordinates are snapped to 1/2**SUBPIXEL_BITS pixel.
@@ -507,42 +506,6 @@ def resolve_nearest(fragments: Fragments) -> np.ndarray:
     chosen = nearest[fragments.triangle[nearest] == first_tri[key[nearest]]]
     winner[key[chosen]] = chosen
     return winner
-
-
-def visible_fragments(
-    clip_xyzw: np.ndarray,
-    triangles: np.ndarray,
-    width: int,
-    height: int,
-    *,
-    samples: int = 1,
-    cull_backfaces: bool = False,
-    engine: str = "numpy",
-    progress: Callable[[float], None] | None = None,
-) -> Fragments:
-    """The nearest fragment of every covered sample (a z-buffer pass), ordered by ``sample_key``.
-
-    ``engine="numpy"`` is :func:`rasterize` + :func:`resolve_nearest` (the reference);
-    ``engine="numba"`` runs the compiled loop of :mod:`blinn_phong.fast`, which never
-    materialises hidden fragments; ``"auto"`` picks numba when it imports. Arguments
-    as for :func:`rasterize` (``progress`` is reported by the numpy engine).
-    """
-    if engine not in ("numpy", "numba", "auto"):
-        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
-    if engine != "numpy":
-        from blinn_phong.fast import numba_available, visible_fragments_compiled
-
-        if numba_available():
-            return visible_fragments_compiled(
-                clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
-            )
-        if engine == "numba":
-            raise ValueError("engine: 'numba' requested but numba cannot be imported")
-    frags = rasterize(
-        clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces, progress=progress
-    )
-    winner = resolve_nearest(frags)
-    return frags.subset(winner[winner >= 0])
 
 
 def interpolate(fragments: Fragments, triangles: np.ndarray, attribute: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import visible_fragments
+from blinn_phong.visibility import visible_fragments
 
 pytest.importorskip("numba")
 

@@ -1,0 +1,225 @@
+"""The frame: one pipeline from scene to image, the same stages with or without effects.
+
+``scene -> prepared -> fragments -> visibility -> shading -> resolve``:
+
+1. :func:`blinn_phong.prepared.prepare_scene` — meshes to eye and clip space, lights to eye space;
+2. :func:`blinn_phong.visibility.frame_fragments` — rasterize and keep the fragments that can be
+   seen: the nearest opaque one per sample and the transparent ones in front of it (with the
+   plain z-buffer every triangle is opaque, so this is the z-buffer pass);
+3. per light, the visibility of those fragments by the plan's shadow method, once per light
+   and frame (:func:`blinn_phong.shadows.light_visibility`, or
+   :func:`blinn_phong.raytrace.area_light_visibility` for soft shadows) — skipped when no
+   light casts shadows;
+4. :func:`blinn_phong.shading.shade_fragments` — shade them once, with that visibility;
+5. :func:`blinn_phong.resolve.fragment_colours` — premultiplied fragments by each material's
+   transparency model, fogged per fragment before blending (as OpenGL does);
+6. :func:`blinn_phong.resolve.resolve_frame` — the transparency method per sample, then the
+   box filter and the nearest surface's depth, normal and light passes.
+
+With transparency ``zbuffer``, no shadow and no fog, steps 3 and the transparency part of 6
+do nothing: the plain z-buffer render *is* this pipeline with no effects. Every stage has a
+numpy reference and a compiled (numba) twin, selected by ``engine``.
+
+Imports flow one way: this module uses the stage modules, :mod:`blinn_phong.render` uses this
+module and :mod:`blinn_phong.frame` (the plan); no stage imports a later one.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from blinn_phong.planner import Plan
+from blinn_phong.prepared import PreparedScene
+from blinn_phong.raster import interpolate
+from blinn_phong.resolve import FogParameters, FrameImage, fragment_colours, resolve_frame, side_tables
+from blinn_phong.scene import AmbientLight, Scene
+from blinn_phong.shading import shade_fragments
+from blinn_phong.shadows import light_visibility
+from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
+
+__all__ = ["FrameResult", "light_visibilities", "render_frame"]
+
+
+def _world_triangles(scene: Scene) -> np.ndarray:
+    """(T, 3, 3) world-space triangles in scene order, as :func:`blinn_phong.raytrace.world_triangles`.
+
+    Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
+    :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
+    """
+    parts = [
+        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
+        for m in scene.meshes
+    ]
+    return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+
+
+def _soft_visibility(
+    light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """Area-light visibility: a square of side ``2·radius`` at the light, facing the receivers' centroid."""
+    from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
+
+    radius = float(params["radius"])  # type: ignore[arg-type]
+    centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
+    axis = points.mean(axis=0) - centre
+    axis /= max(float(np.linalg.norm(axis)), 1e-12)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    return area_light_visibility(
+        ray_scene,
+        points,
+        normals,
+        centre - radius * (u + v),
+        2 * radius * u,
+        2 * radius * v,
+        samples_per_axis=int(params["samples_per_axis"]),  # type: ignore[call-overload]
+        offset=float(params["offset"]),  # type: ignore[arg-type]
+    )
+
+
+def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_plan: Plan) -> np.ndarray | None:
+    """(N, L) visibility of the visible fragments per non-ambient light; None when no light casts shadows.
+
+    One evaluation per light and frame, by the plan's method for that light
+    (:func:`blinn_phong.shadows.light_visibility`, Embree area-light sampling for ``soft``),
+    at the fragments' world positions with their face normals.
+    """
+    scene = prepared.scene
+    lit = [
+        (light, c)
+        for light, c in zip(scene.lights, the_plan.shadows, strict=True)
+        if not isinstance(light, AmbientLight)
+    ]
+    if not any(c.method != "none" for _, c in lit):
+        return None
+    f = visible.fragments
+    eye = interpolate(f, prepared.triangles, prepared.eye_position)
+    world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
+    normal = prepared.face_world_normal[f.triangle]
+    tris = _world_triangles(scene)
+    ray_scene: list[object] = []
+    columns = []
+    for light, c in lit:
+        if c.method == "soft":
+            if not ray_scene:
+                from blinn_phong.raytrace import RayScene  # Embree: imported only when used
+
+                ray_scene.append(RayScene(tris))
+            columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
+        else:
+            columns.append(light_visibility(c.method, light, tris, world, normal, **c.params))  # type: ignore[arg-type]
+    return np.stack(columns, axis=1) if columns else None
+
+
+FrameResult = tuple[FrameImage, int]
+
+
+def render_frame(
+    prepared: PreparedScene,
+    width: int,
+    height: int,
+    the_plan: Plan,
+    *,
+    shading: str = "phong",
+    samples: int = 1,
+    gl_compat: bool = False,
+    cull_backfaces: bool = False,
+    fog: object = None,
+    engine: str = "auto",
+    seconds: dict[str, float] | None = None,
+    report: Callable[[str, float], None] | None = None,
+) -> FrameResult:
+    """Render ``prepared`` by the stages of the module docstring, following ``the_plan``.
+
+    Args:
+        prepared: from :func:`blinn_phong.prepared.prepare_scene`.
+        width: image width in pixels.
+        height: image height in pixels.
+        the_plan: from :func:`blinn_phong.frame.frame_plan` (choices carry their parameters).
+        shading: ``"flat"``, ``"gouraud"`` or ``"phong"`` (a mesh's own ``shading`` wins).
+        samples: k² samples per pixel.
+        gl_compat: the OpenGL 2.1 fixed-function preset for shading (no effects in the plan).
+        cull_backfaces: discard clockwise triangles.
+        fog: a :class:`blinn_phong.frame.Fog` (any object with its fields), or None.
+        engine: ``"numpy"`` (reference stages), ``"numba"`` (compiled stages) or ``"auto"``.
+        seconds: per-stage wall times are stored here (``visibility``, ``shadows`` when a light
+            casts shadows, ``shade`` (with the fragment colours and fog), ``resolve_samples``
+            (the transparency resolve and the box filter)).
+        report: ``report(stage, fraction_done)``.
+
+    Returns:
+        ``(image, shaded)``: the :class:`~blinn_phong.resolve.FrameImage` and the number of
+        fragments shaded (each visible fragment once).
+    """
+    seconds = {} if seconds is None else seconds
+
+    def say(stage: str, fraction: float) -> None:
+        if report is not None:
+            report(stage, fraction)
+
+    compiled = use_compiled(engine)
+    stage_engine = "numba" if compiled else "numpy"
+    scene: Scene = prepared.scene
+    method = the_plan.transparency.method
+    opaque = None
+    if method != "zbuffer":
+        _, side_opaque = side_tables(scene)
+        two_sided = scene.light_model.two_sided
+
+        def opaque(triangle: np.ndarray, front_facing: np.ndarray) -> np.ndarray:
+            back = ~front_facing if two_sided else False
+            return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
+
+    t = time.perf_counter()
+    visible = frame_fragments(
+        prepared.clip,
+        prepared.triangles,
+        width,
+        height,
+        opaque=opaque,
+        samples=samples,
+        cull_backfaces=cull_backfaces,
+        engine=stage_engine,
+        progress=None if report is None else (lambda f: say("visibility", 0.05 + 0.35 * f)),
+    )
+    seconds["visibility"] = time.perf_counter() - t
+    say("visibility", 0.4)
+
+    t = time.perf_counter()
+    visibility = light_visibilities(prepared, visible, the_plan)
+    if visibility is not None:
+        seconds["shadows"] = time.perf_counter() - t
+        say("shadows", 0.6)
+
+    t = time.perf_counter()
+    shaded = shade_fragments(
+        prepared,
+        visible.fragments,
+        shading=shading,
+        gl_compat=gl_compat,
+        visibility=visibility,
+        engine=stage_engine,
+    )
+    rgba, alpha = fragment_colours(prepared, visible, shaded, FogParameters.of(fog), engine=stage_engine)
+    seconds["shade"] = time.perf_counter() - t
+    say("shade", 0.8)
+
+    t = time.perf_counter()
+    image = resolve_frame(
+        prepared,
+        visible,
+        shaded,
+        rgba,
+        alpha,
+        method,
+        visibility=visibility,
+        engine=stage_engine,
+        **the_plan.transparency.params,  # type: ignore[arg-type]
+    )
+    seconds["resolve_samples"] = time.perf_counter() - t  # transparency resolve and box filter, one pass
+    return image, len(visible.fragments)

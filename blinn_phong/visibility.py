@@ -1,0 +1,171 @@
+"""Stage 3 of the frame: which fragments can be seen (``fragments -> visibility``).
+
+Visibility is decided before any shading, so each fragment that can be seen is shaded once
+and no hidden one is shaded at all:
+
+* opaque geometry goes through a z-buffer (``GL_LESS`` in draw order: the smallest depth wins,
+  equal depths go to the lower triangle index — :func:`blinn_phong.raster.resolve_nearest`);
+* transparent geometry is depth-tested against the opaque depth but does not write it (the
+  usual order for blending): every transparent fragment strictly in front of the sample's
+  opaque depth (1.0, the clear value, where nothing opaque was drawn) is kept.
+
+:func:`frame_fragments` returns both as a :class:`FrameFragments`: per sample its nearest
+opaque fragment and its list of transparent fragments (in draw order), which is what every
+transparency method of :mod:`blinn_phong.oit` needs (the A-buffer of Carpenter 1984 keeps
+exactly these lists).
+
+Two engines implement the stage: ``"numpy"`` — the reference, which rasterizes every
+fragment with :func:`blinn_phong.raster.rasterize` and filters; ``"numba"`` — the compiled
+loops of :mod:`blinn_phong.fast`, which never build the array of all fragments (memory is
+the per-sample z-buffer plus the fragments that survive the depth test). Both return the same
+fragments in the same order (tests/blinn_phong/test_engines_agree.py).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from blinn_phong.fast import frame_fragments_compiled, numba_available, visible_fragments_compiled
+from blinn_phong.raster import Fragments, _setup_triangles, rasterize, resolve_nearest
+
+__all__ = ["ENGINES", "FrameFragments", "frame_fragments", "use_compiled", "visible_fragments"]
+
+#: Engines of the frame stages: the numpy reference, the compiled one, or numba when it imports.
+ENGINES: tuple[str, ...] = ("numpy", "numba", "auto")
+
+
+def use_compiled(engine: str) -> bool:
+    """True when ``engine`` selects the compiled stages (``"numba"``, or ``"auto"`` with numba importable).
+
+    Raises ValueError for an unknown engine, or ``"numba"`` when numba cannot be imported.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    if engine == "numpy":
+        return False
+    if numba_available():
+        return True
+    if engine == "numba":
+        raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    return False
+
+
+def visible_fragments(
+    clip_xyzw: np.ndarray,
+    triangles: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    samples: int = 1,
+    cull_backfaces: bool = False,
+    engine: str = "numpy",
+    progress: Callable[[float], None] | None = None,
+) -> Fragments:
+    """The nearest fragment of every covered sample (a z-buffer pass), ordered by ``sample_key``.
+
+    ``engine="numpy"`` is :func:`~blinn_phong.raster.rasterize` +
+    :func:`~blinn_phong.raster.resolve_nearest` (the reference); ``engine="numba"`` runs the
+    compiled loop of :mod:`blinn_phong.fast`, which never materialises hidden fragments;
+    ``"auto"`` picks numba when it imports. Arguments as for
+    :func:`~blinn_phong.raster.rasterize` (``progress`` is reported by the numpy engine).
+    """
+    if use_compiled(engine):
+        return visible_fragments_compiled(
+            clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces
+        )
+    frags = rasterize(
+        clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces, progress=progress
+    )
+    winner = resolve_nearest(frags)
+    return frags.subset(winner[winner >= 0])
+
+
+@dataclass(frozen=True, eq=False)
+class FrameFragments:
+    """The fragments of a frame that can be seen, grouped by sample.
+
+    Attributes:
+        fragments: the nearest opaque fragment of every covered sample (``n_opaque`` of them,
+            in increasing ``sample_key``), then the transparent fragments in front of the
+            opaque depth, grouped by increasing ``sample_key`` and in draw order (triangle
+            index) inside a sample.
+        n_opaque: number of opaque fragments at the start of ``fragments``.
+        opaque_of: (width·height·samples,) int64 index into ``fragments`` of each sample's
+            opaque fragment, −1 where none.
+        offsets: (width·height·samples + 1,) int64: the transparent fragments of sample key
+            ``s`` are ``fragments[n_opaque + offsets[s] : n_opaque + offsets[s + 1]]``.
+    """
+
+    fragments: Fragments
+    n_opaque: int
+    opaque_of: np.ndarray
+    offsets: np.ndarray
+
+    @property
+    def n_transparent(self) -> int:
+        """Number of transparent fragments kept."""
+        return len(self.fragments) - self.n_opaque
+
+
+def frame_fragments(
+    clip_xyzw: np.ndarray,
+    triangles: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    opaque: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    samples: int = 1,
+    cull_backfaces: bool = False,
+    engine: str = "numpy",
+    progress: Callable[[float], None] | None = None,
+) -> FrameFragments:
+    """The fragments a frame can see: per sample the nearest opaque one and the transparent ones in front.
+
+    Args:
+        clip_xyzw: (V, 4) clip-space vertex positions.
+        triangles: (T, 3) vertex indices (draw order = row order).
+        width: image width in pixels.
+        height: image height in pixels.
+        opaque: ``opaque(triangle, front_facing) -> bool array``: which triangles (given as
+            index and facing, arrays of one shape) are opaque and write depth; None: all of them
+            (the plain z-buffer).
+        samples: k² samples per pixel.
+        cull_backfaces: discard clockwise triangles.
+        engine: ``"numpy"`` (reference), ``"numba"`` or ``"auto"``.
+        progress: ``callback(fraction)`` during rasterization (numpy engine).
+
+    Returns:
+        :class:`FrameFragments`.
+    """
+    if use_compiled(engine):
+        setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+        sub_opaque = None if opaque is None else np.asarray(opaque(setup.source, setup.front), dtype=bool)
+        frags, n_opaque, opaque_of, offsets = frame_fragments_compiled(setup, sub_opaque)
+        return FrameFragments(frags, n_opaque, opaque_of, offsets)
+
+    frags = rasterize(
+        clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces, progress=progress
+    )
+    n_keys = frags.width * frags.height * frags.samples
+    key = frags.sample_key
+    if opaque is None:
+        is_opaque = np.ones(len(frags), dtype=bool)
+    else:
+        is_opaque = np.asarray(opaque(frags.triangle, frags.front_facing), dtype=bool)
+    opaque_idx = np.flatnonzero(is_opaque)
+    nearest = resolve_nearest(frags.subset(opaque_idx))
+    covered = np.flatnonzero(nearest >= 0)
+    winners = opaque_idx[nearest[covered]]  # in increasing sample key
+    opaque_depth = np.ones(n_keys)
+    opaque_depth[covered] = frags.depth[winners]
+    transparent = np.flatnonzero(~is_opaque)
+    kept = transparent[frags.depth[transparent] < opaque_depth[key[transparent]]]
+    kept = kept[np.lexsort((frags.triangle[kept], key[kept]))]  # by sample, then draw order
+    opaque_of = np.full(n_keys, -1, np.int64)
+    opaque_of[covered] = np.arange(len(winners))
+    offsets = np.zeros(n_keys + 1, np.int64)
+    np.cumsum(np.bincount(key[kept], minlength=n_keys), out=offsets[1:])
+    return FrameFragments(frags.subset(np.concatenate([winners, kept])), len(winners), opaque_of, offsets)
