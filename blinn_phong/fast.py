@@ -678,16 +678,16 @@ def _resolve_kernel() -> object:  # a numba dispatcher
         o_shadow,
     ):  # pragma: no cover - compiled
         for row in numba.prange(height):
+            # Scratch space per row (one thread each), reused for every pixel of the row.
             order = np.empty(max(max_list, 1), np.int64)
             res = np.empty(4)
             acc = np.empty(4)
+            # Sums over the samples: rgba 0-3, ambient 4-6, diffuse 7-9, specular 10-12, normal 13-15,
+            # shadow 16.
+            tot = np.empty(17)
             for col in range(width):
-                sum_c = np.zeros(4)
-                sum_a = np.zeros(3)
-                sum_d = np.zeros(3)
-                sum_s = np.zeros(3)
-                sum_n = np.zeros(3)
-                sum_v = 0.0
+                for ch in range(17):
+                    tot[ch] = 0.0
                 zmin = np.float32(1.0)
                 for smp in range(n_samples):
                     key = (row * width + col) * n_samples + smp
@@ -735,27 +735,27 @@ def _resolve_kernel() -> object:  # a numba dispatcher
                             res[ch] = acc[ch] / safe * cover + res[ch] * (1.0 - cover)
                         res[3] = cover + res[3] * (1.0 - cover)
                     for ch in range(4):
-                        sum_c[ch] += np.float32(res[ch])
+                        tot[ch] += np.float32(res[ch])
                     if nearest >= 0:
                         a = alpha[nearest]
                         for ch in range(3):
-                            sum_a[ch] += np.float32(ambient[nearest, ch] * a)
-                            sum_d[ch] += np.float32(diffuse[nearest, ch] * a)
-                            sum_s[ch] += np.float32(specular[nearest, ch] * a)
-                            sum_n[ch] += np.float32(normal[nearest, ch])
+                            tot[4 + ch] += np.float32(ambient[nearest, ch] * a)
+                            tot[7 + ch] += np.float32(diffuse[nearest, ch] * a)
+                            tot[10 + ch] += np.float32(specular[nearest, ch] * a)
+                            tot[13 + ch] += np.float32(normal[nearest, ch])
                         if has_vis:
-                            sum_v += np.float32(vis_mean[nearest] * a)
+                            tot[16] += np.float32(vis_mean[nearest] * a)
                         zmin = min(zmin, np.float32(depth[nearest]))
                 for ch in range(4):  # the box filter: the mean, as numpy's (sum, then divide)
-                    o_rgba[row, col, ch] = sum_c[ch] / n_samples
+                    o_rgba[row, col, ch] = tot[ch] / n_samples
                 for ch in range(3):
-                    o_amb[row, col, ch] = sum_a[ch] / n_samples
-                    o_dif[row, col, ch] = sum_d[ch] / n_samples
-                    o_spe[row, col, ch] = sum_s[ch] / n_samples
-                    o_nrm[row, col, ch] = sum_n[ch] / n_samples
+                    o_amb[row, col, ch] = tot[4 + ch] / n_samples
+                    o_dif[row, col, ch] = tot[7 + ch] / n_samples
+                    o_spe[row, col, ch] = tot[10 + ch] / n_samples
+                    o_nrm[row, col, ch] = tot[13 + ch] / n_samples
                 o_depth[row, col] = zmin
                 if has_vis:
-                    o_shadow[row, col, 0] = sum_v / n_samples
+                    o_shadow[row, col, 0] = tot[16] / n_samples
 
     return resolve
 

@@ -40,7 +40,7 @@ from blinn_phong.shading import shade_fragments
 from blinn_phong.shadows import light_visibility
 from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
 
-__all__ = ["FrameResult", "light_visibilities", "render_frame"]
+__all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 
 
 def _world_triangles(scene: Scene) -> np.ndarray:
@@ -117,6 +117,10 @@ def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_pla
 
 
 FrameResult = tuple[FrameImage, int]
+
+#: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays
+#: (about 250 bytes per visible fragment) whatever the image size.
+BAND_SAMPLES = 1 << 19
 
 
 def render_frame(
@@ -196,30 +200,56 @@ def render_frame(
         seconds["shadows"] = time.perf_counter() - t
         say("shadows", 0.6)
 
-    t = time.perf_counter()
-    shaded = shade_fragments(
-        prepared,
-        visible.fragments,
-        shading=shading,
-        gl_compat=gl_compat,
-        visibility=visibility,
-        engine=stage_engine,
-    )
-    rgba, alpha = fragment_colours(prepared, visible, shaded, FogParameters.of(fog), engine=stage_engine)
-    seconds["shade"] = time.perf_counter() - t
-    say("shade", 0.8)
-
-    t = time.perf_counter()
-    image = resolve_frame(
-        prepared,
-        visible,
-        shaded,
-        rgba,
-        alpha,
-        method,
-        visibility=visibility,
-        engine=stage_engine,
-        **the_plan.transparency.params,  # type: ignore[arg-type]
-    )
-    seconds["resolve_samples"] = time.perf_counter() - t  # transparency resolve and box filter, one pass
-    return image, len(visible.fragments)
+    # Shade, colour and resolve band by band (whole pixel rows): the shading arrays never hold more
+    # than one band's fragments, and every stage works per fragment or per sample, so bands give
+    # the image one pass would.
+    f_all = visible.fragments
+    rows_per_band = max(1, BAND_SAMPLES // (width * f_all.samples))
+    rgba = np.zeros((height, width, 4), np.float32)
+    depth = np.ones((height, width), np.float32)
+    normal = np.zeros((height, width, 3), np.float32)
+    passes = {name: np.zeros((height, width, 3), np.float32) for name in ("ambient", "diffuse", "specular")}
+    if visibility is not None:
+        passes["shadow"] = np.zeros((height, width, 1), np.float32)
+    seconds["shade"] = seconds["resolve_samples"] = 0.0
+    fog_parameters = FogParameters.of(fog)
+    for row0 in range(0, height, rows_per_band):
+        row1 = min(height, row0 + rows_per_band)
+        band = visible if (row0, row1) == (0, height) else visible.rows(row0, row1)
+        band_vis = None
+        if visibility is not None:
+            o0, o1, t0, t1 = visible.fragment_range(row0, row1)
+            n_op = visible.n_opaque
+            band_vis = np.concatenate([visibility[o0:o1], visibility[n_op + t0 : n_op + t1]])
+        t = time.perf_counter()
+        shaded = shade_fragments(
+            prepared,
+            band.fragments,
+            shading=shading,
+            gl_compat=gl_compat,
+            visibility=band_vis,
+            engine=stage_engine,
+        )
+        colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
+        seconds["shade"] += time.perf_counter() - t
+        t = time.perf_counter()
+        image = resolve_frame(
+            prepared,
+            band,
+            shaded,
+            colour,
+            alpha,
+            method,
+            visibility=band_vis,
+            engine=stage_engine,
+            **the_plan.transparency.params,  # type: ignore[arg-type]
+        )
+        del shaded, colour, alpha
+        rgba[row0:row1] = image.rgba
+        depth[row0:row1] = image.depth
+        normal[row0:row1] = image.normal
+        for name, buffer in image.passes.items():
+            passes[name][row0:row1] = buffer
+        seconds["resolve_samples"] += time.perf_counter() - t
+        say("shade", 0.6 + 0.4 * row1 / height)
+    return FrameImage(rgba, depth, normal, passes), len(f_all)

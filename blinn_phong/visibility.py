@@ -109,6 +109,38 @@ class FrameFragments:
         """Number of transparent fragments kept."""
         return len(self.fragments) - self.n_opaque
 
+    def fragment_range(self, row0: int, row1: int) -> tuple[int, int, int, int]:
+        """``(o0, o1, t0, t1)``: the opaque fragments ``[o0, o1)`` and transparent ones
+        ``[n_opaque + t0, n_opaque + t1)`` of pixel rows ``[row0, row1)`` (both are grouped by sample key)."""
+        f = self.fragments
+        k0 = row0 * f.width * f.samples
+        k1 = row1 * f.width * f.samples
+        keys = f.sample_key[: self.n_opaque]
+        o0, o1 = (int(v) for v in np.searchsorted(keys, [k0, k1]))
+        return o0, o1, int(self.offsets[k0]), int(self.offsets[k1])
+
+    def rows(self, row0: int, row1: int) -> FrameFragments:
+        """The fragments of pixel rows ``[row0, row1)`` as a frame of ``row1 − row0`` rows (a band)."""
+        f = self.fragments
+        o0, o1, t0, t1 = self.fragment_range(row0, row1)
+        index = np.concatenate([np.arange(o0, o1), np.arange(self.n_opaque + t0, self.n_opaque + t1)])
+        k0 = row0 * f.width * f.samples
+        k1 = row1 * f.width * f.samples
+        band = Fragments(
+            f.width,
+            row1 - row0,
+            f.samples,
+            f.pixel[index] - row0 * f.width,
+            f.sample[index],
+            f.depth[index],
+            f.triangle[index],
+            f.bary[index],
+            f.front_facing[index],
+        )
+        opaque_of = self.opaque_of[k0:k1] - o0
+        opaque_of[opaque_of < 0] = -1  # (−1 − o0 for empty samples)
+        return FrameFragments(band, o1 - o0, opaque_of, self.offsets[k0 : k1 + 1] - t0)
+
 
 def frame_fragments(
     clip_xyzw: np.ndarray,

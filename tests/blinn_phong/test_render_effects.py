@@ -5,6 +5,9 @@ emissive quads (the straight colour of an emissive, unlit surface is its emissio
 shadow of a square from similar triangles, Lambert's cosine, Kay & Greenberg's formula,
 OpenGL's fog equations (§3.10), or the pre-existing z-buffer stages (prepare → visible
 fragments → shade → box filter) for the claim that nothing changes without effects.
+
+Every test runs on both engines (the numpy reference stages and the compiled ones): the
+autouse ``engine`` fixture gives ``bp.render`` calls without an explicit ``engine`` that engine.
 """
 
 from __future__ import annotations
@@ -16,6 +19,22 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong.primitives import uv_sphere
+
+
+@pytest.fixture(autouse=True, params=["numpy", "numba"])
+def engine(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run the test with ``bp.render(..., engine=<param>)`` unless the test names an engine."""
+    if request.param == "numba":
+        pytest.importorskip("numba")
+    original = bp.render
+
+    def render(*args: object, **kwargs: object) -> bp.RenderResult:
+        kwargs.setdefault("engine", request.param)
+        return original(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(bp, "render", render)
+    return str(request.param)
+
 
 SIZE = 40  # pixels across the 4 × 4 world-unit view: pixel (row, col) centre is at
 # x = -2 + (col + 0.5)·0.1, y = 2 - (row + 0.5)·0.1
