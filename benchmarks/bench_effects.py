@@ -17,7 +17,8 @@ Usage::
 
     .venv/bin/python -m benchmarks.bench_effects [--out benchmarks/results] [--repeat 3] [--size 256]
 
-Writes ``effects.json`` to ``--out``.
+Writes ``effects.json`` to ``--out``, then runs :mod:`benchmarks.bench_frame` (the whole frame
+with each effect against the plain frame, ``frame.json``).
 """
 
 from __future__ import annotations
@@ -329,6 +330,10 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 3, size: int = 256) -> dict
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "effects.json").write_text(json.dumps(result, indent=2) + "\n")
+    # The whole frame with each effect against the plain frame (frame.json; see benchmarks.bench_frame).
+    from benchmarks import bench_frame
+
+    bench_frame.run(out, repeat=repeat, quick=size < 256)
     return result
 
 

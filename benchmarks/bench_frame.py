@@ -223,9 +223,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--charts", type=Path, default=None, help="documentation directory (PNG in <dir>/charts)"
     )
-    parser.add_argument(
-        "--child", nargs=4, metavar=("CASE", "WIDTH", "HEIGHT", "SEGMENTS"), help=argparse.SUPPRESS
-    )
+    parser.add_argument("--child", nargs=2, metavar=("CASE", "POINTS_JSON"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         case, points = args.child

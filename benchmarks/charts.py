@@ -423,4 +423,10 @@ def draw_all(results: dict[str, dict], out_dir: Path, results_dir: Path | None =
         if family in _DRAW:
             paths += _DRAW[family](data, Path(out_dir))
     paths += peers_chart(results, results_dir, Path(out_dir))
+    if results_dir is not None and (Path(results_dir) / "frame.json").exists():  # benchmarks.bench_frame
+        import json
+
+        from benchmarks.bench_frame import draw
+
+        paths += draw(json.loads((Path(results_dir) / "frame.json").read_text()), Path(out_dir))
     return paths
