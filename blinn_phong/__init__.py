@@ -1,11 +1,12 @@
-"""blinn_phong: a pure numpy local-illumination renderer (no bpy).
+"""blinn_phong: a local-illumination renderer (numpy reference, compiled numba engine; no bpy).
 
-Scene model in :mod:`blinn_phong.scene`, the lighting equation in
-:mod:`blinn_phong.lighting`, the rasterizer in :mod:`blinn_phong.raster`, the
-pipeline in :mod:`blinn_phong.render`, the planner in :mod:`blinn_phong.planner` and
-the effects :func:`render` adds when the plan needs them in :mod:`blinn_phong.frame`.
-Output follows the project's image conventions: float32 premultiplied linear RGBA,
-row 0 at the top.
+Scene model in :mod:`blinn_phong.scene`, the lighting equation in :mod:`blinn_phong.lighting`,
+the planner in :mod:`blinn_phong.planner` and the plan of a frame with the caller's options in
+:mod:`blinn_phong.frame`. :func:`render` runs one pipeline (:mod:`blinn_phong.pipeline`) whose
+stages flow one way: :mod:`~blinn_phong.prepared` → :mod:`~blinn_phong.raster` (fragments) →
+:mod:`~blinn_phong.visibility` → :mod:`~blinn_phong.shading` → :mod:`~blinn_phong.resolve`;
+effects (transparency, shadows, fog) are stages of that frame. Output follows the project's
+image conventions: float32 premultiplied linear RGBA, row 0 at the top.
 """
 
 from blinn_phong.frame import Fog, ShadowOptions

@@ -1,17 +1,25 @@
-"""Optional compiled (numba) fast path for the z-buffer visibility pass.
+"""The compiled (numba) engine of the frame stages; :mod:`blinn_phong.raster`, :mod:`blinn_phong.visibility`
+and :mod:`blinn_phong.resolve` hold the numpy references.
 
-The numpy functions in :mod:`blinn_phong.raster` are the reference; this module
-runs the same triangle setup (:func:`blinn_phong.raster._setup_triangles`: the
-same clipping, snapping, edge functions and fill rule) through a compiled
-scan-conversion loop that keeps only the nearest fragment per sample, so no
-array of all fragments is ever built. Barycentrics and depths of the winners are
-then computed by a compiled twin of :func:`blinn_phong.raster._fragments_from_hits`
-(tests/blinn_phong/test_engines_agree.py checks both against the reference).
+* Visibility: the same triangle setup as the reference (:func:`blinn_phong.raster._setup_triangles`:
+  the same clipping, snapping, edge functions and fill rule) through compiled scan-conversion
+  loops. :func:`visible_fragments_compiled` keeps only the nearest fragment per sample;
+  :func:`frame_fragments_compiled` also builds, per sample, the list of transparent fragments
+  in front of the opaque depth (a counting pass, a prefix sum, a filling pass), so no array of
+  all fragments is ever built. Barycentrics and depths of the kept fragments come from a
+  compiled twin of :func:`blinn_phong.raster._fragments_from_hits`.
+* :func:`fragment_colours_compiled`: transparency models, Kay–Greenberg, wash-out and fog per
+  fragment (twin of :func:`blinn_phong.resolve.fragment_colours`).
+* :func:`resolve_frame_compiled`: per pixel, each sample's transparent list sorted and
+  composited over its opaque fragment (or accumulated for weighted blended OIT), then the box
+  filter and the nearest surface's buffers (twin of :func:`blinn_phong.resolve.resolve_frame`).
 
 The depth test is ``GL_LESS`` in draw order, as :func:`blinn_phong.raster.resolve_nearest`:
-smaller depth wins, equal depths go to the lower triangle index. The image is
-split into horizontal bands processed in parallel (numba ``prange``); each band
-owns its rows, so there are no write races.
+smaller depth wins, equal depths go to the lower triangle index. Rasterization splits the image
+into horizontal bands processed in parallel (numba ``prange``), the resolve runs rows in
+parallel; each band or row owns its samples, so there are no write races and the results do
+not depend on the thread count (tests/blinn_phong/test_engines_agree.py checks every kernel
+against the reference).
 """
 
 from __future__ import annotations
@@ -242,7 +250,7 @@ def visible_fragments_compiled(
 
     Same arguments, conventions and result as
     ``rasterize(...)`` followed by ``resolve_nearest`` and keeping the winners
-    (:func:`blinn_phong.raster.visible_fragments` with ``engine="numpy"``), computed
+    (:func:`blinn_phong.visibility.visible_fragments` with ``engine="numpy"``), computed
     by a compiled loop. Requires numba (:func:`numba_available`).
     """
     setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
@@ -353,7 +361,7 @@ def surface_at_fragments_compiled(
     world_normal: np.ndarray,
     flip: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Compiled twin of :func:`blinn_phong.render.surface_at_fragments` (same formulas)."""
+    """Compiled twin of :func:`blinn_phong.shading.surface_at_fragments` (same formulas)."""
     n = len(triangle)
     out_p = np.empty((n, 3))
     out_n = np.empty((n, 3))
@@ -409,7 +417,7 @@ def scatter_samples_compiled(
 ) -> tuple[np.ndarray, ...]:
     """Per-sample float32 buffers: premultiplied rgba, ambient, diffuse, specular; normal; depth.
 
-    The compiled twin of the numpy scatter in :func:`blinn_phong.render.render`: samples
+    The compiled twin of the numpy scatter in :func:`blinn_phong.resolve.resolve_nearest_buffers`: samples
     not in ``keys`` hold 0 (depth 1, the OpenGL clear value).
     """
     out = (
