@@ -147,9 +147,10 @@ def render(
             alpha is the covered fraction.
         gl_compat: the OpenGL 2.1 fixed-function preset (see the module docstring).
         cull_backfaces: discard clockwise (back-facing) triangles.
-        engine: ``"numpy"`` — the reference implementation; ``"numba"`` — the compiled
-            visibility pass and lighting kernel (same results to ~1e-12); ``"auto"`` —
-            numba when it can be imported, else numpy.
+        engine: ``"numpy"`` — the reference stages; ``"numba"`` — the compiled stages
+            (visibility lists, lighting, transparency models, fog, transparency resolves and
+            box filter; the buffers agree with the reference to 1e-6); ``"auto"`` — numba when
+            it can be imported, else numpy.
         progress: optional ``callback(stage, fraction_done)`` called as stages finish.
         transparency: ``None``/``"auto"`` (the planner's choice) or one of
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
