@@ -209,10 +209,17 @@ def draw(data: dict, out_dir: str | Path) -> list[Path]:
         for case, marker in (("plain", "o"), ("a_buffer", "s"), ("fog", "^")):
             mine = sorted((p for p in points if p["case"] == case), key=lambda p: p[key])
             x = [p[key] for p in mine]
-            axes[0, col].plot(x, [p["seconds"] for p in mine], marker + "-", label=case)
+            (line,) = axes[0, col].plot(x, [p["seconds"] for p in mine], marker + "-", label=f"{case} (wall)")
+            axes[0, col].plot(
+                x,
+                [p["cpu_seconds"] for p in mine],
+                marker + "--",
+                color=line.get_color(),
+                label=f"{case} (CPU)",
+            )
             axes[1, col].plot(x, [p["peak_rss_bytes"] / 2**30 for p in mine], marker + "-", label=case)
         fixed = "65k-triangle spheres" if key == "pixels" else "960×540"
-        for row, label in ((0, "seconds (one render)"), (1, "peak RSS, GiB")):
+        for row, label in ((0, "seconds (one render; CPU: all threads)"), (1, "peak RSS, GiB")):
             ax = axes[row, col]
             ax.set_xscale("log")
             ax.set_xlabel(f"{key} ({fixed})", fontsize=8)
