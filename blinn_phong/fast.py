@@ -487,8 +487,8 @@ def frame_fragments_compiled(
         in_front(True, *args, offsets, t_sub, t_fine)
     del winner, zbuf
     n_opaque = len(fine_key)
-    all_fine = np.concatenate([fine_key, t_fine])
-    all_sub = np.concatenate([sub, t_sub])
+    all_fine = np.concatenate([fine_key, t_fine]) if len(t_fine) else fine_key
+    all_sub = np.concatenate([sub, t_sub]) if len(t_sub) else sub
     n = len(all_fine)
     depth = np.empty(n)
     bary = np.empty((n, 3))
@@ -685,6 +685,8 @@ def _resolve_kernel() -> object:  # a numba dispatcher
         o_depth,
         o_shadow,
     ):  # pragma: no cover - compiled
+        inv = 1.0 / n_samples
+        scale_exact = (n_samples & (n_samples - 1)) == 0
         for row in numba.prange(height):
             # Scratch space per row (one thread each), reused for every pixel of the row.
             order = np.empty(max(max_list, 1), np.int64)
@@ -754,16 +756,24 @@ def _resolve_kernel() -> object:  # a numba dispatcher
                         if has_vis:
                             tot[16] += np.float32(vis_mean[nearest] * a)
                         zmin = min(zmin, np.float32(depth[nearest]))
-                for ch in range(4):  # the box filter: the mean, as numpy's (sum, then divide)
-                    o_rgba[row, col, ch] = tot[ch] / n_samples
+                # The box filter: the mean as numpy's (sum, then divide); 1/n is exact for n a
+                # power of two (1, 4, 16, ...), so multiplying gives the same bits more cheaply.
+                if scale_exact:
+                    for ch in range(17):
+                        tot[ch] *= inv
+                else:
+                    for ch in range(17):
+                        tot[ch] /= n_samples
+                for ch in range(4):
+                    o_rgba[row, col, ch] = tot[ch]
                 for ch in range(3):
-                    o_amb[row, col, ch] = tot[4 + ch] / n_samples
-                    o_dif[row, col, ch] = tot[7 + ch] / n_samples
-                    o_spe[row, col, ch] = tot[10 + ch] / n_samples
-                    o_nrm[row, col, ch] = tot[13 + ch] / n_samples
+                    o_amb[row, col, ch] = tot[4 + ch]
+                    o_dif[row, col, ch] = tot[7 + ch]
+                    o_spe[row, col, ch] = tot[10 + ch]
+                    o_nrm[row, col, ch] = tot[13 + ch]
                 o_depth[row, col] = zmin
                 if has_vis:
-                    o_shadow[row, col, 0] = tot[16] / n_samples
+                    o_shadow[row, col, 0] = tot[16]
 
     return resolve
 
@@ -787,25 +797,28 @@ def resolve_frame_compiled(
     normal: np.ndarray,
     depth: np.ndarray,
     vis_mean: np.ndarray | None,
+    out: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, ...]:
     """Compiled twin of :func:`blinn_phong.resolve.resolve_frame`: transparency resolve + box filter.
 
     One pass per pixel (rows in parallel; every pixel is written by one thread, and its samples
     are summed in sample order, so the result does not depend on the thread count). Returns
     float32 ``(rgba, ambient, diffuse, specular, normal_sum_mean, depth, shadow)`` images; the
-    normal is the mean of the samples' unit normals (not renormalised).
+    normal is the mean of the samples' unit normals (not renormalised). ``out``: C-contiguous
+    float32 arrays of those shapes to write into (e.g. row bands of the frame's buffers).
     """
     f32 = np.float32
-    out = (
-        np.empty((height, width, 4), f32),
-        np.empty((height, width, 3), f32),
-        np.empty((height, width, 3), f32),
-        np.empty((height, width, 3), f32),
-        np.empty((height, width, 3), f32),
-        np.empty((height, width), f32),
-        np.zeros((height, width, 1), f32) if vis_mean is not None else np.zeros((0, 0, 1), f32),
-    )
-    max_list = int(np.diff(offsets).max()) if len(offsets) > 1 else 0
+    if out is None:
+        out = (
+            np.empty((height, width, 4), f32),
+            np.empty((height, width, 3), f32),
+            np.empty((height, width, 3), f32),
+            np.empty((height, width, 3), f32),
+            np.empty((height, width, 3), f32),
+            np.empty((height, width), f32),
+            np.zeros((height, width, 1), f32) if vis_mean is not None else np.zeros((0, 0, 1), f32),
+        )
+    max_list = int(np.diff(offsets).max()) if code != 0 and len(offsets) > 1 else 0
     _resolve_kernel()(
         width, height, n_samples, code, max_layers, max_list, n_opaque, opaque_of, offsets,
         np.ascontiguousarray(sort_key, dtype=np.float64), np.ascontiguousarray(weight, dtype=np.float64),

@@ -233,7 +233,7 @@ def render_frame(
         colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
         seconds["shade"] += time.perf_counter() - t
         t = time.perf_counter()
-        image = resolve_frame(
+        resolve_frame(  # writes straight into the band's rows of the frame buffers
             prepared,
             band,
             shaded,
@@ -242,14 +242,15 @@ def render_frame(
             method,
             visibility=band_vis,
             engine=stage_engine,
+            out=FrameImage(
+                rgba[row0:row1],
+                depth[row0:row1],
+                normal[row0:row1],
+                {name: buffer[row0:row1] for name, buffer in passes.items()},
+            ),
             **the_plan.transparency.params,  # type: ignore[arg-type]
         )
         del shaded, colour, alpha
-        rgba[row0:row1] = image.rgba
-        depth[row0:row1] = image.depth
-        normal[row0:row1] = image.normal
-        for name, buffer in image.passes.items():
-            passes[name][row0:row1] = buffer
         seconds["resolve_samples"] += time.perf_counter() - t
         say("shade", 0.6 + 0.4 * row1 / height)
     return FrameImage(rgba, depth, normal, passes), len(f_all)

@@ -325,6 +325,7 @@ def resolve_frame(
     layers: int | None = None,
     wboit_equation: str = "eq10",
     engine: str = "numpy",
+    out: FrameImage | None = None,
 ) -> FrameImage:
     """Resolve each sample (transparency over the opaque fragment), then the box filter.
 
@@ -347,9 +348,11 @@ def resolve_frame(
         layers: passes for ``depth_peeling``.
         wboit_equation: weight of ``weighted_blended``.
         engine: ``"numpy"`` (reference) or ``"numba"``/``"auto"`` (compiled, one pass per pixel).
+        out: buffers to write the result into (C-contiguous float32 of the frame's shapes, with
+            a ``shadow`` pass when ``visibility`` is given), or None for new ones.
 
     Returns:
-        :class:`FrameImage`.
+        :class:`FrameImage` (``out`` when given).
     """
     f = fragments.fragments
     width, height, samples = f.width, f.height, f.samples
@@ -387,18 +390,23 @@ def resolve_frame(
                     ).astype(np.float64)
         else:
             sort_key = weight_all = np.zeros(0)
-        out = resolve_frame_compiled(
+        targets = None
+        if out is not None:
+            p = out.passes
+            shadow_out = p["shadow"] if vis_mean is not None else np.zeros((0, 0, 1), np.float32)
+            targets = (out.rgba, p["ambient"], p["diffuse"], p["specular"], out.normal, out.depth, shadow_out)
+        buffers = resolve_frame_compiled(
             width, height, samples, code, max_layers, n_op, fragments.opaque_of, fragments.offsets,
             sort_key, weight_all, rgba, alpha, shaded.ambient, shaded.diffuse, shaded.specular,
-            shaded.normal, f.depth, vis_mean,
+            shaded.normal, f.depth, vis_mean, targets,
         )  # fmt: skip
-        image, ambient, diffuse, specular, normal, depth, shadow = out
+        image, ambient, diffuse, specular, normal, depth, shadow = buffers
         if samples > 1:
-            normal = normalize(normal)  # the mean of unit normals; one sample is unit already
+            normal[...] = normalize(normal)  # the mean of unit normals; one sample is unit already
         passes = {"ambient": ambient, "diffuse": diffuse, "specular": specular}
         if vis_mean is not None:
             passes["shadow"] = shadow
-        return FrameImage(image, depth, normal, passes)
+        return FrameImage(image, depth, normal, passes) if out is None else out
 
     per_sample = np.zeros((n_keys, 4))
     per_sample[key[:n_op]] = rgba[:n_op]
@@ -438,4 +446,9 @@ def resolve_frame(
         buf = np.zeros((n_keys, 1), np.float32)
         buf[covered, 0] = vis_mean[nearest] * alpha[nearest]
         passes["shadow"] = resolve_samples(buf, width, height, samples)
-    return FrameImage(image, depth, normal, passes)
+    if out is None:
+        return FrameImage(image, depth, normal, passes)
+    out.rgba[...], out.depth[...], out.normal[...] = image, depth, normal
+    for name, buffer in passes.items():
+        out.passes[name][...] = buffer
+    return out

@@ -123,7 +123,9 @@ class FrameFragments:
         """The fragments of pixel rows ``[row0, row1)`` as a frame of ``row1 − row0`` rows (a band)."""
         f = self.fragments
         o0, o1, t0, t1 = self.fragment_range(row0, row1)
-        index = np.concatenate([np.arange(o0, o1), np.arange(self.n_opaque + t0, self.n_opaque + t1)])
+        index: slice | np.ndarray = slice(o0, o1)  # opaque fragments only: views, no copies
+        if t1 > t0:
+            index = np.concatenate([np.arange(o0, o1), np.arange(self.n_opaque + t0, self.n_opaque + t1)])
         k0 = row0 * f.width * f.samples
         k1 = row1 * f.width * f.samples
         band = Fragments(
