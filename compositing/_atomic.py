@@ -74,7 +74,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[str]:
     directory = os.path.dirname(os.path.abspath(target))
     name = os.path.basename(target)
     ext = os.path.splitext(name)[1]
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=f".part{ext}", dir=directory)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=f".part{ext}", dir=directory)
+    except OSError as exc:
+        raise OSError(
+            exc.errno, f"path: cannot write {target!r}: {exc.strerror} (directory {directory!r})"
+        ) from exc
     os.close(fd)
     try:
         try:
@@ -109,4 +114,3 @@ def write_json_atomic(path: str | os.PathLike, data: object, **dumps_kwargs: obj
     raises ``TypeError``/``ValueError`` and leaves ``path`` alone.
     """
     write_text_atomic(path, json.dumps(data, **dumps_kwargs) + "\n")
-

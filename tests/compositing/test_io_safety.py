@@ -146,6 +146,11 @@ def test_atomic_text_and_json_writers(tmp_path):
     assert target.read_text() == "new\n" and (target.stat().st_mode & 0o777) == 0o640  # mode kept
 
 
+def test_a_missing_directory_is_named(tmp_path):
+    with pytest.raises(OSError, match=r"path: cannot write .*x\.png.*No such file or directory"):
+        write_image(tmp_path / "missing" / "x.png", _image(12, 2, 2))
+
+
 # --------------------------------------------------------------------------- channels by name
 
 
