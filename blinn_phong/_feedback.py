@@ -8,7 +8,8 @@
 * A long render shows progress: :func:`progress_callback` turns ``render``'s
   ``progress`` argument into a callback; the default (``None``) prints
   ``render: <stage> <percent>`` lines to stderr once the render has run for
-  :data:`PROGRESS_AFTER` seconds, so short renders stay silent. ``progress=True``
+  :data:`PROGRESS_AFTER` seconds, when stderr is a terminal: short renders, batch
+  workers and logs stay silent. ``progress=True``
   prints from the start, ``progress=False`` never; a callable receives
   ``(stage, fraction_done)`` itself and nothing is printed.
 """
@@ -65,6 +66,14 @@ def announce_compiles(engine: str) -> None:
     event.register("numba:compile", _Notice())
 
 
+def _interactive() -> bool:
+    """True when standard error is a terminal (someone is watching)."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
 def progress_callback(progress: object) -> Callable[[str, float], None] | None:
     """The callback ``render`` reports to, from its ``progress`` argument (module docstring).
 
@@ -80,6 +89,8 @@ def progress_callback(progress: object) -> Callable[[str, float], None] | None:
             f"progress: expected None (stderr lines after {PROGRESS_AFTER:g} s), True, False or a "
             f"callable(stage, fraction), got {type(progress).__name__}"
         )
+    if progress is None and not _interactive():
+        return None
     start = time.perf_counter()
     delay = 0.0 if progress is True else PROGRESS_AFTER
 

@@ -652,9 +652,10 @@ def render(
             visibility pass and lighting kernel (same results to ~1e-12); ``"auto"`` —
             numba when it can be imported, else numpy.
         progress: ``callback(stage, fraction_done)`` called as stages finish; ``None`` (default)
-            prints ``render: <stage> <percent>`` to stderr once the render has run 3 s, ``True``
-            from the start, ``False`` never (:mod:`blinn_phong._feedback`). The first compiled
-            render of a process prints ``compiling kernels (once per machine)…`` while numba compiles.
+            prints ``render: <stage> <percent>`` to stderr, if it is a terminal, once the render
+            has run 3 s; ``True`` from the start, ``False`` never (:mod:`blinn_phong._feedback`).
+            When numba compiles the kernels (once per machine) ``compiling kernels (once per
+            machine)…`` is printed to stderr.
         transparency: ``None``/``"auto"`` (the planner's choice) or one of
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
             alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,

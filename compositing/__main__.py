@@ -56,8 +56,8 @@ def _composite_parser() -> argparse.ArgumentParser:
         "       python -m compositing blend SRC DST -o OUT --src-factor S --dst-factor D [options]\n"
         "       python -m compositing list",
         description="Composite SRC with DST by a Porter-Duff (or disjoint/conjoint) operator.",
-        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators). Operators: "
-        + ", ".join(ALL_OPERATORS),
+        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators). Exit status: 0 success, "
+        "1 a check on the data failed, 2 usage error. Operators: " + ", ".join(ALL_OPERATORS),
     )
     parser.add_argument(
         "images",

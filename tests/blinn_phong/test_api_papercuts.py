@@ -258,6 +258,9 @@ def test_a_long_render_prints_progress_and_a_short_one_stays_silent(capsys, monk
 
     monkeypatch.setattr(feedback, "PROGRESS_AFTER", 0.0)  # every render is "long" now
     bp.render(scene, 8, 8)
+    assert capsys.readouterr().err == ""  # stderr is not a terminal here: the default stays silent
+    monkeypatch.setattr(feedback, "_interactive", lambda: True)
+    bp.render(scene, 8, 8)
     lines = capsys.readouterr().err.splitlines()
     assert lines[-1] == "render: done 100%" and lines[0].startswith("render: ")
     bp.render(scene, 8, 8, progress=False)
