@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from .factors import ALL_OPERATORS, describe
@@ -156,17 +157,24 @@ def _composite(argv: list[str]) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status: 0 ok, 1 a data check failed, 2 usage (via argparse)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        if argv[:1] == ["list"]:
-            _list()
-        elif argv[:1] == ["blend"]:
-            _blend(argv[1:])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)  # e.g. which channels of a file were read
+        try:
+            if argv[:1] == ["list"]:
+                _list()
+            elif argv[:1] == ["blend"]:
+                _blend(argv[1:])
+            else:
+                _composite(argv)
+        except (ValueError, TypeError, OSError) as exc:
+            status = 1
+            print(f"error: {exc}", file=sys.stderr)
         else:
-            _composite(argv)
-    except (ValueError, TypeError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+            status = 0
+        finally:
+            for warning in caught:
+                print(f"warning: {warning.message}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

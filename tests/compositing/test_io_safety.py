@@ -167,6 +167,21 @@ def test_rgbz_exr_does_not_read_depth_as_alpha(tmp_path):
     assert image_channels(path).alpha is None
 
 
+def test_cli_says_which_channels_it_read(tmp_path, capsys):
+    rng = np.random.default_rng(13)
+    data = rng.random((5, 6, 4)).astype(np.float32)
+    _write_raw_exr(tmp_path / "rgbz.exr", data, ("R", "G", "B", "Z"))
+    out = tmp_path / "o.exr"
+    assert main(["src_over", str(tmp_path / "rgbz.exr"), str(tmp_path / "rgbz.exr"), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.strip() == f"wrote {out}"
+    assert (
+        captured.err.count("warning: ") == 2
+        and "alpha = 1 (no alpha channel declared); ignored: Z" in captured.err
+    )
+    np.testing.assert_array_equal(read_image(out)[..., 3], 1.0)  # opaque over opaque
+
+
 def test_uv_file_does_not_read_v_as_alpha(tmp_path):
     rng = np.random.default_rng(7)
     data = rng.random((4, 3, 2)).astype(np.float32)
