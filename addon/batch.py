@@ -1095,9 +1095,8 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
         inp = oiio.ImageInput.open(args.background)
         background_size = (inp.spec().width, inp.spec().height)
         inp.close()
-    attempt_dir = None
-    if args.scheduler or args.dask_local:
-        attempt_dir = str(out_dir / f".batch-attempts-{uuid.uuid4().hex[:8]}")
+    # Each attempt leaves a marker here (shared storage on a cluster): who ran what, for the report.
+    attempt_dir = str(out_dir / f".batch-attempts-{uuid.uuid4().hex[:8]}")
     # An opaque source decides the result of these operators: the composite equals the render.
     opaque = np.array([[[0.25, 0.5, 0.75, 1.0]]], np.float32)
     probe_bg = np.array([[[0.1, 0.7, 0.3, 0.6]]], np.float32)

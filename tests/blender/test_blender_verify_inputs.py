@@ -46,3 +46,61 @@ def test_images_are_checked_before_blender_starts() -> None:
         run_blender(src, dst[:4], [Case("node_group", "xor")], python="/nonexistent/python")
     with pytest.raises(ValueError, match="cases: expected at least one Case"):
         run_blender(src, dst, [], python="/nonexistent/python")
+
+
+@pytest.mark.parametrize(
+    ("args", "flag", "accepts"),
+    [
+        (["--operator", "xor", "--size", "0x0"], "--size", "each side in 1..8192"),
+        (["--operator", "xor", "--size", "100000x100000"], "--size", "each side in 1..8192"),
+        (["--operator", "xor", "--size", "97"], "--size", "WIDTHxHEIGHT"),
+        (["--operator", "xor", "--python", "/nonexistent/python"], "--python", "executable Python"),
+        (["--operator", "xor", "--tolerance", "-1"], "--tolerance", "finite number >= 0"),
+        (["--operator", "xor", "--tolerance", "nan"], "--tolerance", "finite number >= 0"),
+        (["--operator", "xor", "--factor", "1.5"], "--factor", "[0, 1]"),
+        (["--operator", "over"], "--operator", "expected one of"),
+        (["--op", "src_atop", "--via", "alpha_over"], "--operator", "for kind 'alpha_over'"),
+        ([], "--operator", "or --all"),
+        (
+            ["--operator", "xor", "--src", "/nonexistent/a.exr", "--dst", "/nonexistent/b.exr"],
+            "--src",
+            "no such",
+        ),
+        (["--operator", "xor", "--src", "a.exr"], "--src and --dst", "together"),
+    ],
+)
+def test_cli_usage_errors_exit_2_before_blender_starts(
+    capsys: pytest.CaptureFixture, args: list[str], flag: str, accepts: str
+) -> None:
+    from addon.verify import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert f"error: argument {flag}" in err or f"error: {flag}" in err, err
+    assert accepts in err, err
+
+
+def test_cli_out_must_not_be_an_existing_file(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    from addon.verify import main
+
+    taken = tmp_path / "taken"
+    taken.write_text("x")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--operator", "xor", "--out", str(taken)])
+    assert (
+        exit_info.value.code == 2
+        and f"--out: {taken} exists and is not a directory" in capsys.readouterr().err
+    )
+
+
+def test_one_operator_flag_and_one_default_tolerance_for_both_command_lines() -> None:
+    from addon import batch, verify
+
+    verify_args = verify.build_parser().parse_args(["--op", "xor"])
+    assert verify_args.operator == "xor"
+    assert verify.build_parser().parse_args(["--operator", "xor"]).operator == "xor"
+    batch_args = batch.build_parser().parse_args(["f.blend", "--out", "o", "--op", "xor"])
+    assert batch_args.operator == "xor"
+    assert batch_args.tolerance == verify_args.tolerance == verify.DEFAULT_TOLERANCE
