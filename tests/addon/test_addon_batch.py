@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import signal
@@ -15,7 +16,7 @@ import OpenImageIO as oiio  # noqa: N813
 import pytest
 from addon_testing import REPO, run_bpy
 
-from addon.batch import atomic_target, main, parse_colour, parse_frames
+from addon.batch import Progress, atomic_target, main, parse_colour, parse_frames
 from compositing.io import read_image
 
 # Frame 2 is bound (timeline marker) to a panoramic camera, which the engine cannot render.
@@ -465,3 +466,36 @@ def test_an_opaque_render_warns_that_the_composite_cannot_change_it(
     assert "warning:" in done.stderr and "Film → Transparent is off" in done.stderr
     assert any("Film → Transparent is off" in w for w in _report(out)["warnings"])
     np.testing.assert_array_equal(read_image(out / "o_0001_src_over.exr"), read_image(out / "o_0001.exr"))
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def _result(frame: int, ok: bool, seconds: float) -> dict:
+    return {
+        "task": {"blend": "/shots/sh010/lighting.blend", "frame": frame},
+        "ok": ok,
+        "error": None if ok else "RuntimeError: Cannot render, no camera\n",
+        "seconds": {"total": seconds},
+    }
+
+
+def test_progress_bar_on_a_terminal_plain_lines_otherwise_silent_when_quiet() -> None:
+    terminal = _Terminal()
+    progress = Progress(2, terminal)
+    progress.update(_result(1, True, 1.25))
+    progress.update(_result(2, False, 0.5))
+    text = terminal.getvalue()
+    assert "2/2" in text and "frame" in text and "s/frame" in text and "100%" in text  # tqdm's bar
+    assert "lighting.blend frame 2: FAILED (RuntimeError: Cannot render, no camera)" in text
+    log = io.StringIO()
+    progress = Progress(2, log)
+    progress.update(_result(1, True, 1.25))
+    assert log.getvalue() == "[1/2] lighting.blend frame 1: ok (1.25 s)\n"
+    quiet = _Terminal()
+    progress = Progress(2, quiet, quiet=True)
+    progress.update(_result(1, True, 1.25))
+    progress.note("retrying")
+    assert quiet.getvalue() == ""
