@@ -1142,8 +1142,13 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
         render.filepath = pattern
         skip = args.skip_existing or not render.use_overwrite
         placeholder = args.placeholders or render.use_placeholder
+        source = "--output-pattern" if args.output_pattern is not None else f"{blend}: render.filepath"
         for frame in frames if frames is not None else [scene.frame_current]:
-            output = str(Path(bpy.path.abspath(render.frame_path(frame=frame))).resolve())
+            try:
+                output = str(Path(bpy.path.abspath(render.frame_path(frame=frame))).resolve())
+            except RuntimeError as error:  # Blender 5.0 path templates: unknown or broken {…}
+                problems.append(f"{source}: {_trim(error).removeprefix('Error: ')}")
+                break
             task = Task(
                 blend=str(path),
                 frame=frame,

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813
 import pytest
-from addon_testing import REPO, run_bpy
+from addon_testing import REPO, bpy_version, run_bpy
 
 from addon.batch import Progress, atomic_target, main, parse_colour, parse_frames
 from compositing.io import read_image
@@ -218,6 +218,10 @@ def test_inputs_that_need_the_file_are_checked_before_the_first_render(blend: Pa
     )
     assert not out.exists() or _files(out) == []
     print(f"time to the first error needing the .blend: {seconds:.2f} s")
+    if bpy_version() >= (5, 0):  # path templates: Blender's own parser names the bad expression
+        done = _batch(str(blend), "--frames", "1", "--out", str(out), "--output-pattern", "{shot}_####")
+        assert done.returncode == 2 and "error: --output-pattern: Parse errors" in done.stderr, done.stderr
+        assert "'{shot}'" in done.stderr
 
 
 @pytest.mark.blender
