@@ -1213,9 +1213,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         argv = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
     parser = build_parser()
     args = parser.parse_args(list(argv))
-    if (args.workers > 1 or args.scheduler or args.dask_local) and _inside_blender_binary():
+    if (args.workers > 1 or args.timeout or args.scheduler or args.dask_local) and _inside_blender_binary():
         parser.error(
-            "--workers, --scheduler and --dask-local start Python processes with the bpy module; "
+            "--workers, --timeout, --scheduler and --dask-local start Python processes with the bpy module; "
             "inside Blender (blender -P) tasks run in this process: run python -m addon.batch instead"
         )
     open_file, current_frame = _default_blend_and_frame()

@@ -535,7 +535,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise ValueError(f"--operator/--via: {error}") from None
     except (OSError, ValueError, TypeError) as error:
         parser.error(str(error))
-    results, report = verify_cases(src, dst, cases, python=args.python)
+    try:
+        results, report = verify_cases(src, dst, cases, python=args.python)
+    except (RuntimeError, subprocess.TimeoutExpired) as error:
+        print(f"{parser.prog}: Blender's side failed: {str(error).strip()}", file=sys.stderr)
+        return 1
     print(f"Blender {report['blender_version']}, {src.shape[1]}x{src.shape[0]}, {len(results)} case(s)")
     print(f"{'case':48s} {'max abs error':>14s} {'mean abs error':>15s}")
     worst = 0.0

@@ -503,3 +503,30 @@ def test_progress_bar_on_a_terminal_plain_lines_otherwise_silent_when_quiet() ->
     progress.update(_result(1, True, 1.25))
     progress.note("retrying")
     assert quiet.getvalue() == ""
+
+
+@pytest.mark.blender
+@pytest.mark.timeout(300)
+def test_dask_timeout_ends_the_worker_and_retries_are_bounded(blend: Path, tmp_path: Path) -> None:
+    # Under Dask a render cannot be interrupted: the task's worker process is ended, and with
+    # --retries 0 the scheduler gives the task up after that one lost worker.
+    out = tmp_path / "dask_timeout"
+    done = _batch(
+        str(blend),
+        "--frames",
+        "1",
+        "--out",
+        str(out),
+        "--dask-local",
+        "1",
+        "--timeout",
+        "0.5",
+        "--retries",
+        "0",
+    )
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "exceeded --timeout 0.5 s; ending this worker" in done.stderr
+    task = _report(out)["tasks"][0]
+    assert task["ok"] is False and "KilledWorker" in task["error"], task["error"]
+    assert [a["outcome"] for a in task["attempts"]] == ["worker lost before the task finished"]
+    assert _files(out) == ["report.json"]
