@@ -1095,6 +1095,13 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
         inp = oiio.ImageInput.open(args.background)
         background_size = (inp.spec().width, inp.spec().height)
         inp.close()
+        from compositing.io import read_image
+        from compositing.validate import check_alpha_range
+
+        try:  # decoded once here, so that bad pixels are found before the first render
+            check_alpha_range(read_image(args.background), "pixels")
+        except (OSError, ValueError) as error:
+            problems.append(f"--background: {args.background}: {error}")
     # Each attempt leaves a marker here (shared storage on a cluster): who ran what, for the report.
     attempt_dir = str(out_dir / f".batch-attempts-{uuid.uuid4().hex[:8]}")
     # An opaque source decides the result of these operators: the composite equals the render.
@@ -1253,8 +1260,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if attempt_dir and Path(attempt_dir).is_dir():
             for marker in Path(attempt_dir).iterdir():
                 marker.unlink(missing_ok=True)
-            Path(attempt_dir).rmdir()
+            try:
+                Path(attempt_dir).rmdir()
+            except OSError:
+                pass
     failed = [r for r in results if not r["ok"]]
+    for result in failed:  # a placeholder left by a killed attempt of a task that finally failed
+        output = Path(result["task"]["output"])
+        if result["task"].get("placeholder") and output.is_file() and output.stat().st_size == 0:
+            output.unlink()
     warnings = list(plan.warnings)
     for result in results:
         result["error"] = _trim(result["error"]) if result["error"] else None

@@ -203,6 +203,7 @@ def test_inputs_that_need_the_file_are_checked_before_the_first_render(blend: Pa
         shots[-1].write_bytes(blend.read_bytes())
     plate = tmp_path / "plate.exr"
     out_image = oiio.ImageBuf(oiio.ImageSpec(10, 10, 4, oiio.FLOAT))
+    out_image.setpixel(3, 4, (0.5, float("nan"), 0.0, 1.0))
     assert out_image.write(str(plate))
     out = tmp_path / "out"
     started = time.perf_counter()
@@ -216,6 +217,7 @@ def test_inputs_that_need_the_file_are_checked_before_the_first_render(blend: Pa
     assert (
         "--background: " in done.stderr and "is 10×10 but" in done.stderr and "renders 64×48" in done.stderr
     )
+    assert f"--background: {plate}: " in done.stderr and "finite" in done.stderr  # the NaN pixel
     assert not out.exists() or _files(out) == []
     print(f"time to the first error needing the .blend: {seconds:.2f} s")
     if bpy_version() >= (5, 0):  # path templates: Blender's own parser names the bad expression
