@@ -104,3 +104,33 @@ def test_one_operator_flag_and_one_default_tolerance_for_both_command_lines() ->
     batch_args = batch.build_parser().parse_args(["f.blend", "--out", "o", "--op", "xor"])
     assert batch_args.operator == "xor"
     assert batch_args.tolerance == verify_args.tolerance == verify.DEFAULT_TOLERANCE
+
+
+@pytest.mark.blender
+def test_cli_success_prints_what_it_wrote(tmp_path) -> None:
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from compositing.io import read_image
+
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "diff"
+    done = subprocess.run(
+        [sys.executable, "-m", "addon.verify", "--op", "xor", "--size", "9x7", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=str(repo),
+        env=dict(os.environ, PYTHONPATH=str(repo), BLENDER_USER_RESOURCES=str(tmp_path / "user")),
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    for name in ("blender", "ours", "difference"):
+        assert f"wrote {out / name}.exr" in done.stdout
+    # |Blender − ours| as written equals the difference of the two written images: both are the
+    # correctly rounded float32 of an exact difference (values in [-0.5, 3]), so equal bit for bit.
+    blender, ours = read_image(out / "blender.exr"), read_image(out / "ours.exr")
+    np.testing.assert_array_equal(read_image(out / "difference.exr"), np.abs(blender - ours))
+    assert sorted(p.name for p in out.iterdir()) == ["blender.exr", "difference.exr", "ours.exr"]
