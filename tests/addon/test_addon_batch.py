@@ -271,6 +271,7 @@ def test_processes_failing_frame_composite_and_verify(blend: Path, tmp_path: Pat
         assert f"wrote {path}" in done.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.timeout(300)
 def test_a_killed_worker_costs_only_its_own_task(blend: Path, tmp_path: Path) -> None:
@@ -335,6 +336,7 @@ def _exr_parts(path: Path) -> dict[str, np.ndarray]:
     return channels
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.timeout(300)
 def test_the_files_own_output_settings_and_overrides(blends: tuple[Path, Path], tmp_path: Path) -> None:
@@ -392,6 +394,7 @@ def test_the_files_own_output_settings_and_overrides(blends: tuple[Path, Path], 
     np.testing.assert_array_equal(combined, read_image(plain / "spheres_0003.exr"))
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.timeout(300)
 def test_skip_existing_renders_only_what_is_missing(blend: Path, tmp_path: Path) -> None:
@@ -507,6 +510,7 @@ def test_progress_bar_on_a_terminal_plain_lines_otherwise_silent_when_quiet() ->
     assert quiet.getvalue() == ""
 
 
+@pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.timeout(300)
 def test_dask_timeout_ends_the_worker_and_retries_are_bounded(blend: Path, tmp_path: Path) -> None:
