@@ -204,6 +204,13 @@ def test_cluster_frames_equal_single_process_bit_for_bit(
 def test_a_worker_killed_mid_job_loses_nothing(
     blend: Path, cluster: str, reference: dict[int, np.ndarray], tmp_path: Path
 ) -> None:
+    from distributed import Client
+
+    # Fresh worker processes: a task's first run imports bpy and loads the kernels (seconds), so the
+    # kill below lands in the middle of a task, not between two 30 ms warm tasks.
+    with Client(cluster, timeout=30) as client:
+        client.restart(timeout=120)
+        client.wait_for_workers(2, timeout=90)
     out = tmp_path / "killed"
     job = _batch(str(blend), "--frames", "1-6", "--out", str(out), "--scheduler", cluster)
     victim = None
@@ -215,7 +222,7 @@ def test_a_worker_killed_mid_job_loses_nothing(
                 victim = json.loads(markers[0].read_text())["pid"]
             except ValueError:  # being written
                 continue
-        time.sleep(0.02)
+        time.sleep(0.01)
     assert victim is not None, "no task started on the cluster"
     os.kill(victim, signal.SIGKILL)  # the worker process running a task dies; its nanny starts a new one
     stdout, stderr = job.communicate(timeout=400)
