@@ -377,6 +377,7 @@ def run_task(task: Task | dict) -> dict[str, Any]:
             except FileExistsError:
                 pass
         t = time.perf_counter()
+        _engine_module().LAST_RENDER.clear()  # no status of an earlier task in this worker
         try:
             bpy.ops.render.render()
         except RuntimeError as error:  # Blender turns the engine's error report into an exception

@@ -21,7 +21,8 @@ from compositing.io import read_image
 
 # Frame 2 is bound (timeline marker) to a panoramic camera, which the engine cannot render.
 # spheres.blend writes 32-bit EXR to "spheres_####" (a relative path: batch puts it under --out);
-# own.blend writes 16-bit PNG next to itself ("//renders/own_##_v"), as Blender would.
+# own.blend writes 16-bit PNG next to itself ("//renders/own_##_v"), as Blender would;
+# nocam.blend has no camera.
 MAKE_BLEND = """
 import math, sys
 import bpy
@@ -51,6 +52,11 @@ settings.file_format, settings.color_depth, settings.color_mode = "PNG", "16", "
 scene.render.filepath = "//renders/own_##_v"
 scene.render.film_transparent = False
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
+scene.render.filepath = "nocam_####"
+scene.camera = None
+scene.timeline_markers.clear()
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[3])
 emit(True)
 """
 
@@ -60,7 +66,7 @@ def blends(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     root = tmp_path_factory.mktemp("batch")
     spheres, own = root / "spheres.blend", root / "own" / "own.blend"
     own.parent.mkdir()
-    run_bpy(MAKE_BLEND, root, args=(str(spheres), str(own)))
+    run_bpy(MAKE_BLEND, root, args=(str(spheres), str(own), str(root / "nocam.blend")))
     return spheres, own
 
 
@@ -535,4 +541,19 @@ def test_dask_timeout_ends_the_worker_and_retries_are_bounded(blend: Path, tmp_p
     task = _report(out)["tasks"][0]
     assert task["ok"] is False and "KilledWorker" in task["error"], task["error"]
     assert [a["outcome"] for a in task["attempts"]] == ["worker lost before the task finished"]
+    assert _files(out) == ["report.json"]
+
+
+@pytest.mark.blender
+@pytest.mark.timeout(300)
+def test_each_failure_is_named_for_its_own_task(blend: Path, tmp_path: Path) -> None:
+    # One process, two failing tasks in a row: the engine's error (panoramic camera), then Blender's
+    # own ("no camera", raised before the engine runs) — the second must not inherit the first.
+    out = tmp_path / "failures"
+    done = _batch(str(blend), str(blend.parent / "nocam.blend"), "--frames", "2", "--out", str(out))
+    assert done.returncode == 1, done.stdout + done.stderr
+    errors = {Path(t["task"]["blend"]).name: t["error"] for t in _report(out)["tasks"]}
+    assert "panoramic" in errors["spheres.blend"]
+    assert "Cannot render, no camera" in errors["nocam.blend"] and "panoramic" not in errors["nocam.blend"]
+    assert all(e == e.strip() for e in errors.values())  # Blender's trailing newline trimmed
     assert _files(out) == ["report.json"]
