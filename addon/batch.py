@@ -35,7 +35,9 @@ Dask reschedules the task of a lost worker itself. ``--dask-local N`` starts a D
 workers on loopback. Under ``blender -P`` tasks run in the Blender process itself.
 
 Exit codes (the same for ``python -m addon.verify``): 0 every task rendered and every verification
-stayed within ``--tolerance``; 1 a task or a check failed; 2 usage error (nothing was rendered).
+stayed within ``--tolerance``; 1 a task or a check failed, or the job was interrupted (SIGINT,
+SIGTERM: workers are stopped, the report records what finished and ``interrupted``); 2 usage error
+(nothing was rendered).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ import json
 import math
 import os
 import re
+import signal
 import socket
 import sys
 import threading
@@ -695,6 +698,9 @@ def _run_pool(
                         slot.index = slot.deadline = None
     finally:
         for slot in slots:
+            if slot.index is not None and slot.process.is_alive():
+                slot.process.kill()  # interrupted while busy: its task is not finished, stop it now
+                continue
             try:
                 slot.conn.send(None)
             except (OSError, ValueError):
@@ -1215,6 +1221,21 @@ def _cleanup_temporaries(tasks: Iterable[Task]) -> None:
                     pass
 
 
+class _Terminated(Exception):
+    """SIGTERM arrived (a farm manager or ``kill`` stopping the job)."""
+
+
+def _on_sigterm_raise() -> Any:
+    """In the main thread: make SIGTERM raise :class:`_Terminated`; returns the previous handler."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum: int, frame: Any) -> None:
+        raise _Terminated
+
+    return signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the exit code (0 ok, 1 a task or check failed, 2 usage error)."""
     if argv is None:
@@ -1243,6 +1264,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     for item in plan.skipped:
         progress.note(f"{Path(item['blend']).name} frame {item['frame']}: skipped (outputs exist)")
     started = time.perf_counter()
+    arrived: list[dict[str, Any]] = []
+
+    def on_result(result: dict[str, Any]) -> None:
+        arrived.append(result)
+        progress.update(result)
+
+    interrupted = None
+    previous = _on_sigterm_raise()
     try:
         results = run_tasks(
             plan.tasks,
@@ -1251,10 +1280,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             dask_local=args.dask_local,
             timeout=args.timeout,
             retries=args.retries,
-            on_result=progress.update,
+            on_result=on_result,
             note=progress.note,
         )
+    except (KeyboardInterrupt, _Terminated) as stop:
+        # Ctrl-C or a farm manager's SIGTERM: stop the workers, keep what finished, say so.
+        interrupted = "SIGINT" if isinstance(stop, KeyboardInterrupt) else "SIGTERM"
+        results = list(arrived)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         progress.close()
         _cleanup_temporaries(plan.tasks)
         attempt_dir = plan.tasks[0].attempt_dir if plan.tasks else None
@@ -1266,9 +1301,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             except OSError:
                 pass
     failed = [r for r in results if not r["ok"]]
-    for result in failed:  # a placeholder left by a killed attempt of a task that finally failed
-        output = Path(result["task"]["output"])
-        if result["task"].get("placeholder") and output.is_file() and output.stat().st_size == 0:
+    finished_ok = {r["task"]["output"] for r in results if r["ok"]}
+    for task in plan.tasks:  # placeholders of tasks that failed, were killed or never finished
+        output = Path(task.output)
+        if (
+            task.placeholder
+            and task.output not in finished_ok
+            and output.is_file()
+            and output.stat().st_size == 0
+        ):
             output.unlink()
     warnings = list(plan.warnings)
     for result in results:
@@ -1297,6 +1338,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     code = EXIT_OK if not failed and len(results) == len(plan.tasks) else EXIT_FAILED
     report["exit_code"] = code
+    report["interrupted"] = interrupted
+    if interrupted:
+        print(
+            f"interrupted ({interrupted}): {len(plan.tasks) - len(results)} task(s) not finished",
+            file=sys.stderr,
+        )
     report_path = (args.report or args.out / "report.json").resolve()
     write_text_atomic(report_path, json.dumps(report, indent=1, default=str))
     if not args.quiet:

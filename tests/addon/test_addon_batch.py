@@ -557,3 +557,46 @@ def test_each_failure_is_named_for_its_own_task(blend: Path, tmp_path: Path) -> 
     assert "Cannot render, no camera" in errors["nocam.blend"] and "panoramic" not in errors["nocam.blend"]
     assert all(e == e.strip() for e in errors.values())  # Blender's trailing newline trimmed
     assert _files(out) == ["report.json"]
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_sigterm_stops_the_workers_and_reports_what_finished(blend: Path, tmp_path: Path) -> None:
+    out = tmp_path / "stopped"
+    job = subprocess.Popen(
+        [
+            *_command(),
+            str(blend),
+            "--frames",
+            "1,3,4,5",
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--placeholders",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        cwd=str(REPO),
+    )
+    workers: set[int] = set()
+    deadline = time.monotonic() + 120
+    while not workers and time.monotonic() < deadline and job.poll() is None:
+        for marker in out.glob(".batch-attempts-*/*"):
+            workers.add(int(marker.name.rsplit(".", 1)[1]))
+        time.sleep(0.05)
+    assert workers, "no task started"
+    job.send_signal(signal.SIGTERM)  # as a farm manager stops a job
+    stdout, stderr = job.communicate(timeout=60)
+    assert job.returncode == 1, stdout + stderr
+    assert "interrupted (SIGTERM)" in stderr
+    report = _report(out)
+    assert report["interrupted"] == "SIGTERM" and report["total"] < 4
+    # Whatever finished is listed; nothing half-written, no placeholder, no marker is left behind.
+    assert _files(out) == sorted([*(Path(p).name for p in report["written"]), "report.json"])
+    for pid in workers:  # the worker processes were stopped
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
