@@ -843,7 +843,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Exit codes: 0 ok, 1 a task or check failed, 2 usage error (nothing rendered).",
     )
     parser.add_argument("blend", nargs="*", help=".blend files (default under blender -P: the open file)")
-    parser.add_argument("--frames", default=None, help="frames, e.g. '1-5,7' (default: the current frame)")
+    parser.add_argument(
+        "--frames", default=None, help="frames, e.g. '1-5,7' (default: each file's current frame)"
+    )
     parser.add_argument(
         "--out", type=Path, required=True, help="directory for the report (and relative outputs)"
     )
