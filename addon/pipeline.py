@@ -37,7 +37,13 @@ TRANSPARENCY_SETTINGS: dict[str, str | None] = {
 }
 """Render-setting value -> ``render(transparency=...)`` (None: the planner's choice)."""
 
-SHADOW_SETTINGS: dict[str, str | None] = {"AUTO": None, "NONE": "none", "HARD": "ray_traced", "SOFT": "soft"}
+SHADOW_SETTINGS: dict[str, str | None] = {
+    "AUTO": None,
+    "NONE": "none",
+    "HARD": "ray_traced",
+    "SOFT": "soft",
+    "VOLUME": "shadow_volume",
+}
 """Render-setting value -> shadow method (None: the planner's choice per light)."""
 
 

@@ -559,7 +559,8 @@ def render_effects(
                     ray_scene.append(RayScene(tris))
                 columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
             else:
-                columns.append(light_visibility(c.method, light, tris, world, normal, **c.params))  # type: ignore[arg-type]
+                extra = {"camera": scene.camera} if c.method == "shadow_volume" else {}
+                columns.append(light_visibility(c.method, light, tris, world, normal, **c.params, **extra))  # type: ignore[arg-type]
         visibility = np.stack(columns, axis=1) if columns else None
     seconds["shadows"] = time.perf_counter() - t
     report("shadows", 0.5)
