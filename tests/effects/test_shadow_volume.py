@@ -96,7 +96,7 @@ def test_engines_count_identically(method):
     """Integer counts from the same float expressions: numba and numpy agree exactly (deterministic)."""
     light = LIGHTS["point"]
     scene = scene_with(casters("pair") + casters("box"), light, outside_camera())
-    pts, nrm, _, _ = samples(scene, 80, 60)
+    pts, _, _, _ = samples(scene, 80, 60)
     volume = shadow_volume_triangles(world_triangles(scene), light, caps=method == "zfail")
     view, proj = scene.camera.view, scene.camera.projection
     a = stencil_counts(volume, view, proj, pts, method=method, engine="numpy")
