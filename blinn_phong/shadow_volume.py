@@ -284,8 +284,9 @@ def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | 
     sk = key[order]
     twin = b * nv + a
     pos = np.clip(np.searchsorted(sk, twin), 0, max(len(sk) - 1, 0))
+    exists = sk[pos] == twin if len(sk) else np.zeros(0, bool)
     twin_lit = face_lit[order][pos]
-    is_sil = face_lit & ~twin_lit
+    is_sil = face_lit & exists & ~twin_lit  # a boundary edge (no twin) is no silhouette edge
     return np.stack([a[is_sil], b[is_sil]], axis=1)
 
 
