@@ -81,6 +81,7 @@ a face lit by the light moves out of its own volume, a face turned away moves in
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
 import os
 from dataclasses import dataclass
@@ -102,6 +103,7 @@ __all__ = [
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
+_TILE_POINTS = 16  # receivers per screen tile, on average
 
 
 # --------------------------------------------------------------------------- input checks
@@ -180,9 +182,50 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     if n == 0:
         e = np.zeros(0, np.int64)
         return Topology(np.zeros((0, 3)), np.zeros((0, 3), np.int64), e.astype(bool), e, e.astype(bool), ())
-    flat = np.ascontiguousarray(tris.reshape(-1, 3))
-    flat = flat + 0.0  # -0.0 and 0.0 weld together
-    vertices, inverse = np.unique(flat, axis=0, return_inverse=True)
+    key = hashlib.blake2b(tris.tobytes(), digest_size=16).digest()
+    if key in _TOPOLOGY_CACHE:
+        return _TOPOLOGY_CACHE[key]
+    topology = _analyse(tris)
+    if len(_TOPOLOGY_CACHE) >= 2:
+        _TOPOLOGY_CACHE.pop(next(iter(_TOPOLOGY_CACHE)))
+    _TOPOLOGY_CACHE[key] = topology
+    return topology
+
+
+#: The last topologies analysed, by a digest of the triangles (a frame asks once per light).
+_TOPOLOGY_CACHE: dict[bytes, Topology] = {}
+
+
+def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge bit-identical rows of (m, 3) float64: (unique rows, index of each input row)."""
+    flat = np.ascontiguousarray(flat + 0.0)  # -0.0 and 0.0 weld together
+    bits = flat.view(np.uint64).reshape(-1, 3)
+
+    def mix(z: np.ndarray) -> np.ndarray:  # splitmix64's finaliser (wrapping uint64 arithmetic)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return z ^ (z >> np.uint64(31))
+
+    digest = mix(mix(mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
+    order = np.argsort(digest, kind="stable")  # radix sort for integers
+    ordered = digest[order]
+    first = np.r_[True, ordered[1:] != ordered[:-1]]
+    group = np.cumsum(first) - 1
+    representative = order[first]
+    if not np.array_equal(bits[order], bits[representative[group]]):  # a collision: sort exactly
+        order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0]))
+        rows = bits[order]
+        first = np.r_[True, np.any(rows[1:] != rows[:-1], axis=1)]
+        group = np.cumsum(first) - 1
+        representative = order[first]
+    inverse = np.empty(len(flat), np.int64)
+    inverse[order] = group
+    return flat[representative], inverse
+
+
+def _analyse(tris: np.ndarray) -> Topology:
+    n = len(tris)
+    vertices, inverse = _weld(tris.reshape(-1, 3))
     faces = inverse.reshape(n, 3).astype(np.int64)
     valid = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
     idx = np.flatnonzero(valid)
@@ -195,23 +238,23 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     twin = b * nv + a
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
-    uniq, counts = np.unique(sorted_key, return_counts=True)
-    # count of each directed edge and of its twin
-    pos = np.searchsorted(uniq, key)
-    own_count = counts[pos]
-    tpos = np.clip(np.searchsorted(uniq, twin), 0, len(uniq) - 1)
-    twin_count = np.where(uniq[tpos] == twin, counts[tpos], 0)
+    starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+    uniq = sorted_key[starts]
+    counts = np.diff(np.r_[starts, len(sorted_key)])
+    run = np.empty(len(key), np.int64)
+    run[order] = np.cumsum(np.r_[True, sorted_key[1:] != sorted_key[:-1]]) - 1
+    own_count = counts[run]
+    tpos = np.clip(np.searchsorted(uniq, twin), 0, max(len(uniq) - 1, 0))
+    has_twin = uniq[tpos] == twin
+    twin_count = np.where(has_twin, counts[tpos], 0)
     bad_edge = (own_count != 1) | (twin_count != 1)
-    # components: triangles joined by any shared undirected edge
+    # components: triangles joined through an edge and its twin
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    und = np.minimum(a, b) * nv + np.maximum(a, b)
-    o2 = np.argsort(und, kind="stable")
-    su = und[o2]
-    same = np.flatnonzero(su[1:] == su[:-1])
-    rows, cols = owner[o2][same], owner[o2][same + 1]
-    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+    rows = owner[has_twin]
+    cols = owner[order[starts[tpos[has_twin]]]]
+    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     component = np.full(n, -1, np.int64)
     # relabel valid triangles' components densely
@@ -280,7 +323,7 @@ def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | 
     face_lit = np.repeat(lit[sel], 3)
     nv = len(topology.vertices)
     key = a * nv + b
-    order = np.argsort(key)
+    order = np.argsort(key, kind="stable")
     sk = key[order]
     twin = b * nv + a
     pos = np.clip(np.searchsorted(sk, twin), 0, max(len(sk) - 1, 0))
@@ -510,7 +553,7 @@ def _grid(
     xmin, xmax = float(px.min()), float(px.max())
     ymin, ymax = float(py.min()), float(py.max())
     spanx, spany = max(xmax - xmin, 1e-12), max(ymax - ymin, 1e-12)
-    cells = max(1, m // 2)
+    cells = max(1, m // _TILE_POINTS)
     nx = int(min(4096, max(1, round(math.sqrt(cells * spanx / spany)))))
     ny = int(min(4096, max(1, round(cells / nx))))
     cw, ch = spanx / nx * (1 + 1e-9), spany / ny * (1 + 1e-9)
@@ -562,6 +605,10 @@ def _kernel() -> object:  # a numba dispatcher
         n_bands,
         ny,
         nx,
+        xmin,
+        ymin,
+        cw,
+        ch,
         cx0,
         cx1,
         cy0,
@@ -585,7 +632,15 @@ def _kernel() -> object:  # a numba dispatcher
         order,
         zfail,
     ):  # pragma: no cover - compiled
+        n_cells = nx * ny
         counts = np.zeros(px.shape[0], np.int64)
+        whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        for cell in range(n_cells):
+            for k in range(cell_start[cell], cell_start[cell + 1]):
+                zlo[cell] = min(zlo[cell], pz[order[k]])
+                zhi[cell] = max(zhi[cell], pz[order[k]])
         band_h = (ny + n_bands - 1) // n_bands
         for band in numba.prange(n_bands):
             r0 = band * band_h
@@ -596,27 +651,118 @@ def _kernel() -> object:  # a numba dispatcher
                 if lo > hi or cx0[t] > cx1[t]:
                     continue
                 for row in range(lo, hi + 1):
-                    s0 = cell_start[row * nx + cx0[t]]
-                    s1 = cell_start[row * nx + cx1[t] + 1]
-                    for k in range(s0, s1):
-                        p = order[k]
-                        x = px[p]
-                        y = py[p]
-                        ok = True
-                        for i in range(3):
-                            e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
-                            se = esign[t, i] * e
-                            if not (se > 0 or (e == 0 and etie[t, i])):
-                                ok = False
-                                break
-                        if not ok:
+                    # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
+                    sy0 = ymin + row * ch - 1e-9 * ch
+                    sy1 = ymin + (row + 1) * ch + 1e-9 * ch
+                    span_lo = np.inf
+                    span_hi = -np.inf
+                    for i in range(3):
+                        if edy[t, i] == 0.0:
+                            if sy0 <= ey[t, i] <= sy1:
+                                span_lo = min(span_lo, ex[t, i])
+                                span_hi = max(span_hi, ex[t, i] + edx[t, i])
                             continue
-                        depth = z0[t] + (gx[t] * (x - x0[t]) + gy[t] * (y - y0[t]))
+                        ta = (sy0 - ey[t, i]) / edy[t, i]
+                        tb = (sy1 - ey[t, i]) / edy[t, i]
+                        t_lo = max(min(ta, tb), 0.0)
+                        t_hi = min(max(ta, tb), 1.0)
+                        if t_lo > t_hi:
+                            continue
+                        xa = ex[t, i] + t_lo * edx[t, i]
+                        xb = ex[t, i] + t_hi * edx[t, i]
+                        span_lo = min(span_lo, xa, xb)
+                        span_hi = max(span_hi, xa, xb)
+                    if span_lo > span_hi:
+                        continue
+                    pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
+                    c_lo = max(cx0[t], int(np.floor((span_lo - pad - xmin) / cw)))
+                    c_hi = min(cx1[t], int(np.floor((span_hi + pad - xmin) / cw)))
+                    for col in range(c_lo, c_hi + 1):
+                        cell = row * nx + col
+                        s0 = cell_start[cell]
+                        s1 = cell_start[cell + 1]
+                        if s0 == s1:
+                            continue
+                        # the tile's rectangle, widened past rounding of the binning
+                        ax = xmin + col * cw - 1e-9 * cw
+                        bx = xmin + (col + 1) * cw + 1e-9 * cw
+                        ay = ymin + row * ch - 1e-9 * ch
+                        by = ymin + (row + 1) * ch + 1e-9 * ch
+                        # tile against the triangle: outside one edge, or inside all three
+                        outside = False
+                        inside_all = True
+                        for i in range(3):
+                            lo_e = np.inf
+                            hi_e = -np.inf
+                            mag = 0.0
+                            for corner in range(4):
+                                xc = ax if corner % 2 == 0 else bx
+                                yc = ay if corner < 2 else by
+                                u = edx[t, i] * (yc - ey[t, i])
+                                v = edy[t, i] * (xc - ex[t, i])
+                                e = esign[t, i] * (u - v)
+                                lo_e = min(lo_e, e)
+                                hi_e = max(hi_e, e)
+                                mag = max(mag, abs(u) + abs(v))
+                            margin = 1e-12 * mag + 1e-300
+                            if hi_e < -margin:
+                                outside = True
+                                break
+                            if lo_e <= margin:
+                                inside_all = False
+                        if outside:
+                            continue
+                        # the face's depth plane over the tile
+                        lo_z = np.inf
+                        hi_z = -np.inf
+                        mag = 0.0
+                        for corner in range(4):
+                            xc = ax if corner % 2 == 0 else bx
+                            yc = ay if corner < 2 else by
+                            u = gx[t] * (xc - x0[t])
+                            v = gy[t] * (yc - y0[t])
+                            d = z0[t] + (u + v)
+                            lo_z = min(lo_z, d)
+                            hi_z = max(hi_z, d)
+                            mag = max(mag, abs(z0[t]) + abs(u) + abs(v))
+                        margin = 1e-12 * mag + 1e-300
+                        all_nearer = hi_z < zlo[cell] - margin
+                        none_nearer = lo_z > zhi[cell] + margin
                         if zfail:
-                            if not (depth < pz[p]):
-                                counts[p] -= front[t]
-                        elif depth < pz[p]:
-                            counts[p] += front[t]
+                            if all_nearer:
+                                continue
+                            if inside_all and none_nearer:
+                                whole[cell] -= front[t]
+                                continue
+                        else:
+                            if none_nearer:
+                                continue
+                            if inside_all and all_nearer:
+                                whole[cell] += front[t]
+                                continue
+                        for k in range(s0, s1):
+                            p = order[k]
+                            x = px[p]
+                            y = py[p]
+                            ok = True
+                            for i in range(3):
+                                e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
+                                se = esign[t, i] * e
+                                if not (se > 0 or (e == 0 and etie[t, i])):
+                                    ok = False
+                                    break
+                            if not ok:
+                                continue
+                            depth = z0[t] + (gx[t] * (x - x0[t]) + gy[t] * (y - y0[t]))
+                            if zfail:
+                                if not (depth < pz[p]):
+                                    counts[p] -= front[t]
+                            elif depth < pz[p]:
+                                counts[p] += front[t]
+            for row in range(r0, r1 + 1):
+                for cell in range(row * nx, (row + 1) * nx):
+                    for k in range(cell_start[cell], cell_start[cell + 1]):
+                        counts[order[k]] += whole[cell]
         return counts
 
     return count
@@ -688,6 +834,10 @@ def stencil_counts(
         n_bands,
         ny,
         nx,
+        grid[0],
+        grid[1],
+        grid[2],
+        grid[3],
         st.cx0,
         st.cx1,
         st.cy0,
