@@ -457,9 +457,14 @@ def _clip(clip: np.ndarray, guard: float) -> np.ndarray:
     """Clip to the near plane ``z ≥ −w`` (as OpenGL does) and to a guard band ``|x|, |y| ≤ guard·w``
     lying beyond every receiver (it only keeps window positions finite: vertices at infinity that
     graze the eye plane would otherwise land at infinity on the screen)."""
-    for plane in ((0, 0, 1, 1), (-1, 0, 0, guard), (1, 0, 0, guard), (0, -1, 0, guard), (0, 1, 0, guard)):
-        clip = _clip_plane(clip, np.asarray(plane, dtype=np.float64))
-    return clip
+    planes = np.array(
+        [(0, 0, 1, 1), (-1, 0, 0, guard), (1, 0, 0, guard), (0, -1, 0, guard), (0, 1, 0, guard)], np.float64
+    )
+    inside = ((clip @ planes.T) >= 0).all(axis=(1, 2))  # most faces need no clipping at all
+    cut = clip[~inside]
+    for plane in planes:
+        cut = _clip_plane(cut, plane)
+    return np.concatenate([clip[inside], cut])
 
 
 @dataclass(frozen=True, eq=False)
@@ -786,7 +791,7 @@ def stencil_counts(
     projection: np.ndarray,
     points: np.ndarray,
     *,
-    method: str = "zfail",
+    stencil: str = "zfail",
     engine: str = "auto",
 ) -> np.ndarray:
     """Per receiver, the stencil count of the shadow-volume faces along its camera ray.
@@ -797,15 +802,15 @@ def stencil_counts(
         view: 4×4 world → eye matrix of the camera.
         projection: 4×4 eye → clip matrix (OpenGL conventions); only the near plane clips.
         points: (n, 3) world-space receivers; each must lie in front of the camera (clip w > 0).
-        method: ``"zfail"`` (faces behind the receiver: +1 back, −1 front) or ``"zpass"``
+        stencil: ``"zfail"`` (faces behind the receiver: +1 back, −1 front) or ``"zpass"``
             (faces in front of it: +1 front, −1 back).
         engine: ``"numba"``, ``"numpy"`` (the reference) or ``"auto"``.
 
     Returns:
         (n,) int64 counts; 0 means outside every volume (lit) when the method is valid.
     """
-    if method not in STENCIL_METHODS:
-        raise ValueError(f"method: expected one of {STENCIL_METHODS}, got {method!r}")
+    if stencil not in STENCIL_METHODS:
+        raise ValueError(f"stencil: expected one of {STENCIL_METHODS}, got {stencil!r}")
     vol = np.asarray(volume_triangles, dtype=np.float64)
     if vol.ndim != 3 or vol.shape[1:] != (3, 4) or not np.all(np.isfinite(vol)):
         raise ValueError(f"volume_triangles: expected finite (m, 3, 4), got shape {vol.shape}")
@@ -825,7 +830,7 @@ def stencil_counts(
     clip = vol @ vp.T
     guard = 2.0 * max(float(np.abs(px).max()), float(np.abs(py).max()), 1.0) + 1.0
     st = _setup(clip, grid, guard)
-    zfail = method == "zfail"
+    zfail = stencil == "zfail"
     nx, ny = grid[4], grid[5]
     if not numba_path:
         return _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
@@ -886,7 +891,7 @@ def shadow_volume_visibility(
     normals: np.ndarray,
     *,
     camera: Camera | None = None,
-    method: str = "zfail",
+    stencil: str = "zfail",
     offset: float = 1e-4,
     engine: str = "auto",
 ) -> np.ndarray:
@@ -902,7 +907,7 @@ def shadow_volume_visibility(
             normal towards the light's side before it is counted.
         camera: the camera whose samples the points are; None — a view that sees every point
             (fine for z-fail; z-pass is only valid for a camera outside every volume).
-        method: ``"zfail"`` (robust) or ``"zpass"`` (valid only while the camera is outside every
+        stencil: ``"zfail"`` (robust) or ``"zpass"`` (valid only while the camera is outside every
             volume and the near plane cuts none).
         offset: world units, ≥ 0.
         engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
@@ -938,6 +943,8 @@ def shadow_volume_visibility(
         span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
-    volume = shadow_volume_triangles(tris, light, caps=method == "zfail", extent=extent)
-    counts = stencil_counts(volume, view, proj, q, method=method, engine=engine)
+    if stencil not in STENCIL_METHODS:
+        raise ValueError(f"stencil: expected one of {STENCIL_METHODS}, got {stencil!r}")
+    volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)
+    counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
     return (counts == 0).astype(np.float64)

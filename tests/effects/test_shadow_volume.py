@@ -50,7 +50,7 @@ def _compare(scene, light, method):
     pts, nrm, pix, _ = samples(scene)
     tris = world_triangles(scene)
     ref = embree_visibility(light, tris, pts, nrm)
-    got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera, method=method)
+    got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera, stencil=method)
     band = boundary_band(image_of(ref.astype(np.int64), pix), radius=0).ravel()[pix]
     return ref, got, band
 
@@ -99,8 +99,8 @@ def test_engines_count_identically(method):
     pts, _, _, _ = samples(scene, 80, 60)
     volume = shadow_volume_triangles(world_triangles(scene), light, caps=method == "zfail")
     view, proj = scene.camera.view, scene.camera.projection
-    a = stencil_counts(volume, view, proj, pts, method=method, engine="numpy")
-    b = stencil_counts(volume, view, proj, pts, method=method, engine="numba")
+    a = stencil_counts(volume, view, proj, pts, stencil=method, engine="numpy")
+    b = stencil_counts(volume, view, proj, pts, stencil=method, engine="numba")
     np.testing.assert_array_equal(a, b)
     assert np.count_nonzero(a) > 50
 
@@ -184,8 +184,8 @@ def test_bad_input_is_named():
     tris = sphere_mesh((0, 0, 1), 0.5).positions[sphere_mesh((0, 0, 1), 0.5).triangles]
     with pytest.raises(ValueError, match="points"):
         shadow_volume_visibility(light, tris, np.zeros((3, 2)), np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="method"):
-        stencil_counts(np.zeros((1, 3, 4)), np.eye(4), np.eye(4), np.zeros((1, 3)), method="zmiddle")
+    with pytest.raises(ValueError, match="stencil"):
+        stencil_counts(np.zeros((1, 3, 4)), np.eye(4), np.eye(4), np.zeros((1, 3)), stencil="zmiddle")
     with pytest.raises(TypeError, match="light"):
         shadow_volume_visibility(object(), tris, np.zeros((3, 3)), np.ones((3, 3)))
     with pytest.raises(ValueError, match="behind the camera"):

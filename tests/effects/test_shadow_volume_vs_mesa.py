@@ -53,7 +53,7 @@ def _masks(render_stencil_shadows, scene, light, method):
     gl = render_stencil_shadows(scene, light, WIDTH, HEIGHT, method=method)
     pts, nrm, pix, depth = samples(scene)
     ours = shadow_volume_visibility(
-        light, world_triangles(scene), pts, nrm, camera=scene.camera, method=method
+        light, world_triangles(scene), pts, nrm, camera=scene.camera, stencil=method
     )
     theirs = (gl.stencil.ravel()[pix] == 0).astype(np.int64)
     same_surface = np.abs(gl.depth.ravel()[pix] - depth) <= 1e-5

@@ -71,8 +71,8 @@ def _zpass_vs_zfail(scene, light, band_radius=0):
     volume_f = shadow_volume_triangles(world_triangles(scene), light, caps=True)
     volume_p = shadow_volume_triangles(world_triangles(scene), light, caps=False)
     view, proj = scene.camera.view, scene.camera.projection
-    zfail = stencil_counts(volume_f, view, proj, pts, method="zfail")
-    zpass = stencil_counts(volume_p, view, proj, pts, method="zpass")
+    zfail = stencil_counts(volume_f, view, proj, pts, stencil="zfail")
+    zpass = stencil_counts(volume_p, view, proj, pts, stencil="zpass")
     q = _near_points(scene.camera, pts)
     w_q = 1.0 - embree_visibility(light, world_triangles(scene), q, np.tile([0.0, 0.0, 1.0], (len(q), 1)))
     band = boundary_band(image_of(w_q.astype(np.int64), pix), radius=band_radius).ravel()[pix]
@@ -161,7 +161,7 @@ def test_open_mesh_leaks_through_its_hole_unless_every_triangle_is_extruded():
         ]
     )
     zp = stencil_counts(
-        zpass, camera.view, camera.projection, pts + 1e-4 * _towards(nrm, pts, light), method="zpass"
+        zpass, camera.view, camera.projection, pts + 1e-4 * _towards(nrm, pts, light), stencil="zpass"
     )
     assert np.count_nonzero(((zp == 0) != (truth == 1)) & ok) == 0
 
@@ -185,8 +185,8 @@ def test_a_silhouette_with_a_gap_streaks(method):
     for k in range(0, n_sil, max(1, n_sil // 6)):
         keep = np.ones(len(full), bool)
         keep[[k, n_sil + k]] = False  # side triangles (b, a, a∞) and (b, a∞, b∞) of edge k
-        broken = stencil_counts(full[keep], scene.camera.view, scene.camera.projection, q, method=method)
-        c_x = stencil_counts(full[~keep], scene.camera.view, scene.camera.projection, q, method=method)
+        broken = stencil_counts(full[keep], scene.camera.view, scene.camera.projection, q, stencil=method)
+        c_x = stencil_counts(full[~keep], scene.camera.view, scene.camera.projection, q, stencil=method)
         wrong = ((broken == 0) != (truth == 1)) & ok
         # derived: counts w − c_X with w, c_X in {0, ±1}: wrong only where the gap is counted
         assert not np.any(wrong & (c_x == 0))
