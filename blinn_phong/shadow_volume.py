@@ -104,6 +104,7 @@ __all__ = [
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 16  # receivers per screen tile, on average
+_PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
 
 
 # --------------------------------------------------------------------------- input checks
@@ -154,6 +155,8 @@ class Topology:
         component: (T,) int64 edge-connected component of each triangle (-1 when not valid).
         closed: (T,) bool, True when the triangle's component is a closed 2-manifold.
         reasons: one line per open or non-manifold component: why it is extruded per triangle.
+        neighbour: (T, 3) int64, the triangle across edge ``(v_i, v_(i+1))`` of each triangle
+            (its twin's owner), −1 where the edge has no unique twin.
     """
 
     vertices: np.ndarray
@@ -162,6 +165,7 @@ class Topology:
     component: np.ndarray
     closed: np.ndarray
     reasons: tuple[str, ...]
+    neighbour: np.ndarray
 
 
 def analyse_topology(world_triangles: np.ndarray) -> Topology:
@@ -181,7 +185,15 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     n = len(tris)
     if n == 0:
         e = np.zeros(0, np.int64)
-        return Topology(np.zeros((0, 3)), np.zeros((0, 3), np.int64), e.astype(bool), e, e.astype(bool), ())
+        return Topology(
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            e.astype(bool),
+            e,
+            e.astype(bool),
+            (),
+            np.zeros((0, 3), np.int64),
+        )
     key = hashlib.blake2b(tris.tobytes(), digest_size=16).digest()
     if key in _TOPOLOGY_CACHE:
         return _TOPOLOGY_CACHE[key]
@@ -288,7 +300,13 @@ def _analyse(tris: np.ndarray) -> Topology:
     flip[idx] = closed[idx] & (comp_volume[component[idx]] < 0)
     faces = faces.copy()
     faces[flip] = faces[flip][:, ::-1]
-    return Topology(vertices, faces, valid, component, closed, tuple(reasons))
+    neighbour = np.full((n, 3), -1, np.int64)
+    unique_twin = has_twin & (own_count == 1) & (twin_count == 1)
+    twin_owner = np.where(unique_twin, owner[order[starts[tpos]]], -1)
+    neighbour[idx] = twin_owner.reshape(-1, 3)
+    # a reversed face (v2, v1, v0) has the edges of (v0, v1, v2) in the order 1, 0, 2
+    neighbour[flip] = neighbour[flip][:, [1, 0, 2]]
+    return Topology(vertices, faces, valid, component, closed, tuple(reasons), neighbour)
 
 
 def _facing(topology: Topology, light_vec: np.ndarray, directional: bool) -> np.ndarray:
@@ -316,21 +334,15 @@ def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | 
     """
     light_vec, directional = _light(light)
     lit = _facing(topology, light_vec, directional) > 0
-    sel = np.flatnonzero(topology.closed)
+    sel = np.flatnonzero(topology.closed & lit)
     f = topology.triangles[sel]
-    a = f[:, [0, 1, 2]].ravel()
-    b = f[:, [1, 2, 0]].ravel()
-    face_lit = np.repeat(lit[sel], 3)
-    nv = len(topology.vertices)
-    key = a * nv + b
-    order = np.argsort(key, kind="stable")
-    sk = key[order]
-    twin = b * nv + a
-    pos = np.clip(np.searchsorted(sk, twin), 0, max(len(sk) - 1, 0))
-    exists = sk[pos] == twin if len(sk) else np.zeros(0, bool)
-    twin_lit = face_lit[order][pos]
-    is_sil = face_lit & exists & ~twin_lit  # a boundary edge (no twin) is no silhouette edge
-    return np.stack([a[is_sil], b[is_sil]], axis=1)
+    nb = topology.neighbour[sel]
+    edges = []
+    for i in range(3):
+        other = nb[:, i]
+        is_sil = (other >= 0) & ~lit[np.maximum(other, 0)]  # a boundary edge (no twin) is no silhouette
+        edges.append(np.stack([f[is_sil, i], f[is_sil, (i + 1) % 3]], axis=1))
+    return np.concatenate(edges)
 
 
 def _to_infinity(
@@ -376,7 +388,13 @@ def shadow_volume_triangles(
     topo = world_triangles if isinstance(world_triangles, Topology) else analyse_topology(world_triangles)
     if force_silhouette:
         topo = Topology(
-            topo.vertices, topo.triangles, topo.valid, topo.component, topo.valid.copy(), topo.reasons
+            topo.vertices,
+            topo.triangles,
+            topo.valid,
+            topo.component,
+            topo.valid.copy(),
+            topo.reasons,
+            topo.neighbour,
         )
     light_vec, directional = _light(light)
     verts = topo.vertices
@@ -487,6 +505,10 @@ class _Setup:
     cx1: np.ndarray
     cy0: np.ndarray
     cy1: np.ndarray
+    bx0: np.ndarray  # (S,) window bounding box, slightly widened
+    bx1: np.ndarray
+    by0: np.ndarray
+    by1: np.ndarray
 
 
 def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], guard: float) -> _Setup:
@@ -530,6 +552,9 @@ def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], 
     cy0 = np.clip(cy0, 0, ny).astype(np.int64)
     cy1 = np.clip(cy1, -1, ny - 1).astype(np.int64)
     front = np.where(area > 0, 1, -1).astype(np.int64)
+    # bounding boxes widened past rounding (a pre-test only: the edge functions decide)
+    pad_x = 1e-9 * (np.abs(x).max(axis=1) + 1.0)
+    pad_y = 1e-9 * (np.abs(y).max(axis=1) + 1.0)
     return _Setup(
         ex,
         ey,
@@ -547,6 +572,10 @@ def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], 
         cx1,
         cy0,
         cy1,
+        x.min(axis=1) - pad_x,
+        x.max(axis=1) + pad_x,
+        y.min(axis=1) - pad_y,
+        y.max(axis=1) + pad_y,
     )
 
 
@@ -601,11 +630,11 @@ def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool
     return counts
 
 
-@functools.lru_cache(maxsize=1)
-def _kernel() -> object:  # a numba dispatcher
+@functools.lru_cache(maxsize=2)
+def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
     import numba
 
-    @numba.njit(parallel=True, cache=True, fastmath=False)
+    @numba.njit(parallel=parallel, cache=True, fastmath=False)
     def count(
         n_bands,
         ny,
@@ -630,13 +659,17 @@ def _kernel() -> object:  # a numba dispatcher
         gx,
         gy,
         front,
+        bx0,
+        bx1,
+        by0,
+        by1,
         px,
         py,
         pz,
         cell_start,
-        order,
         zfail,
     ):  # pragma: no cover - compiled
+        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c)
         n_cells = nx * ny
         counts = np.zeros(px.shape[0], np.int64)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
@@ -644,8 +677,8 @@ def _kernel() -> object:  # a numba dispatcher
         zhi = np.full(n_cells, -np.inf)
         for cell in range(n_cells):
             for k in range(cell_start[cell], cell_start[cell + 1]):
-                zlo[cell] = min(zlo[cell], pz[order[k]])
-                zhi[cell] = max(zhi[cell], pz[order[k]])
+                zlo[cell] = min(zlo[cell], pz[k])
+                zhi[cell] = max(zhi[cell], pz[k])
         band_h = (ny + n_bands - 1) // n_bands
         for band in numba.prange(n_bands):
             r0 = band * band_h
@@ -746,9 +779,11 @@ def _kernel() -> object:  # a numba dispatcher
                                 whole[cell] += front[t]
                                 continue
                         for k in range(s0, s1):
-                            p = order[k]
+                            p = k
                             x = px[p]
                             y = py[p]
+                            if x < bx0[t] or x > bx1[t] or y < by0[t] or y > by1[t]:
+                                continue
                             ok = True
                             for i in range(3):
                                 e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
@@ -767,7 +802,7 @@ def _kernel() -> object:  # a numba dispatcher
             for row in range(r0, r1 + 1):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
-                        counts[order[k]] += whole[cell]
+                        counts[k] += whole[cell]
         return counts
 
     return count
@@ -834,8 +869,10 @@ def stencil_counts(
     nx, ny = grid[4], grid[5]
     if not numba_path:
         return _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
-    n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1)))
-    return _kernel()(
+    # small jobs run serially: a parallel region costs more than it saves on a busy machine
+    parallel = len(px) >= _PARALLEL_RECEIVERS
+    n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1))) if parallel else 1
+    sorted_counts = _kernel(parallel)(
         n_bands,
         ny,
         nx,
@@ -859,13 +896,19 @@ def stencil_counts(
         st.gx,
         st.gy,
         st.front,
-        px,
-        py,
-        pz,
+        st.bx0,
+        st.bx1,
+        st.by0,
+        st.by1,
+        px[order],
+        py[order],
+        pz[order],
         cell_start,
-        order,
         zfail,
     )
+    counts = np.empty(len(px), np.int64)
+    counts[order] = sorted_counts
+    return counts
 
 
 def _default_camera(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
