@@ -98,6 +98,7 @@ __all__ = [
     "shadow_volume_visibility",
     "silhouette_edges",
     "stencil_counts",
+    "zpass_is_safe",
 ]
 
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
@@ -911,6 +912,68 @@ def stencil_counts(
     return counts
 
 
+def zpass_is_safe(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+) -> bool:
+    """True when no shadow volume can reach the camera's near plane, so z-pass counts exactly.
+
+    A point q of the near-plane rectangle is in shadow only if the segment from q to the light
+    (for a directional light: the ray towards it) meets a caster, i.e. only if a caster meets
+    the convex hull of the rectangle and the light. z-pass is short by exactly the number of
+    volumes containing q (see the module docstring), so it is exact when every caster lies
+    wholly outside one of that hull's face planes. The test is conservative: a triangle not
+    separated by a face plane counts as meeting the hull.
+
+    Args:
+        light: the light.
+        world_triangles: (n, 3, 3) the casters, world space.
+        view: 4×4 world → eye matrix.
+        projection: 4×4 eye → clip matrix; must be a perspective (or orthographic) projection
+            whose near plane is ``z_clip = −w_clip``.
+
+    Returns:
+        bool.
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    light_vec, directional = _light(light)
+    inv = np.linalg.inv(np.asarray(projection, float) @ np.asarray(view, float))
+    ndc = np.array([[-1, -1, -1, 1], [1, -1, -1, 1], [1, 1, -1, 1], [-1, 1, -1, 1]], float)
+    corners = ndc @ inv.T
+    if not np.all(np.abs(corners[:, 3]) > 1e-300):
+        return False
+    corners = corners[:, :3] / corners[:, 3:4]
+    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+    planes = [(normal, float(normal @ corners[0]))]
+    if directional:
+        toward = -light_vec
+        inside = corners.mean(axis=0) + toward  # a point inside the (infinite) prism
+        if abs(float(normal @ toward)) < 1e-12 * np.linalg.norm(normal):
+            return False
+        for i in range(4):
+            n = np.cross(corners[(i + 1) % 4] - corners[i], toward)
+            planes.append((n, float(n @ corners[i])))
+    else:
+        apex = light_vec
+        if abs(float(normal @ apex) - planes[0][1]) < 1e-9 * (
+            np.linalg.norm(normal) * (1 + np.abs(apex).max())
+        ):
+            return False  # the light lies on the near plane
+        inside = (corners.sum(axis=0) + apex) / 5.0
+        for i in range(4):
+            n = np.cross(corners[(i + 1) % 4] - corners[i], apex - corners[i])
+            planes.append((n, float(n @ corners[i])))
+    separated = np.zeros(len(tris), bool)
+    for n, d in planes:
+        if n @ inside < d:  # orient every plane with the hull on its positive side
+            n, d = -n, -d
+        margin = 1e-9 * float(np.linalg.norm(n)) * (1.0 + float(np.abs(tris).max(initial=0.0)))
+        separated |= np.all(tris @ n < d - margin, axis=1)
+    return bool(np.all(separated))
+
+
 def _default_camera(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A perspective view that sees every receiver (for z-fail, whose count needs no particular eye)."""
     from .scene import look_at, perspective_matrix
@@ -934,7 +997,7 @@ def shadow_volume_visibility(
     normals: np.ndarray,
     *,
     camera: Camera | None = None,
-    stencil: str = "zfail",
+    stencil: str = "auto",
     offset: float = 1e-4,
     engine: str = "auto",
 ) -> np.ndarray:
@@ -950,8 +1013,9 @@ def shadow_volume_visibility(
             normal towards the light's side before it is counted.
         camera: the camera whose samples the points are; None — a view that sees every point
             (fine for z-fail; z-pass is only valid for a camera outside every volume).
-        stencil: ``"zfail"`` (robust) or ``"zpass"`` (valid only while the camera is outside every
-            volume and the near plane cuts none).
+        stencil: ``"auto"`` (z-pass where :func:`zpass_is_safe` proves it exact — it draws no
+            caps —, else z-fail), ``"zfail"`` (robust) or ``"zpass"`` (valid only while the
+            camera is outside every volume and the near plane cuts none).
         offset: world units, ≥ 0.
         engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
 
@@ -986,8 +1050,10 @@ def shadow_volume_visibility(
         span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
-    if stencil not in STENCIL_METHODS:
-        raise ValueError(f"stencil: expected one of {STENCIL_METHODS}, got {stencil!r}")
+    if stencil not in (*STENCIL_METHODS, "auto"):
+        raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
+    if stencil == "auto":
+        stencil = "zpass" if zpass_is_safe(light, tris, view, proj) else "zfail"
     volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)
     counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
     return (counts == 0).astype(np.float64)

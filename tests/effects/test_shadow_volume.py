@@ -25,6 +25,7 @@ from blinn_phong.shadow_volume import (
     shadow_volume_visibility,
     silhouette_edges,
     stencil_counts,
+    zpass_is_safe,
 )
 
 from .volume_scenes import (
@@ -216,3 +217,21 @@ def test_mesh_object_is_not_needed_for_soups():
     soup = (np.c_[mesh.positions, np.ones(len(mesh.positions))] @ mesh.transform.T)[:, :3][mesh.triangles]
     assert analyse_topology(soup).closed.all()
     assert HEIGHT <= 120 and WIDTH <= 160
+
+
+@pytest.mark.parametrize("light_name", sorted(LIGHTS))
+def test_auto_picks_zpass_only_where_it_is_exact(light_name):
+    """The near-clip test: z-pass from outside, z-fail from inside; both answers match Embree."""
+    light = LIGHTS[light_name]
+    outside = scene_with(casters("pair"), light, outside_camera())
+    inside_cam = inside_camera(light, casters("pair")[0].transform[:3, 3], 0.7)
+    inside = scene_with(casters("pair"), light, inside_cam)
+    tris = world_triangles(outside)
+    assert zpass_is_safe(light, tris, outside.camera.view, outside.camera.projection)
+    assert not zpass_is_safe(light, tris, inside_cam.view, inside_cam.projection)
+    for scene in (outside, inside):
+        pts, nrm, pix, _ = samples(scene)
+        ref = embree_visibility(light, tris, pts, nrm)
+        got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera)  # stencil="auto"
+        band = boundary_band(image_of(ref.astype(np.int64), pix), radius=0).ravel()[pix]
+        assert np.count_nonzero((got != ref) & ~band) == 0

@@ -25,6 +25,7 @@ from blinn_phong.shadow_volume import (
     shadow_volume_visibility,
     silhouette_edges,
     stencil_counts,
+    zpass_is_safe,
 )
 from tests.effects.volume_scenes import (
     LIGHTS,
@@ -111,6 +112,9 @@ def test_zpass_near_plane_clipping_with_the_eye_outside():
     # bound: the wrong samples are exactly those whose near-plane point is shadowed
     assert np.array_equal(wrong, (w_q > 0) & ok)
     assert 50 < np.count_nonzero(wrong) < np.count_nonzero(ok)
+    # the near-clip test sees it coming: "auto" would count this view with z-fail
+    assert not zpass_is_safe(light, world_triangles(scene), camera.view, camera.projection)
+    assert zpass_is_safe(light, world_triangles(scene), outside_camera().view, outside_camera().projection)
 
 
 def test_open_mesh_leaks_through_its_hole_unless_every_triangle_is_extruded():
