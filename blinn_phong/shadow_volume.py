@@ -209,10 +209,103 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
 _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 
+@functools.lru_cache(maxsize=1)
+def _hash_kernels() -> tuple[object, object]:
+    """Compiled hash-table welding and edge pairing (linear probing; same results as the sorts)."""
+    import numba
+
+    @numba.njit(cache=True)
+    def weld(bits):  # pragma: no cover - compiled
+        m = bits.shape[0]
+        size = 1
+        while size < 2 * m:
+            size *= 2
+        table = np.full(size, -1, np.int64)
+        inverse = np.empty(m, np.int64)
+        first = np.empty(m, np.int64)
+        n_unique = 0
+        for r in range(m):
+            h = np.uint64(0)
+            for c in range(3):
+                z = bits[r, c] ^ h
+                z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+                z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+                h = z ^ (z >> np.uint64(31))
+            slot = np.int64(h & np.uint64(size - 1))
+            while True:
+                u = table[slot]
+                if u < 0:
+                    table[slot] = n_unique
+                    first[n_unique] = r
+                    inverse[r] = n_unique
+                    n_unique += 1
+                    break
+                q = first[u]
+                if bits[q, 0] == bits[r, 0] and bits[q, 1] == bits[r, 1] and bits[q, 2] == bits[r, 2]:
+                    inverse[r] = u
+                    break
+                slot = (slot + 1) & (size - 1)
+        return first[:n_unique].copy(), inverse
+
+    @numba.njit(cache=True)
+    def pair(key, twin):  # pragma: no cover - compiled
+        """Per directed edge: how often it occurs, how often its twin occurs, the twin's first index."""
+        m = key.shape[0]
+        size = 1
+        while size < 2 * m:
+            size *= 2
+        table = np.full(size, -1, np.int64)
+        count = np.zeros(m, np.int64)  # indexed by the first occurrence
+        first_of = np.empty(m, np.int64)
+        for e in range(m):
+            z = np.uint64(key[e])
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            while True:
+                f = table[slot]
+                if f < 0:
+                    table[slot] = e
+                    first_of[e] = e
+                    count[e] = 1
+                    break
+                if key[f] == key[e]:
+                    first_of[e] = f
+                    count[f] += 1
+                    break
+                slot = (slot + 1) & (size - 1)
+        own = np.empty(m, np.int64)
+        twin_count = np.zeros(m, np.int64)
+        twin_first = np.full(m, -1, np.int64)
+        for e in range(m):
+            own[e] = count[first_of[e]]
+            z = np.uint64(twin[e])
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            while True:
+                f = table[slot]
+                if f < 0:
+                    break
+                if key[f] == twin[e]:
+                    twin_count[e] = count[f]
+                    twin_first[e] = f
+                    break
+                slot = (slot + 1) & (size - 1)
+        return own, twin_count, twin_first
+
+    return weld, pair
+
+
 def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Merge bit-identical rows of (m, 3) float64: (unique rows, index of each input row)."""
     flat = np.ascontiguousarray(flat + 0.0)  # -0.0 and 0.0 weld together
     bits = flat.view(np.uint64).reshape(-1, 3)
+    from .fast import numba_available
+
+    if numba_available():
+        representative, inverse = _hash_kernels()[0](bits)
+        return flat[representative], inverse
 
     def mix(z: np.ndarray) -> np.ndarray:  # splitmix64's finaliser (wrapping uint64 arithmetic)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
@@ -249,24 +342,32 @@ def _analyse(tris: np.ndarray) -> Topology:
     owner = np.repeat(idx, 3)
     key = a * nv + b
     twin = b * nv + a
-    order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
-    starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
-    uniq = sorted_key[starts]
-    counts = np.diff(np.r_[starts, len(sorted_key)])
-    run = np.empty(len(key), np.int64)
-    run[order] = np.cumsum(np.r_[True, sorted_key[1:] != sorted_key[:-1]]) - 1
-    own_count = counts[run]
-    tpos = np.clip(np.searchsorted(uniq, twin), 0, max(len(uniq) - 1, 0))
-    has_twin = uniq[tpos] == twin
-    twin_count = np.where(has_twin, counts[tpos], 0)
+    from .fast import numba_available
+
+    if numba_available():
+        own_count, twin_count, twin_first = _hash_kernels()[1](key, twin)
+        has_twin = twin_first >= 0
+        twin_at = np.maximum(twin_first, 0)
+    else:
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+        uniq = sorted_key[starts]
+        counts = np.diff(np.r_[starts, len(sorted_key)])
+        run = np.empty(len(key), np.int64)
+        run[order] = np.cumsum(np.r_[True, sorted_key[1:] != sorted_key[:-1]]) - 1
+        own_count = counts[run]
+        tpos = np.clip(np.searchsorted(uniq, twin), 0, max(len(uniq) - 1, 0))
+        has_twin = uniq[tpos] == twin
+        twin_count = np.where(has_twin, counts[tpos], 0)
+        twin_at = order[starts[tpos]]  # the first occurrence of the twin (where it exists)
     bad_edge = (own_count != 1) | (twin_count != 1)
     # components: triangles joined through an edge and its twin
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     rows = owner[has_twin]
-    cols = owner[order[starts[tpos[has_twin]]]]
+    cols = owner[twin_at[has_twin]]
     graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     component = np.full(n, -1, np.int64)
@@ -303,7 +404,7 @@ def _analyse(tris: np.ndarray) -> Topology:
     faces[flip] = faces[flip][:, ::-1]
     neighbour = np.full((n, 3), -1, np.int64)
     unique_twin = has_twin & (own_count == 1) & (twin_count == 1)
-    twin_owner = np.where(unique_twin, owner[order[starts[tpos]]], -1)
+    twin_owner = np.where(unique_twin, owner[twin_at], -1)
     neighbour[idx] = twin_owner.reshape(-1, 3)
     # a reversed face (v2, v1, v0) has the edges of (v0, v1, v2) in the order 1, 0, 2
     neighbour[flip] = neighbour[flip][:, [1, 0, 2]]
