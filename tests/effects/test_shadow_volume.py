@@ -235,3 +235,24 @@ def test_auto_picks_zpass_only_where_it_is_exact(light_name):
         got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera)  # stencil="auto"
         band = boundary_band(image_of(ref.astype(np.int64), pix), radius=0).ravel()[pix]
         assert np.count_nonzero((got != ref) & ~band) == 0
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+def test_topology_is_the_same_without_numba(monkeypatch):
+    """Hash-table welding/pairing (numba) and sorting (numpy) build the same volumes, bit for bit."""
+    import blinn_phong.fast
+    import blinn_phong.shadow_volume as sv
+
+    scene = scene_with(casters("pair") + casters("torus") + casters("box"), LIGHTS["point"], outside_camera())
+    p, t, _ = uv_sphere(12, 6)
+    tris = np.concatenate([world_triangles(scene), (p + 3.0)[t[:, ::-1]]])  # plus an inside-out sphere
+    compiled = sv._analyse(tris)
+    monkeypatch.setattr(blinn_phong.fast, "numba_available", lambda: False)
+    reference = sv._analyse(tris)
+    for name in ("valid", "closed", "component", "neighbour"):
+        np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name))
+    assert compiled.reasons == reference.reasons
+    for light in LIGHTS.values():
+        np.testing.assert_array_equal(
+            shadow_volume_triangles(compiled, light), shadow_volume_triangles(reference, light)
+        )
