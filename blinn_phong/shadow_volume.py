@@ -22,7 +22,9 @@ Per receiver point ``p`` (a visible sample), with the camera's view and projecti
   here nothing is clipped but the near plane, which is what ``GL_DEPTH_CLAMP`` (or Everitt &
   Kilgard's infinite projection) gives the stencil buffer.
 
-``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``).
+``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). ``stencil="auto"`` uses
+z-pass (no caps to draw) where :func:`zpass_is_safe` proves that no volume reaches the near
+plane, and z-fail elsewhere.
 
 Geometry
 --------
