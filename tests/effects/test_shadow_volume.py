@@ -256,3 +256,17 @@ def test_topology_is_the_same_without_numba(monkeypatch):
         np.testing.assert_array_equal(
             shadow_volume_triangles(compiled, light), shadow_volume_triangles(reference, light)
         )
+
+
+def test_without_embree_hard_shadows_fall_back_to_shadow_volumes(monkeypatch):
+    import blinn_phong.frame as frame
+
+    light = LIGHTS["point"]
+    scene = scene_with(casters("sphere"), light, outside_camera())
+    monkeypatch.setattr(frame, "embree_available", lambda: False)
+    choice = frame.frame_plan(scene, shadows="ray_traced").shadows[0]
+    assert choice.method == "shadow_volume" and "Embree" in choice.reason
+    assert (
+        frame.frame_plan(scene, shadows=frame.ShadowOptions("soft", radius=0.2)).shadows[0].method
+        == "shadow_map"
+    )
