@@ -4,7 +4,8 @@
 effects the plan needs (``blinn_phong.frame``) and returns the plan with a reason per decision.
 This module only translates the add-on's settings into its arguments ("Auto" = the planner's
 choice). In Blender's own Python, which has no Embree (``embreex``), ``render`` itself replaces
-ray-traced, soft and planar shadows by shadow maps and says so in the plan.
+ray-traced and planar shadows by shadow volumes and soft shadows by shadow maps, and says so in
+the plan.
 
 Outputs follow the project conventions (float32 premultiplied linear RGBA, row 0 at the top).
 """

@@ -212,8 +212,9 @@ _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 
 @functools.lru_cache(maxsize=1)
-def _hash_kernels() -> tuple[object, object]:
-    """Compiled hash-table welding and edge pairing (linear probing; same results as the sorts)."""
+def _hash_kernels() -> tuple[object, object, object]:
+    """Compiled hash-table welding, edge pairing (linear probing) and union-find: same results as
+    the numpy sorts and pointer jumping."""
     import numba
 
     @numba.njit(cache=True)
@@ -296,7 +297,49 @@ def _hash_kernels() -> tuple[object, object]:
                 slot = (slot + 1) & (size - 1)
         return own, twin_count, twin_first
 
-    return weld, pair
+    @numba.njit(cache=True)
+    def union_find(n, rows, cols):  # pragma: no cover - compiled
+        parent = np.arange(n)
+        for e in range(rows.shape[0]):
+            a = rows[e]
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            b = cols[e]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
+        for i in range(n):  # roots are the smallest index of their set; parents point lower
+            parent[i] = parent[parent[i]]
+        return parent
+
+    return weld, pair, union_find
+
+
+def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Connected components of n nodes joined by edges (rows[i], cols[i]): each node's label is
+    the smallest node index of its component (the same on both engines)."""
+    from .fast import numba_available
+
+    if numba_available():
+        return _hash_kernels()[2](n, rows.astype(np.int64), cols.astype(np.int64))
+    parent = np.arange(n)
+    while True:  # hook larger roots under smaller ones, then jump pointers until flat
+        pu, pv = parent[rows], parent[cols]
+        lo, hi = np.minimum(pu, pv), np.maximum(pu, pv)
+        moving = lo != hi
+        if not moving.any():
+            return parent
+        np.minimum.at(parent, hi[moving], lo[moving])
+        while True:
+            grand = parent[parent]
+            if np.array_equal(grand, parent):
+                break
+            parent = grand
 
 
 def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -365,13 +408,7 @@ def _analyse(tris: np.ndarray) -> Topology:
         twin_at = order[starts[tpos]]  # the first occurrence of the twin (where it exists)
     bad_edge = (own_count != 1) | (twin_count != 1)
     # components: triangles joined through an edge and its twin
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    rows = owner[has_twin]
-    cols = owner[twin_at[has_twin]]
-    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
+    labels = _components(n, owner[has_twin], owner[twin_at[has_twin]])
     component = np.full(n, -1, np.int64)
     # relabel valid triangles' components densely
     _, dense = np.unique(labels[idx], return_inverse=True)
