@@ -35,7 +35,7 @@ from blinn_phong.render import prepare_scene, render
 from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import light_visibility
 
-__all__ = ["crossover", "frame", "run", "same_scenes"]
+__all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
 
 
 def _samples(scene: Scene, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -202,6 +202,55 @@ def crossover(repeat: int, quick: bool) -> list[dict]:
     return out
 
 
+def chart(result: dict, path: str | os.PathLike) -> Path:
+    """Two panels: time against error on the shared scene; the volumes/Embree ratio against triangles."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for light, marker in (("DirectionalLight", "o"), ("PointLight", "s")):
+        rows = [r for r in result["same_scenes"] if r["light"] == light]
+        for r in rows:
+            err = max(r["differing_share"], 1e-6)  # exact methods drawn at the floor of the axis
+            left.scatter(
+                r["ratio_to_embree"],
+                err,
+                marker=marker,
+                color="C0" if "volume" in r["method"] else ("C1" if "map" in r["method"] else "C2"),
+            )
+            left.annotate(r["method"].replace("shadow_", ""), (r["ratio_to_embree"], err), fontsize=6)
+    left.set_xscale("log")
+    left.set_yscale("log")
+    left.set_xlabel("time / Embree ray tracing (same run)")
+    left.set_ylabel("share of samples differing from Embree (1e-6 = none)")
+    left.set_title("shadows chart scene: volumes, maps, Embree")
+    sizes = sorted({tuple(r["size"]) for r in result["crossover"]})
+    for size in sizes:
+        rows = [r for r in result["crossover"] if tuple(r["size"]) == size]
+        right.plot(
+            [r["triangles"] for r in rows],
+            [r["ratio"] for r in rows],
+            marker="o",
+            label=f"{size[0]}×{size[1]}",
+        )
+    right.axhline(1.0, color="grey", lw=0.8)
+    right.set_xscale("log")
+    right.set_xlabel("triangles (one sphere over a plane)")
+    right.set_ylabel("shadow volumes / Embree time")
+    right.set_title("crossover: below 1, volumes are faster")
+    right.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)  # a failed write leaves the previous chart intact
+    return out
+
+
 def run(out_dir: str | os.PathLike, *, repeat: int = 3, quick: bool = False) -> dict:
     """Run all three measurements, write ``shadow_volume.json`` into ``out_dir`` and return it."""
     sv.shadow_volume_visibility(  # compile the kernel outside the timings
@@ -231,8 +280,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", default="benchmarks/results", help="directory for shadow_volume.json")
     parser.add_argument("--repeat", type=int, default=3, help="interleaved rounds per case")
     parser.add_argument("--quick", action="store_true", help="small sizes")
+    parser.add_argument("--chart", default=None, help="also draw the chart to this PNG path")
     args = parser.parse_args(argv)
-    run(args.out, repeat=args.repeat, quick=args.quick)
+    result = run(args.out, repeat=args.repeat, quick=args.quick)
+    if args.chart:
+        print(f"chart {chart(result, args.chart)}")
 
 
 if __name__ == "__main__":
