@@ -474,7 +474,10 @@ def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | 
         (E, 2) int64 vertex indices into ``topology.vertices``.
     """
     light_vec, directional = _light(light)
-    lit = _facing(topology, light_vec, directional) > 0
+    return _silhouette(topology, _facing(topology, light_vec, directional) > 0)
+
+
+def _silhouette(topology: Topology, lit: np.ndarray) -> np.ndarray:
     sel = np.flatnonzero(topology.closed & lit)
     f = topology.triangles[sel]
     nb = topology.neighbour[sel]
@@ -546,7 +549,7 @@ def shadow_volume_triangles(
     parts = []
     # closed components: silhouette extrusion
     closed = topo.closed
-    sil = silhouette_edges(topo, light) if closed.any() else np.zeros((0, 2), np.int64)
+    sil = _silhouette(topo, lit) if closed.any() else np.zeros((0, 2), np.int64)
     a, b = sil[:, 0], sil[:, 1]
     # side quad (a, b, b∞, a∞): outward for an edge a→b of a face that faces the light
     parts.append(np.stack([hv[b], hv[a], far[a]], axis=1))
@@ -997,7 +1000,7 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
-    pc = np.c_[p, np.ones(len(p))] @ vp.T
+    pc = p @ vp[:, :3].T + vp[:, 3]
     if not np.all(pc[:, 3] > 0):
         bad = int(np.count_nonzero(pc[:, 3] <= 0))
         raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
@@ -1106,11 +1109,13 @@ def zpass_is_safe(
             n = np.cross(corners[(i + 1) % 4] - corners[i], apex - corners[i])
             planes.append((n, float(n @ corners[i])))
     separated = np.zeros(len(tris), bool)
+    scale = 1.0 + float(np.abs(tris).max(initial=0.0))
     for n, d in planes:
         if n @ inside < d:  # orient every plane with the hull on its positive side
             n, d = -n, -d
-        margin = 1e-9 * float(np.linalg.norm(n)) * (1.0 + float(np.abs(tris).max(initial=0.0)))
-        separated |= np.all(tris @ n < d - margin, axis=1)
+        margin = 1e-9 * float(np.linalg.norm(n)) * scale
+        todo = ~separated
+        separated[todo] = np.all(tris[todo] @ n < d - margin, axis=1)
     return bool(np.all(separated))
 
 
@@ -1175,10 +1180,10 @@ def shadow_volume_visibility(
         return np.ones(len(p))
     light_vec, directional = _light(light)
     to_light = np.broadcast_to(-light_vec, p.shape) if directional else light_vec - p
-    unit = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    side = np.sign(np.einsum("ij,ij->i", unit, to_light))
-    side = np.where(side == 0, 1.0, side)
-    q = p + unit * (side * offset)[:, None]
+    length = np.sqrt(np.einsum("ij,ij->i", n, n))
+    side = np.sign(np.einsum("ij,ij->i", n, to_light))
+    side[side == 0] = 1.0
+    q = p + n * (side * offset / np.maximum(length, 1e-300))[:, None]
     if camera is None:
         view, proj = _default_camera(q, tris)
     else:
