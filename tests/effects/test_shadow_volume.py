@@ -270,3 +270,18 @@ def test_without_embree_hard_shadows_fall_back_to_shadow_volumes(monkeypatch):
         frame.frame_plan(scene, shadows=frame.ShadowOptions("soft", radius=0.2)).shadows[0].method
         == "shadow_map"
     )
+
+
+def test_addon_shadow_setting_selects_shadow_volumes():
+    """The add-on's "Shadow Volumes" setting reaches render() and matches ray tracing off the edges."""
+    from addon.pipeline import EffectOptions, render_frame
+
+    light = LIGHTS["directional"]
+    scene = scene_with(casters("box"), light, outside_camera())
+    volume = render_frame(scene, 48, 36, options=EffectOptions(shadows="VOLUME"))
+    traced = render_frame(scene, 48, 36, options=EffectOptions(shadows="HARD"))
+    assert volume.choices["shadows"] == ["shadow_volume"] and traced.choices["shadows"] == ["ray_traced"]
+    shadow = traced.passes["shadow"][..., 0]
+    assert (shadow < 0.5).sum() > 20
+    edge = boundary_band((shadow > 0.5).astype(np.int64), radius=0)
+    assert np.abs(volume.rgba - traced.rgba).max(axis=2)[~edge].max() == 0.0
