@@ -418,5 +418,5 @@ def test_renders_with_only_what_blender_ships(tmp_path: Path) -> None:
         args=(str(REPO / "blend_files" / "shadows.blend"),),
     )
     assert got["ok"] is True, got["error"]
-    assert got["shadows"] == ["shadow_map", "shadow_map"]
+    assert got["shadows"] == ["shadow_volume", "shadow_volume"]
     assert sum("Embree" in r for r in got["reasons"]) == 2
