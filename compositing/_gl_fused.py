@@ -260,7 +260,7 @@ def _build(src: str, label: str, dtype_name: str, helper_names: tuple[str, ...] 
     namespace = _namespace(dtype_name)
     exec(compile(src, f"<gl blend kernel {label} {dtype_name}>", "exec"), namespace)
     for name in helper_names:  # compiled first so that the kernel calls compiled functions
-        namespace[name] = numba.njit(inline="always", error_model="numpy")(namespace[name])
+        namespace[name] = numba.njit(error_model="numpy")(namespace[name])
     return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
 
 
