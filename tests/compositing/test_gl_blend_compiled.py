@@ -107,7 +107,8 @@ def test_uint8_in_and_out_follows_the_integer_model(equation):
     for sf, df in itertools.product(FACTOR_NAMES, FACTOR_NAMES):
         got = gl_blend(src, dst, sf, df, equation, constant=constant, target="unorm8")
         assert got.dtype == np.uint8
-        want = [code_blend(s, d, sf, df, equation, c8) for s, d in zip(src.astype(np.int64), dst.astype(np.int64), strict=True)]
+        pairs = zip(src.astype(np.int64), dst.astype(np.int64), strict=True)
+        want = [code_blend(s, d, sf, df, equation, c8) for s, d in pairs]
         np.testing.assert_array_equal(got, want, err_msg=f"{sf}, {df}, {equation}")
 
 
