@@ -81,8 +81,8 @@ def _check_layer(indent: str) -> list[str]:
 
 
 def _float_source(front_to_back: bool, consts: set[float]) -> str:
-    """Float stacks. Back to front applies two layers per sweep over the tile (the accumulator
-    stays in registers between them); front to back one, checking the tile's alpha in between."""
+    """Float stacks: two layers per sweep over the tile (the accumulator stays in registers
+    between them); front to back checks the tile's alpha before each pair."""
     update = update_source("dst_over" if front_to_back else "src_over", consts)
     first = "nl - 1" if front_to_back else "0"
     load = "s0 = {L}[j]; s1 = {L}[j + U1]; s2 = {L}[j + U2]; s3 = {L}[j + U3]"
@@ -94,13 +94,13 @@ def _float_source(front_to_back: bool, consts: set[float]) -> str:
         "        p0 = np.uint64(t) * U_TILE",
         "        m = np.uint64(min(TILE, npix - t * TILE))",
         f"        layer = numba.carray(as_pointer(addrs[{first}]), (npix * 4,))",
-        "        lowest = K_1_0",
+        "        opaque = np.int32(1)",
         "        for p in range(np.uint64(0), m):",
         "            i = U4 * p",
         "            j = U4 * (p0 + p)",
         "            " + load.format(L="layer"),
         "            acc[i] = s0; acc[i + U1] = s1; acc[i + U2] = s2; acc[i + U3] = s3",
-        *(["            lowest = min(lowest, s3)"] if front_to_back else []),
+        *(["            opaque &= np.int32(s3 >= threshold)"] if front_to_back else []),
         *_check_layer("            "),
         "        read = 1",
     ]
@@ -116,17 +116,24 @@ def _float_source(front_to_back: bool, consts: set[float]) -> str:
         return ["    " + load.format(L=name), *(f"    {x}" for x in update), *_check_layer("    ")]
 
     if front_to_back:
+        pair = [*apply("la"), "    d0 = m0; d1 = m1; d2 = m2; d3 = m3", *apply("lb")]
+        track = ["    opaque &= np.int32(m3 >= threshold)"]
         body = [
-            "for k in range(nl - 2, -1, -1):",
-            "    if lowest >= threshold:",
+            "k = nl - 2",
+            "while k >= 0:",
+            "    if opaque != 0:",
             "        break",
-            "    layer = numba.carray(as_pointer(addrs[k]), (npix * 4,))",
-            "    lowest = K_1_0",
-            *(
-                f"    {x}"
-                for x in [*sweep_head, *apply("layer"), "    lowest = min(lowest, m3)", *sweep_tail]
-            ),
-            "    read += 1",
+            "    opaque = np.int32(1)",
+            "    la = numba.carray(as_pointer(addrs[k]), (npix * 4,))",
+            "    if k >= 1:",
+            "        lb = numba.carray(as_pointer(addrs[k - 1]), (npix * 4,))",
+            *(f"        {x}" for x in [*sweep_head, *pair, *track, *sweep_tail]),
+            "        read += 2",
+            "        k -= 2",
+            "    else:",
+            *(f"        {x}" for x in [*sweep_head, *apply("la"), *track, *sweep_tail]),
+            "        read += 1",
+            "        k -= 1",
         ]
     else:
         pair = [*apply("la"), "    d0 = m0; d1 = m1; d2 = m2; d3 = m3", *apply("lb")]
