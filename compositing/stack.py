@@ -154,7 +154,9 @@ def composite_stack_front_to_back(
     Returns:
         ``(image, used)``: the composite (premultiplied RGBA of the broadcast shape) and how
         many layers were read (fewer than ``len(layers)`` when the accumulated alpha
-        saturated first; with the compiled engine the most any tile read).
+        saturated first). The compiled engine reports the most any tile read; it reads
+        layers two at a time, so a tile may read one layer past the point where it became
+        opaque (with the default threshold that layer changes no value).
     """
     _check_layers(layers)
     if not 0.0 < opaque_threshold <= 1.0:
