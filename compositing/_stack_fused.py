@@ -73,11 +73,13 @@ def update_source(op: str, consts: set[float]) -> list[str]:
 
 
 def _check_layer(indent: str) -> list[str]:
-    """Flag a non-finite value or an alpha outside [0, 1] (or NaN) of the layer pixel s0..s3."""
-    return [
-        f"{indent}z = (s0 + s1) + (s2 + s3)",
-        f"{indent}bad |= np.int32((z - z != K_0_0) | (s3 < K_0_0) | (s3 > K_1_0))",
-    ]
+    """Flag an alpha outside [0, 1] of the layer pixel s0..s3.
+
+    A NaN or Inf needs no test here: ``over`` and ``dst_over`` carry it into every later
+    value of that pixel (x·0 is NaN for x = ±Inf or NaN), so the finite check of the finished
+    tile sees it.
+    """
+    return [f"{indent}bad |= np.int32((s3 < K_0_0) | (s3 > K_1_0))"]
 
 
 def _float_source(front_to_back: bool, consts: set[float]) -> str:
