@@ -16,6 +16,7 @@ from compositing import (
     emission,
     partial_occlusion,
 )
+from compositing._stack_fused import TILE
 
 
 def _layers(n: int, seed: int, shape=(9, 11)) -> list[np.ndarray]:
@@ -133,9 +134,9 @@ def test_coverage_union_closed_form_and_monte_carlo():
 @pytest.mark.parametrize("n", [2, 7, 8])  # odd and even counts: layers go through the tile two at a time
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_compiled_stack_equals_the_layer_by_layer_loop(n, dtype):
-    # Several tiles, the last one partial. Both evaluate element-wise, in the same order, without
-    # fast-math, so the values are identical (deterministic by construction).
-    layers = _layers(n, 50, shape=(37, 61))
+    # 150 × 131 pixels: several tiles, the last one partial. Both evaluate element-wise, in the
+    # same order, without fast-math, so the values are identical (deterministic by construction).
+    layers = _layers(n, 50, shape=(150, 131))
     layers = [layer.astype(dtype) for layer in layers]
     want = layers[0]
     for layer in layers[1:]:
@@ -148,20 +149,21 @@ def test_compiled_stack_equals_the_layer_by_layer_loop(n, dtype):
 
 
 def test_compiled_front_to_back_stops_per_tile():
-    # 64 × 64 pixels = 4 tiles of 1024 pixels (16 rows each). The front layer is opaque on the
-    # top 32 rows: those two tiles read one layer, the others all of them.
-    layers = _layers(6, 60, shape=(64, 64))
-    layers[5][:32, :, 3] = 1.0
-    layers[5][:32, :, :3] = 0.25
+    # Four tiles of TILE pixels, 64 pixels a row. The front layer is opaque on the top half:
+    # those two tiles read one layer, the others all of them.
+    rows = TILE // 64
+    layers = _layers(6, 60, shape=(4 * rows, 64))
+    layers[5][: 2 * rows, :, 3] = 1.0
+    layers[5][: 2 * rows, :, :3] = 0.25
     exact = _painter(layers)
     image, used = composite_stack_front_to_back(layers, engine="numba")
     assert used == 6
     np.testing.assert_allclose(image, exact, rtol=1e-13, atol=1e-13)
-    np.testing.assert_array_equal(image[:32], layers[5][:32])
-    layers[2][:32] = np.nan  # behind the opaque tiles: never read
+    np.testing.assert_array_equal(image[: 2 * rows], layers[5][: 2 * rows])
+    layers[2][: 2 * rows] = np.nan  # behind the opaque tiles: never read
     image, _ = composite_stack_front_to_back(layers, engine="numba")
     np.testing.assert_allclose(image, exact, rtol=1e-13, atol=1e-13)
-    layers[2][40, 3] = np.nan  # in a tile that reads every layer
+    layers[2][3 * rows, 3] = np.nan  # in a tile that reads every layer
     with pytest.raises(ValueError, match=r"layers\[2\]: expected finite values"):
         composite_stack_front_to_back(layers, engine="numba")
 
