@@ -83,11 +83,33 @@ def _check_layer(indent: str) -> list[str]:
     return [f"{indent}bad |= np.int32((s3 < K_0_0) | (s3 > K_1_0))"]
 
 
+def _opaque_scan(full: str) -> list[str]:
+    """Lines finding ``start``: the frontmost layer opaque on every pixel of the tile (0 if none).
+
+    Over such a layer ``over`` gives the layer itself whatever lies behind (its ``1 − α`` is
+    an exact 0), so back to front starts there and the layers behind are not read. The scan
+    of a layer stops at its first pixel that is not opaque: for most layers one cache line.
+    """
+    return [
+        "start = 0",
+        "for k in range(nl - 1, 0, -1):",
+        "    layer = numba.carray(as_pointer(addrs[k]), (npix * 4,))",
+        "    covered = True",
+        "    for p in range(np.uint64(0), m):",
+        f"        if layer[U4 * (p0 + p) + U3] != {full}:",
+        "            covered = False",
+        "            break",
+        "    if covered:",
+        "        start = k",
+        "        break",
+    ]
+
+
 def _float_source(front_to_back: bool, consts: set[float]) -> str:
     """Float stacks: two layers per sweep over the tile (the accumulator stays in registers
     between them); front to back checks the tile's alpha before each pair."""
     update = update_source("dst_over" if front_to_back else "src_over", consts)
-    first = "nl - 1" if front_to_back else "0"
+    first = "nl - 1" if front_to_back else "start"
     load = "s0 = {L}[j]; s1 = {L}[j + U1]; s2 = {L}[j + U2]; s3 = {L}[j + U3]"
     lines = [
         "def kernel(addrs, nl, npix, out, threshold, used, lo, hi):",
@@ -96,6 +118,7 @@ def _float_source(front_to_back: bool, consts: set[float]) -> str:
         "    for t in range(lo, hi):",
         "        p0 = np.uint64(t) * U_TILE",
         "        m = np.uint64(min(TILE, npix - t * TILE))",
+        *([] if front_to_back else [f"        {x}" for x in _opaque_scan("K_1_0")]),
         f"        layer = numba.carray(as_pointer(addrs[{first}]), (npix * 4,))",
         "        opaque = np.int32(1)",
         "        for p in range(np.uint64(0), m):",
@@ -141,12 +164,12 @@ def _float_source(front_to_back: bool, consts: set[float]) -> str:
     else:
         pair = [*apply("la"), "    d0 = m0; d1 = m1; d2 = m2; d3 = m3", *apply("lb")]
         body = [
-            "for k in range(1, nl - 1, 2):",
+            "for k in range(start + 1, nl - 1, 2):",
             "    la = numba.carray(as_pointer(addrs[k]), (npix * 4,))",
             "    lb = numba.carray(as_pointer(addrs[k + 1]), (npix * 4,))",
             *(f"    {x}" for x in sweep_head + pair + sweep_tail),
             "    read += 2",
-            "if (nl - 1) % 2 == 1:",
+            "if (nl - 1 - start) % 2 == 1:",
             "    la = numba.carray(as_pointer(addrs[nl - 1]), (npix * 4,))",
             *(f"    {x}" for x in sweep_head + apply("la") + sweep_tail),
             "    read += 1",
@@ -176,10 +199,12 @@ def _straight8_source(consts: set[float]) -> str:
         "    for t in range(lo, hi):",
         "        p0 = np.uint64(t) * U_TILE",
         "        m = np.uint64(min(TILE, npix - t * TILE))",
-        "        layer = numba.carray(as_pointer(addrs[0]), (npix * 4,))",
+        *(f"        {x}" for x in _opaque_scan("np.uint8(255)")),
+        "        layer = numba.carray(as_pointer(addrs[start]), (npix * 4,))",
         "        for q in range(np.uint64(0), U4 * m):",
         "            acc[q] = T(layer[U4 * p0 + q]) / K255",
-        "        for k in range(1, nl):",
+        "        used[t] = nl - start",
+        "        for k in range(start + 1, nl):",
         "            layer = numba.carray(as_pointer(addrs[k]), (npix * 4,))",
         "            for p in range(np.uint64(0), m):",
         "                i = U4 * p",
@@ -248,5 +273,5 @@ def stack_fused(layers: list[np.ndarray], kind: str, threshold: float = 1.0) -> 
     t = np.float32 if kind == "straight8" else first.dtype.type
     args = (addrs, len(layers), npix, out.reshape(-1), t(threshold), used)
     suspicious = run_ranges(kernel, args, tiles, min_per_range=2)
-    read = len(layers) if kind != "front_to_back" else int(used.max())
+    read = int(used.max())
     return out, read, suspicious

@@ -20,13 +20,17 @@ composited back to front as an RGBA8 straight-alpha buffer stores them: each lay
 stored value are premultiplied, combined with ``over``, unpremultiplied (α = 0 keeps the
 colour) and stored back rounded to the nearest 8-bit value (the arithmetic in float32). That
 is what a chain of Pillow ``Image.alpha_composite`` calls computes, up to Pillow's own
-fixed-point rounding of each step.
+fixed-point rounding of each step. That buffer has one order, so both ``order`` values give
+this image.
 
 Two engines compute the same values: the compiled one (:mod:`compositing._stack_fused`, the
 whole stack in one pass per tile of pixels, front to back stopping per tile where alpha
-saturates) and the numpy reference (one :func:`compositing.composite` per layer). The
-compiled engine is bitwise equal to the reference for back to front; front to back stops
-per tile instead of for the whole image, which with the default threshold gives equal values.
+saturates) and the numpy reference (one :func:`compositing.composite` per layer). Back to
+front, the compiled engine first looks, per tile, for the frontmost layer that is opaque
+(α = 1, or 255) on every pixel of the tile and starts there: ``over`` onto anything gives
+that layer exactly, so the layers behind it are not read (nor checked). It is equal to the
+reference for back to front (bitwise, but for the sign of a zero); front to back stops per
+tile instead of for the whole image, which with the default threshold gives equal values.
 """
 
 from __future__ import annotations
@@ -145,7 +149,8 @@ def composite_stack_front_to_back(
 
     Args:
         layers: premultiplied linear RGBA arrays ``(..., 4)`` that broadcast together,
-            float32 or float64, alpha in [0, 1], backmost first.
+            float32 or float64, alpha in [0, 1], backmost first (8-bit straight ``uint8``
+            layers give the image of :func:`composite_stack`, whose buffer has one order).
         opaque_threshold: alpha in (0, 1] at which a pixel counts as opaque. With 1 the
             result equals back to front up to rounding; below 1 the error is at most
             ``1 − opaque_threshold`` times the brightest layer not read.
@@ -163,12 +168,12 @@ def composite_stack_front_to_back(
         raise ValueError(f"opaque_threshold: expected a number in (0, 1], got {opaque_threshold!r}")
     if _use_fused(engine):
         arrays, shape, straight8 = _arrays(layers)
-        if straight8:
-            raise TypeError(
-                "layers: 8-bit straight layers are composited back to front, as an RGBA8 buffer stores "
-                "them; use composite_stack(layers, 'back_to_front')"
-            )
-        return _fused(arrays, shape, "front_to_back", opaque_threshold, False)
+        # 8-bit straight layers: the RGBA8 buffer's order (back to front from the frontmost
+        # opaque layer of each tile) is the only one with that buffer's rounding.
+        return _fused(arrays, shape, "front_to_back", opaque_threshold, straight8)
+    arrays, shape, straight8 = _arrays(layers)
+    if straight8:
+        return _straight8_numpy(arrays, shape), len(layers)
     acc = np.array(_layer(layers, len(layers) - 1), copy=True)
     used = 1
     for i in range(len(layers) - 2, -1, -1):
@@ -192,7 +197,7 @@ def composite_stack(
         layers: premultiplied linear RGBA arrays ``(..., 4)`` that broadcast together,
             float32 or float64, alpha in [0, 1], backmost first; or 8-bit straight-alpha
             RGBA ``uint8`` arrays (all of them), composited as an RGBA8 straight buffer
-            stores them (see the module docstring), back to front only.
+            stores them (see the module docstring; both orders give that image).
         order: ``"back_to_front"`` or ``"front_to_back"`` (stops once every pixel
             is opaque, see :func:`composite_stack_front_to_back`). Both give the same
             image up to float rounding.
@@ -217,10 +222,10 @@ def composite_stack(
         return composite_stack_front_to_back(layers, opaque_threshold=opaque_threshold, engine=engine)[0]
     fused = _use_fused(engine)
     arrays, shape, straight8 = _arrays(layers)
+    if straight8 and not fused:
+        return _straight8_numpy(arrays, shape)
     if fused:
         return _fused(arrays, shape, "back_to_front", 1.0, straight8)[0]
-    if straight8:
-        return _straight8_numpy(arrays, shape)
     acc = np.array(np.broadcast_to(_layer(layers, 0), shape), copy=True)
     for i in range(1, len(layers)):
         acc = composite(_layer(layers, i), acc, "src_over", engine="numpy")

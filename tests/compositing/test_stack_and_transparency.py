@@ -236,6 +236,32 @@ def test_straight_8_bit_stack_closed_form_and_identities():
     np.testing.assert_array_equal(composite_stack(layers), layers[3])
 
 
-def test_straight_8_bit_stack_is_back_to_front_only():
-    with pytest.raises(TypeError, match="8-bit straight layers are composited back to front"):
-        composite_stack(_straight8(2, 1), "front_to_back")
+def test_straight_8_bit_stack_has_one_order():
+    layers = _straight8(6, 1)
+    want = composite_stack(layers, engine="numpy")
+    np.testing.assert_array_equal(composite_stack(layers, "front_to_back"), want)
+    image, used = composite_stack_front_to_back(layers)
+    np.testing.assert_array_equal(image, want)
+    assert used == 6
+
+
+@pytest.mark.parametrize("kind", ["float32", "uint8"])
+def test_back_to_front_starts_at_the_frontmost_opaque_layer_of_each_tile(kind):
+    # Four tiles; layer 4 is opaque on the top half only. Behind it, those tiles read nothing:
+    # a NaN there is never seen, and the image is what the full loop gives.
+    rows = TILE // 64
+    if kind == "uint8":
+        layers = _straight8(6, 2, shape=(4 * rows, 64))
+        layers[4][: 2 * rows, :, 3] = 255
+    else:
+        layers = [layer.astype(np.float32) for layer in _layers(6, 3, shape=(4 * rows, 64))]
+        layers[4][: 2 * rows, :, 3] = 1.0
+    want = composite_stack(layers, engine="numpy")
+    got = composite_stack(layers, engine="numba")
+    np.testing.assert_array_equal(got, want)
+    if kind == "float32":
+        layers[1][: 2 * rows] = np.nan
+        np.testing.assert_array_equal(composite_stack(layers, engine="numba"), want)
+        layers[1][3 * rows, 5, 0] = np.nan  # in a tile with no opaque layer: read, and reported
+        with pytest.raises(ValueError, match=r"layers\[1\]: expected finite values"):
+            composite_stack(layers, engine="numba")
