@@ -30,6 +30,15 @@ Two framebuffer formats are modelled:
   every factor is ``ZERO`` or ``ONE`` (or the equation is MIN/MAX) there is nothing to round
   and the two agree bit for bit.
 
+With ``target="unorm8"`` the colours may also be ``uint8`` arrays, the codes of an RGBA8
+image (value = code/255); two ``uint8`` inputs give a ``uint8`` result computed on the codes,
+with no float round trip (the dtype rule is written once, in docs/gl_blend.md, "Dtypes").
+
+Factors and equations are held once, as expression trees (:data:`GL_FACTOR_EXPRS`,
+:data:`GL_EQUATION_EXPRS`). The numpy reference (``engine="numpy"``) evaluates them on
+arrays; the compiled blend stage (``engine="numba"``, :mod:`compositing._gl_fused`) is
+generated from them and gives the same values (identical floats, identical 8-bit codes).
+
 Names are the GL enumerants without the ``GL_`` prefix (a leading ``GL_`` is tolerated),
 case-insensitive. Dual-source factors (``SRC1_*``) are not modelled: they need a second
 fragment colour.
