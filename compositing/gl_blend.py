@@ -102,6 +102,10 @@ GL_BLEND_TARGETS: Final[tuple[str, ...]] = ("float32", "unorm8")
 #: table below) and the numpy reference; ``"auto"`` takes the compiled one when numba is installed.
 GL_BLEND_ENGINES: Final[tuple[str, ...]] = ("auto", "numpy", "numba")
 
+#: ``engine="auto"`` evaluates fewer pixels than this with numpy: a few colours are not worth
+#: the compilation of the generic kernel (1–2 s once per process); both engines agree.
+AUTO_COMPILED_MIN_PIXELS: Final = 64
+
 _UNORM8_MAX: Final = 255.0
 
 
@@ -287,8 +291,9 @@ def gl_blend(
         target: ``"float32"`` for a floating-point colour buffer (no clamping anywhere) or ``"unorm8"``
             for a fixed-point RGBA8 buffer (source, destination, constant and result clamped to
             [0, 1] and rounded to the nearest multiple of 1/255, see the module docstring).
-        engine: ``"auto"`` (the compiled blend stage when numba is installed), ``"numba"`` or
-            ``"numpy"`` (the reference evaluation of the table). Both give the same values.
+        engine: ``"auto"`` (the compiled blend stage when numba is installed, except for fewer
+            than :data:`AUTO_COMPILED_MIN_PIXELS` pixels), ``"numba"`` or ``"numpy"`` (the
+            reference evaluation of the table). Both give the same values.
 
     Returns:
         The blended RGBA, shape ``broadcast(src, dst)``. dtype (docs/gl_blend.md, "Dtypes"):
@@ -336,7 +341,10 @@ def gl_blend(
     constant_arr = _as_constant(constant)
     rgb_state, alpha_state = (sf, df, eq), (sfa, dfa, eqa)
 
-    use_fused = engine == "numba" or (engine == "auto" and _fused_available())
+    pixels = int(np.prod(shape[:-1]))
+    use_fused = engine == "numba" or (
+        engine == "auto" and pixels >= AUTO_COMPILED_MIN_PIXELS and _fused_available()
+    )
     if use_fused:
         return _gl_blend_fused(s, d, constant_arr, rgb_state, alpha_state, shape, dtype, unorm8, codes)
 
