@@ -35,6 +35,7 @@ caster was drawn.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +44,7 @@ from .raster import rasterize
 from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographic_matrix, perspective_matrix
 
 __all__ = [
+    "ENGINES",
     "PCF_KERNELS",
     "SHADOW_METHODS",
     "ShadowMap",
@@ -57,6 +59,31 @@ __all__ = [
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
 PCF_KERNELS: tuple[str, ...] = ("nearest", "bilinear", "box3", "box5", "box7")
+#: ``engine`` values: the numpy reference, the compiled twins of
+#: :mod:`blinn_phong.shadow_kernels`, or ``auto`` (compiled when numba imports).
+ENGINES: tuple[str, ...] = ("auto", "numpy", "numba")
+
+
+@functools.lru_cache(maxsize=1)
+def _numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def _compiled(engine: str) -> bool:
+    """True when ``engine`` selects the compiled kernels; raises for an unknown engine."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    if engine == "numpy":
+        return False
+    if _numba_available():
+        return True
+    if engine == "numba":
+        raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    return False
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +134,7 @@ def render_shadow_map(
     *,
     constant_bias: float = 0.0,
     slope_bias: float = 0.0,
+    engine: str = "auto",
 ) -> ShadowMap:
     """Render a light-space depth map of world-space triangles (both faces, nearest depth).
 
@@ -117,6 +145,9 @@ def render_shadow_map(
         resolution: map size in texels (square), ≥ 1.
         constant_bias: window-depth units added to every caster fragment (≥ 0).
         slope_bias: multiple of the triangle's depth slope per texel added (≥ 0).
+        engine: ``numpy`` (the reference: :func:`~blinn_phong.raster.rasterize` and a
+            scatter-min), ``numba`` (:func:`blinn_phong.shadow_kernels.depth_map_compiled`,
+            same formulas, depths within 1e-12) or ``auto`` (numba when it imports).
 
     Returns:
         :class:`ShadowMap` with the biased nearest depth per texel (1 where empty).
@@ -128,6 +159,11 @@ def render_shadow_map(
         raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
     res = int(resolution)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    if _compiled(engine):
+        from .shadow_kernels import depth_map_compiled
+
+        depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
+        return ShadowMap(depth_map, np.asarray(view, float), np.asarray(projection, float))
     clip = _homogeneous(tris.reshape(-1, 3)) @ vp.T
     index = np.arange(len(clip)).reshape(-1, 3)
     frags = rasterize(clip, index, res, res)
@@ -167,6 +203,7 @@ def shadow_visibility(
     *,
     normal_offset: float = 0.0,
     kernel: str = "nearest",
+    engine: str = "auto",
 ) -> np.ndarray:
     """Fraction of the depth comparisons that find each point lit (1 = lit, 0 = shadowed).
 
@@ -179,6 +216,8 @@ def shadow_visibility(
         normal_offset: world units each point moves along its unit normal (towards the
             side facing the light) before projection.
         kernel: one of :data:`PCF_KERNELS`.
+        engine: ``numpy`` (this function's reference code), ``numba``
+            (:func:`blinn_phong.shadow_kernels.lookup_compiled`) or ``auto``.
 
     Returns:
         (n,) float64 visibility in [0, 1].
@@ -186,12 +225,28 @@ def shadow_visibility(
     p = _points("points", points)
     if kernel not in PCF_KERNELS:
         raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    n = None
     if normal_offset != 0.0:
         if normals is None:
             raise ValueError("normals are required when normal_offset != 0")
         n = _points("normals", normals)
         if n.shape != p.shape:
             raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+    if _compiled(engine):
+        from .shadow_kernels import lookup_compiled
+
+        vp = shadow_map.projection @ shadow_map.view
+        return lookup_compiled(
+            shadow_map.depth[None],
+            vp[None],
+            shadow_map.view[None],
+            p,
+            n,
+            light_position=None,
+            normal_offset=float(normal_offset),
+            kernel=kernel,
+        )
+    if n is not None:
         n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         # face the normal towards the light: the side whose light-eye z is larger (nearer the light)
         towards = (n @ shadow_map.view[:3, :3].T)[:, 2]
@@ -259,6 +314,7 @@ def light_shadow_maps(
     *,
     constant_bias: float = 0.0,
     slope_bias: float = 0.0,
+    engine: str = "auto",
 ) -> list[ShadowMap]:
     """The shadow map(s) of one light over the given casters.
 
@@ -272,13 +328,14 @@ def light_shadow_maps(
         resolution: texels per map side.
         constant_bias: see :func:`render_shadow_map`.
         slope_bias: see :func:`render_shadow_map`.
+        engine: see :func:`render_shadow_map`.
 
     Returns:
         A list with one :class:`ShadowMap` (directional, spot) or six (point).
     """
     tris = _triangles("world_triangles", world_triangles)
     centre, radius = _bounds(tris)
-    kw = {"constant_bias": constant_bias, "slope_bias": slope_bias}
+    kw = {"constant_bias": constant_bias, "slope_bias": slope_bias, "engine": engine}
     if isinstance(light, DirectionalLight):
         d = np.asarray(light.direction, dtype=np.float64)
         eye = centre - d * 2 * radius
@@ -294,15 +351,28 @@ def light_shadow_maps(
         proj = perspective_matrix(2 * light.cutoff, 1.0, near, far)
         return [render_shadow_map(tris, view, proj, resolution, **kw)]
     if isinstance(light, PointLight | SpotLight):
-        maps = []
+        proj = perspective_matrix(90.0, 1.0, near, far)
+        views = []
         for axis, sign, up in _CUBE_FACES:
             d = np.zeros(3)
             d[axis] = sign
-            view = look_at(pos, pos + d, up)
-            maps.append(
-                render_shadow_map(tris, view, perspective_matrix(90.0, 1.0, near, far), resolution, **kw)
-            )
-        return maps
+            views.append(look_at(pos, pos + d, up))
+        if _compiled(engine) and isinstance(resolution, int | np.integer) and resolution >= 1:
+            if constant_bias < 0 or slope_bias < 0:
+                raise ValueError(
+                    f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
+                )
+            from .shadow_kernels import depth_map_compiled
+
+            # the six faces in one (6, R, R) block, so the look-up reads them without a copy
+            res = int(resolution)
+            cube = np.empty((6, res, res))
+            for face, view in enumerate(views):
+                depth_map_compiled(
+                    tris, proj @ view, res, float(constant_bias), float(slope_bias), out=cube[face]
+                )
+            return [ShadowMap(cube[face], view, proj) for face, view in enumerate(views)]
+        return [render_shadow_map(tris, view, proj, resolution, **kw) for view in views]
     raise TypeError(f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}")
 
 
@@ -314,6 +384,7 @@ def shadow_map_visibility(
     *,
     normal_offset: float = 0.0,
     kernel: str = "nearest",
+    engine: str = "auto",
 ) -> np.ndarray:
     """Visibility of points for one light from its maps (:func:`light_shadow_maps`).
 
@@ -327,15 +398,46 @@ def shadow_map_visibility(
         normals: (n, 3) normals, for ``normal_offset``.
         normal_offset: see :func:`shadow_visibility`.
         kernel: see :func:`shadow_visibility`.
+        engine: see :func:`shadow_visibility`.
 
     Returns:
         (n,) float64 visibility in [0, 1].
     """
     p = _points("points", points)
     if len(maps) == 1:
-        return shadow_visibility(maps[0], p, normals, normal_offset=normal_offset, kernel=kernel)
+        return shadow_visibility(
+            maps[0], p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
+        )
     if len(maps) != 6 or isinstance(light, DirectionalLight):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
+    if _compiled(engine):
+        if kernel not in PCF_KERNELS:
+            raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+        n = None
+        if normal_offset != 0.0:
+            if normals is None:
+                raise ValueError("normals are required when normal_offset != 0")
+            n = _points("normals", normals)
+            if n.shape != p.shape:
+                raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+        from .shadow_kernels import lookup_compiled
+
+        base = maps[0].depth.base
+        same_block = (
+            isinstance(base, np.ndarray)
+            and base.shape == (6, *maps[0].depth.shape)
+            and all(m.depth.base is base and np.shares_memory(m.depth, base[f]) for f, m in enumerate(maps))
+        )
+        return lookup_compiled(
+            base if same_block else np.stack([m.depth for m in maps]),
+            np.stack([m.projection @ m.view for m in maps]),
+            np.stack([m.view for m in maps]),
+            p,
+            n,
+            light_position=np.asarray(light.position, dtype=np.float64),
+            normal_offset=float(normal_offset),
+            kernel=kernel,
+        )
     rel = p - np.asarray(light.position, dtype=np.float64)
     axis = np.argmax(np.abs(rel), axis=1)
     sign = np.sign(rel[np.arange(len(p)), axis])
@@ -344,7 +446,9 @@ def shadow_map_visibility(
         sel = (axis == ax) & (sign == sg)
         if np.any(sel):
             nrm = None if normals is None else np.asarray(normals)[sel]
-            vis[sel] = shadow_visibility(maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel)
+            vis[sel] = shadow_visibility(
+                maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel, engine="numpy"
+            )
     return vis
 
 
@@ -432,6 +536,8 @@ def light_visibility(
     kernel: str = "nearest",
     plane: np.ndarray | tuple[float, ...] | None = None,
     caster_triangles: np.ndarray | None = None,
+    normal_offset: float = 0.0,
+    engine: str = "auto",
 ) -> np.ndarray:
     """Visibility of points for one light by a named method (a planner choice).
 
@@ -447,6 +553,9 @@ def light_visibility(
         kernel: PCF kernel for ``shadow_map``.
         plane: ``(a, b, c, d)`` receiving plane for ``planar``.
         caster_triangles: casters for ``planar`` (default: every triangle not in the plane).
+        normal_offset: receiver offset along the normal for ``shadow_map`` (world units).
+        engine: ``shadow_map`` maps and look-ups by the numpy reference (``numpy``), the
+            compiled kernels (``numba``) or ``auto``; see :func:`render_shadow_map`.
 
     Returns:
         (m,) float64 visibility in [0, 1].
@@ -456,15 +565,21 @@ def light_visibility(
         return np.ones(len(p))
     tris = _triangles("world_triangles", world_triangles)
     if method == "ray_traced":
-        from .raytrace import RayScene, directional_light_visibility, point_light_visibility
+        from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
 
-        scene = RayScene(tris)
+        scene = cached_ray_scene(tris)  # one BVH for every light of a frame
         if isinstance(light, DirectionalLight):
-            return directional_light_visibility(scene, p, normals, -np.asarray(light.direction))
-        return point_light_visibility(scene, p, normals, light.position)
+            return directional_light_visibility(
+                scene, p, normals, -np.asarray(light.direction), engine=engine
+            )
+        return point_light_visibility(scene, p, normals, light.position, engine=engine)
     if method == "shadow_map":
-        maps = light_shadow_maps(light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias)
-        return shadow_map_visibility(light, maps, p, normals, kernel=kernel)
+        maps = light_shadow_maps(
+            light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias, engine=engine
+        )
+        return shadow_map_visibility(
+            light, maps, p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
+        )
     if method == "planar":
         if plane is None:
             raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
