@@ -115,7 +115,9 @@ def test_light_visibility_engines_agree_and_bad_engine_is_named():
 def _classify(tris, points, normals, light, engine="auto"):
     scene = RayScene(tris)
     if isinstance(light, DirectionalLight):
-        return directional_light_visibility(scene, points, normals, -np.asarray(light.direction), engine=engine)
+        return directional_light_visibility(
+            scene, points, normals, -np.asarray(light.direction), engine=engine
+        )
     return point_light_visibility(scene, points, normals, light.position, engine=engine)
 
 
