@@ -48,6 +48,7 @@ __all__ = [
     "PCF_KERNELS",
     "SHADOW_METHODS",
     "ShadowMap",
+    "light_cameras",
     "light_shadow_maps",
     "light_visibility",
     "planar_shadow_mask",
@@ -334,46 +335,75 @@ def light_shadow_maps(
         A list with one :class:`ShadowMap` (directional, spot) or six (point).
     """
     tris = _triangles("world_triangles", world_triangles)
-    centre, radius = _bounds(tris)
+    cameras = light_cameras(light, tris)
+    if (
+        len(cameras) == 6
+        and _compiled(engine)
+        and isinstance(resolution, int | np.integer)
+        and resolution >= 1
+    ):
+        if constant_bias < 0 or slope_bias < 0:
+            raise ValueError(
+                f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
+            )
+        from .shadow_kernels import depth_map_compiled
+
+        # the six faces in one (6, R, R) block, so the look-up reads them without a copy
+        res = int(resolution)
+        cube = np.empty((6, res, res))
+        for face, (view, proj) in enumerate(cameras):
+            depth_map_compiled(
+                tris, proj @ view, res, float(constant_bias), float(slope_bias), out=cube[face]
+            )
+        return [ShadowMap(cube[face], view, proj) for face, (view, proj) in enumerate(cameras)]
     kw = {"constant_bias": constant_bias, "slope_bias": slope_bias, "engine": engine}
+    return [render_shadow_map(tris, view, proj, resolution, **kw) for view, proj in cameras]
+
+
+def light_cameras(
+    light: DirectionalLight | PointLight | SpotLight, world_triangles: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The light camera(s) of :func:`light_shadow_maps`: ``[(view, projection), ...]`` (4×4 each).
+
+    Directional: an orthographic camera looking along the light over the casters' bounding
+    sphere (centre ``c``, radius ``r``; eye at ``c − 2r·d``, depth range [0.5r, 3.5r]).
+    Spot (cut-off ≤ 80°): a perspective camera at the light along its axis, field of view
+    twice the cut-off. Point (or wider spot): six 90° cube faces in the order of
+    ``_CUBE_FACES`` (+x, −x, +y, −y, +z, −z; OpenGL 4.6 §8.13 table 8.19). Perspective
+    cameras span ``near = 10⁻³·far`` to ``far`` = distance to the farthest bounding-sphere point.
+
+    Args:
+        light: a light of the scene model.
+        world_triangles: (n, 3, 3) world-space casters.
+
+    Returns:
+        One (view, projection) pair, or six for a cube.
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    centre, radius = _bounds(tris)
     if isinstance(light, DirectionalLight):
         d = np.asarray(light.direction, dtype=np.float64)
         eye = centre - d * 2 * radius
         view = look_at(eye, centre, _up_for(d))
         proj = orthographic_matrix(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5)
-        return [render_shadow_map(tris, view, proj, resolution, **kw)]
+        return [(view, proj)]
+    if not isinstance(light, PointLight | SpotLight):
+        raise TypeError(
+            f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}"
+        )
     pos = np.asarray(light.position, dtype=np.float64)
     far = float(np.linalg.norm(centre - pos)) + radius
     near = max(far * 1e-3, 1e-6)
     if isinstance(light, SpotLight) and light.cutoff <= 80.0:
         d = np.asarray(light.direction, dtype=np.float64)
-        view = look_at(pos, pos + d, _up_for(d))
-        proj = perspective_matrix(2 * light.cutoff, 1.0, near, far)
-        return [render_shadow_map(tris, view, proj, resolution, **kw)]
-    if isinstance(light, PointLight | SpotLight):
-        proj = perspective_matrix(90.0, 1.0, near, far)
-        views = []
-        for axis, sign, up in _CUBE_FACES:
-            d = np.zeros(3)
-            d[axis] = sign
-            views.append(look_at(pos, pos + d, up))
-        if _compiled(engine) and isinstance(resolution, int | np.integer) and resolution >= 1:
-            if constant_bias < 0 or slope_bias < 0:
-                raise ValueError(
-                    f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
-                )
-            from .shadow_kernels import depth_map_compiled
-
-            # the six faces in one (6, R, R) block, so the look-up reads them without a copy
-            res = int(resolution)
-            cube = np.empty((6, res, res))
-            for face, view in enumerate(views):
-                depth_map_compiled(
-                    tris, proj @ view, res, float(constant_bias), float(slope_bias), out=cube[face]
-                )
-            return [ShadowMap(cube[face], view, proj) for face, view in enumerate(views)]
-        return [render_shadow_map(tris, view, proj, resolution, **kw) for view in views]
-    raise TypeError(f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}")
+        return [(look_at(pos, pos + d, _up_for(d)), perspective_matrix(2 * light.cutoff, 1.0, near, far))]
+    proj = perspective_matrix(90.0, 1.0, near, far)
+    cameras = []
+    for axis, sign, up in _CUBE_FACES:
+        d = np.zeros(3)
+        d[axis] = sign
+        cameras.append((look_at(pos, pos + d, up), proj))
+    return cameras
 
 
 def shadow_map_visibility(
