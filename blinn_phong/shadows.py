@@ -286,8 +286,13 @@ def shadow_visibility(
 
 
 def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
-    pts = world_triangles.reshape(-1, 3)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    if _numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
+        from .shadow_kernels import corner_bounds  # the same minimum and maximum, in one pass
+
+        lo, hi = corner_bounds(world_triangles)
+    else:
+        pts = world_triangles.reshape(-1, 3)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
     centre = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-9)
     return centre, radius
