@@ -15,7 +15,10 @@ light (one 1024² map and a cube of six), 1920×1080, per-pixel Blinn-Phong. Ren
 Runs are interleaved round-robin so machine load hits all alike; medians of wall time and of
 process CPU time (all threads; llvmpipe's run in this process) are compared. The ``shadows``
 stage time of our frames is reported separately (the light-visibility work this benchmark is
-about). The two shadow-mapped images are compared after UNORM8 rounding on covered pixels
+about). The light-visibility work alone (``light_visibility`` for both lights on every visible
+sample of the frame) is timed as well, so that "plain frame + shadow work" can be set
+against the plain frame and against Mesa whatever the rest of the effects pipeline costs.
+The two shadow-mapped images are compared after UNORM8 rounding on covered pixels
 away from shadow edges (3×3 neighbourhood of constant visibility).
 
 Usage::
@@ -112,7 +115,35 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
         result = bp.render(scene, width, height, shading="phong", shadows=shadows, transparency="zbuffer")
         return time.perf_counter() - start, time.process_time() - cpu, dict(result.stats.seconds), result
 
+    # The light-visibility work alone (both lights, every visible sample of the frame), as the
+    # frame's shadows stage calls it: light_visibility on world points and face normals.
+    from blinn_phong.raster import interpolate, visible_fragments
+    from blinn_phong.raytrace import world_triangles
+    from blinn_phong.render import prepare_scene
+    from blinn_phong.shadows import light_visibility
+
+    prepared = prepare_scene(scene)
+    frags = visible_fragments(prepared.clip, prepared.triangles, width, height, engine="auto")
+    eye = interpolate(frags, prepared.triangles, prepared.eye_position)
+    points = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
+    normals = prepared.face_world_normal[frags.triangle]
+    tris, _ = world_triangles(scene)
+    map_params = {
+        "resolution": RESOLUTION,
+        "constant_bias": CONSTANT_BIAS,
+        "slope_bias": SLOPE_BIAS,
+        "kernel": KERNEL,
+    }
+
+    def work(method: str, params: dict[str, object]) -> tuple[float, float, dict[str, float], object]:
+        start, cpu = time.perf_counter(), time.process_time()
+        for light in scene.lights:
+            light_visibility(method, light, tris, points, normals, **params)  # type: ignore[arg-type]
+        return time.perf_counter() - start, time.process_time() - cpu, {}, None
+
     cases = {
+        "shadow_map_work": lambda: work("shadow_map", map_params),
+        "ray_traced_work": lambda: work("ray_traced", {}),
         "ours_plain": lambda: ours("none"),
         "ours_shadow_map": lambda: ours(shadow_map),
         "ours_ray_traced": lambda: ours("ray_traced"),
@@ -161,6 +192,19 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
         "shadow_map_stage_plus_plain_over_plain": 1 + shadow_stage["ours_shadow_map"] / med["ours_plain"],
         "ray_traced_stage_plus_plain_over_plain": 1 + shadow_stage["ours_ray_traced"] / med["ours_plain"],
     }
+    for method in ("shadow_map", "ray_traced"):
+        w, c = med[f"{method}_work"], med_cpu[f"{method}_work"]
+        ratios[f"{method}_work_s"] = w
+        # the frame if the visibility work were added to the plain frame and nothing else
+        ratios[f"plain_plus_{method}_work_over_plain"] = 1 + w / med["ours_plain"]
+        ratios[f"plain_plus_{method}_work_over_plain_cpu"] = 1 + c / med_cpu["ours_plain"]
+        if gl_shadows is not None and method == "shadow_map":
+            ratios["plain_plus_shadow_map_work_over_mesa_shadow_map"] = (med["ours_plain"] + w) / med[
+                "mesa_shadow_map"
+            ]
+            ratios["plain_plus_shadow_map_work_over_mesa_shadow_map_cpu"] = (
+                med_cpu["ours_plain"] + c
+            ) / med_cpu["mesa_shadow_map"]
     agreement = None
     if gl_shadows is not None:
         ratios["shadow_map_over_mesa_shadow_map"] = med["ours_shadow_map"] / med["mesa_shadow_map"]
@@ -184,7 +228,13 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
         "benchmark": "shadows_mesa",
         "machine": machine_info(),
         "mesa": None if info is None else {"renderer": info.renderer, "version": info.version},
-        "scene": {"triangles": n_tris, "width": width, "height": height, "lights": ["directional", "point"]},
+        "scene": {
+            "triangles": n_tris,
+            "width": width,
+            "height": height,
+            "visible_samples": len(points),
+            "lights": ["directional", "point"],
+        },
         "shadow_map": {
             "resolution": RESOLUTION,
             "constant_bias": CONSTANT_BIAS,
