@@ -573,6 +573,7 @@ def light_visibility(
     caster_triangles: np.ndarray | None = None,
     normal_offset: float = 0.0,
     engine: str = "auto",
+    transmittance: np.ndarray | None = None,
 ) -> np.ndarray:
     """Visibility of points for one light by a named method (a planner choice).
 
@@ -591,11 +592,31 @@ def light_visibility(
         normal_offset: receiver offset along the normal for ``shadow_map`` (world units).
         engine: ``shadow_map`` maps and look-ups by the numpy reference (``numpy``), the
             compiled kernels (``numba``) or ``auto``; see :func:`render_shadow_map`.
+        transmittance: optional (n, 3) per-triangle RGB transmittance in [0, 1] (1 − α for
+            partial occlusion, the per-channel transmittance for absorption, 0 for opaque):
+            transparent casters then cast coloured shadows
+            (:func:`blinn_phong.raytrace.transmitted_light`) and the result is (m, 3).
+            Only ``none`` and ``ray_traced`` accept it.
 
     Returns:
-        (m,) float64 visibility in [0, 1].
+        (m,) float64 visibility in [0, 1]; (m, 3) per channel when ``transmittance`` is given.
     """
     p = _points("points", points)
+    if transmittance is not None:
+        if method == "none":
+            return np.ones((len(p), 3))
+        if method != "ray_traced":
+            raise ValueError(
+                f"transmittance: coloured shadows are ray traced; method {method!r} casts full "
+                "shadows only (use 'ray_traced' or pass transmittance=None)"
+            )
+        from .raytrace import cached_ray_scene, transmitted_light
+
+        tris = _triangles("world_triangles", world_triangles)
+        scene = cached_ray_scene(tris)
+        if isinstance(light, DirectionalLight):
+            return transmitted_light(scene, p, normals, -np.asarray(light.direction), transmittance)
+        return transmitted_light(scene, p, normals, light.position, transmittance, positional=True)
     if method == "none":
         return np.ones(len(p))
     tris = _triangles("world_triangles", world_triangles)
