@@ -39,7 +39,7 @@ import os
 import numba
 import numpy as np
 
-__all__ = ["corner_bounds", "depth_map_compiled", "hard_shadow_rays", "lookup_compiled"]
+__all__ = ["corner_bounds", "cube_maps_compiled", "depth_map_compiled", "hard_shadow_rays", "lookup_compiled"]
 
 #: PCF kernel codes shared with :mod:`blinn_phong.shadows` (index into its PCF_KERNELS).
 KERNEL_CODES = {"nearest": 0, "bilinear": 1, "box3": 3, "box5": 5, "box7": 7}
@@ -192,6 +192,61 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
     return valid, bias, sx, sy, sz, ea, eb, ec, etl, box
 
 
+@numba.njit(cache=True)
+def _scan_rows(
+    depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+):  # pragma: no cover
+    # rows r0..r1 (inclusive) of one map: fill with 1, then keep the smallest biased depth
+    depth[r0 : r1 + 1, :] = 1.0
+    for q in range(slots.shape[0]):
+        s = slots[q]
+        lo = max(box[s, 2], r0)
+        hi = min(box[s, 3], r1)
+        if lo > hi:
+            continue
+        area = ea[s, 3]
+        ex_area = (sx[s, 1] - sx[s, 0]) * (sy[s, 2] - sy[s, 0]) - (sx[s, 2] - sx[s, 0]) * (
+            sy[s, 1] - sy[s, 0]
+        )
+        exact = ex_area * area > 0 and abs(ex_area) > 1e-12
+        abs_area = abs(area)
+        b = bias[s]
+        for py in range(lo, hi + 1):
+            cy = py + 0.5
+            for px in range(box[s, 0], box[s, 1] + 1):
+                cx = px + 0.5
+                e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
+                if e0 < 0 or (e0 == 0 and not etl[s, 0]):
+                    continue
+                e1 = ea[s, 1] * cx + (eb[s, 1] * cy + ec[s, 1])
+                if e1 < 0 or (e1 == 0 and not etl[s, 1]):
+                    continue
+                e2 = ea[s, 2] * cx + (eb[s, 2] * cy + ec[s, 2])
+                if e2 < 0 or (e2 == 0 and not etl[s, 2]):
+                    continue
+                if exact:
+                    l0 = (
+                        (sx[s, 2] - sx[s, 1]) * (cy - sy[s, 1]) - (sy[s, 2] - sy[s, 1]) * (cx - sx[s, 1])
+                    ) / ex_area
+                    l1 = (
+                        (sx[s, 0] - sx[s, 2]) * (cy - sy[s, 2]) - (sy[s, 0] - sy[s, 2]) * (cx - sx[s, 2])
+                    ) / ex_area
+                    l2 = (
+                        (sx[s, 1] - sx[s, 0]) * (cy - sy[s, 0]) - (sy[s, 1] - sy[s, 0]) * (cx - sx[s, 0])
+                    ) / ex_area
+                else:
+                    l0 = e0 / abs_area
+                    l1 = e1 / abs_area
+                    l2 = e2 / abs_area
+                z = l0 * sz[s, 0] + l1 * sz[s, 1] + l2 * sz[s, 2]
+                if z > 1.0:
+                    continue
+                z = max(z, 0.0)
+                biased = z + constant_bias + b
+                if biased < depth[py, px]:
+                    depth[py, px] = biased
+
+
 @numba.njit(parallel=True, cache=True)
 def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box):  # pragma: no cover
     res = depth.shape[0]
@@ -199,54 +254,45 @@ def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, et
     for band in numba.prange(n_bands):
         r0 = band * band_h
         r1 = min(res, r0 + band_h) - 1
-        depth[r0 : r1 + 1, :] = 1.0
-        for q in range(slots.shape[0]):
-            s = slots[q]
-            lo = max(box[s, 2], r0)
-            hi = min(box[s, 3], r1)
-            if lo > hi:
-                continue
-            area = ea[s, 3]
-            ex_area = (sx[s, 1] - sx[s, 0]) * (sy[s, 2] - sy[s, 0]) - (sx[s, 2] - sx[s, 0]) * (
-                sy[s, 1] - sy[s, 0]
-            )
-            exact = ex_area * area > 0 and abs(ex_area) > 1e-12
-            abs_area = abs(area)
-            b = bias[s]
-            for py in range(lo, hi + 1):
-                cy = py + 0.5
-                for px in range(box[s, 0], box[s, 1] + 1):
-                    cx = px + 0.5
-                    e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
-                    if e0 < 0 or (e0 == 0 and not etl[s, 0]):
-                        continue
-                    e1 = ea[s, 1] * cx + (eb[s, 1] * cy + ec[s, 1])
-                    if e1 < 0 or (e1 == 0 and not etl[s, 1]):
-                        continue
-                    e2 = ea[s, 2] * cx + (eb[s, 2] * cy + ec[s, 2])
-                    if e2 < 0 or (e2 == 0 and not etl[s, 2]):
-                        continue
-                    if exact:
-                        l0 = (
-                            (sx[s, 2] - sx[s, 1]) * (cy - sy[s, 1]) - (sy[s, 2] - sy[s, 1]) * (cx - sx[s, 1])
-                        ) / ex_area
-                        l1 = (
-                            (sx[s, 0] - sx[s, 2]) * (cy - sy[s, 2]) - (sy[s, 0] - sy[s, 2]) * (cx - sx[s, 2])
-                        ) / ex_area
-                        l2 = (
-                            (sx[s, 1] - sx[s, 0]) * (cy - sy[s, 0]) - (sy[s, 1] - sy[s, 0]) * (cx - sx[s, 0])
-                        ) / ex_area
-                    else:
-                        l0 = e0 / abs_area
-                        l1 = e1 / abs_area
-                        l2 = e2 / abs_area
-                    z = l0 * sz[s, 0] + l1 * sz[s, 1] + l2 * sz[s, 2]
-                    if z > 1.0:
-                        continue
-                    z = max(z, 0.0)
-                    biased = z + constant_bias + b
-                    if biased < depth[py, px]:
-                        depth[py, px] = biased
+        _scan_rows(depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+
+
+@numba.njit(parallel=True, cache=True)
+def _cube(world, vps, slope_bias, constant_bias, out):  # pragma: no cover - compiled
+    # the six faces of a cube map at once, one face per task (set-up and scan of a face are serial)
+    res = out.shape[1]
+    for f in numba.prange(vps.shape[0]):
+        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], float(res), slope_bias)
+        slots = np.flatnonzero(valid)
+        _scan_rows(out[f], 0, res - 1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+
+
+def cube_maps_compiled(
+    world_triangles: np.ndarray,
+    view_projections: np.ndarray,
+    constant_bias: float,
+    slope_bias: float,
+    out: np.ndarray,
+) -> np.ndarray:
+    """:func:`depth_map_compiled` for several cameras at once (a cube's six faces), one face per thread.
+
+    Args:
+        world_triangles: (n, 3, 3) float64 world-space casters.
+        view_projections: (F, 4, 4) world → clip matrices.
+        constant_bias: window-depth units added to every fragment.
+        slope_bias: multiple of the triangle's depth slope per texel added.
+        out: C-contiguous (F, R, R) float64 array, written and returned.
+
+    Returns:
+        ``out``, each face as :func:`depth_map_compiled` makes it.
+    """
+    world = np.ascontiguousarray(world_triangles, dtype=np.float64).reshape(-1, 3, 3)
+    if len(world) == 0:
+        out[:] = 1.0
+        return out
+    vps = np.ascontiguousarray(view_projections, dtype=np.float64)
+    _cube(world, vps, float(slope_bias), float(constant_bias), out)
+    return out
 
 
 def depth_map_compiled(

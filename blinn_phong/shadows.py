@@ -35,6 +35,7 @@ caster was drawn.
 
 from __future__ import annotations
 
+import contextvars
 import functools
 from dataclasses import dataclass
 
@@ -105,8 +106,14 @@ class ShadowMap:
         return self.depth.shape  # type: ignore[return-value]
 
 
+#: ids of float64 arrays already checked by the light_visibility call running in this context
+_CHECKED: contextvars.ContextVar[frozenset[int]] = contextvars.ContextVar("checked", default=frozenset())
+
+
 def _triangles(name: str, value: np.ndarray) -> np.ndarray:
     tris = np.asarray(value)
+    if id(tris) in _CHECKED.get():
+        return tris
     if tris.dtype.kind not in "fiu" or tris.ndim != 3 or tris.shape[1:] != (3, 3):
         raise ValueError(f"{name} must be a real array of shape (n, 3, 3), got {tris.dtype} {tris.shape}")
     if not np.all(np.isfinite(tris)):
@@ -116,6 +123,8 @@ def _triangles(name: str, value: np.ndarray) -> np.ndarray:
 
 def _points(name: str, value: np.ndarray) -> np.ndarray:
     arr = np.asarray(value)
+    if id(arr) in _CHECKED.get():
+        return arr
     if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must be a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -351,15 +360,14 @@ def light_shadow_maps(
             raise ValueError(
                 f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
             )
-        from .shadow_kernels import depth_map_compiled
+        from .shadow_kernels import cube_maps_compiled
 
-        # the six faces in one (6, R, R) block, so the look-up reads them without a copy
+        # the six faces in one (6, R, R) block, rendered one face per thread; the look-up
+        # then reads the block without a copy
         res = int(resolution)
         cube = np.empty((6, res, res))
-        for face, (view, proj) in enumerate(cameras):
-            depth_map_compiled(
-                tris, proj @ view, res, float(constant_bias), float(slope_bias), out=cube[face]
-            )
+        vps = np.stack([proj @ view for view, proj in cameras])
+        cube_maps_compiled(tris, vps, float(constant_bias), float(slope_bias), cube)
         return [ShadowMap(cube[face], view, proj) for face, (view, proj) in enumerate(cameras)]
     kw = {"constant_bias": constant_bias, "slope_bias": slope_bias, "engine": engine}
     return [render_shadow_map(tris, view, proj, resolution, **kw) for view, proj in cameras]
@@ -620,6 +628,32 @@ def light_visibility(
     if method == "none":
         return np.ones(len(p))
     tris = _triangles("world_triangles", world_triangles)
+    # p and tris are checked: the functions called below need not check them again
+    token = _CHECKED.set(frozenset((id(p), id(tris))))
+    try:
+        return _light_visibility_checked(
+            method, light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, plane,
+            caster_triangles, normal_offset, engine,
+        )  # fmt: skip
+    finally:
+        _CHECKED.reset(token)
+
+
+def _light_visibility_checked(
+    method: str,
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    p: np.ndarray,
+    normals: np.ndarray,
+    resolution: int,
+    constant_bias: float,
+    slope_bias: float,
+    kernel: str,
+    plane: np.ndarray | tuple[float, ...] | None,
+    caster_triangles: np.ndarray | None,
+    normal_offset: float,
+    engine: str,
+) -> np.ndarray:
     if method == "ray_traced":
         from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
 
