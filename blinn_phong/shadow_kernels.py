@@ -16,7 +16,8 @@ that never build an array of all fragments:
 * :func:`lookup_compiled` — per receiver point (in parallel): normal offset (Holbert 2011),
   projection into the light's clip space, the cube face of the major axis for point
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
-  & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`.
+  & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`. The per-point body is
+  :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly.
 * :func:`hard_shadow_rays` — per receiver point (in parallel): the float32 origin, unit
   direction and ``t_max`` of its shadow ray, as ``raytrace._hard_rays_numpy`` computes them
   (offset scaled with the point's distance from the scene centre), so that Embree gets
@@ -39,7 +40,14 @@ import os
 import numba
 import numpy as np
 
-__all__ = ["corner_bounds", "cube_maps_compiled", "depth_map_compiled", "hard_shadow_rays", "lookup_compiled"]
+__all__ = [
+    "corner_bounds",
+    "cube_maps_compiled",
+    "depth_map_compiled",
+    "hard_shadow_rays",
+    "lookup_compiled",
+    "visibility_at",
+]
 
 #: PCF kernel codes shared with :mod:`blinn_phong.shadows` (index into its PCF_KERNELS).
 KERNEL_CODES = {"nearest": 0, "bilinear": 1, "box3": 3, "box5": 5, "box7": 7}
@@ -338,69 +346,86 @@ def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
     return 1.0 if z <= depth[f, int(r), int(c)] else 0.0
 
 
+@numba.njit(cache=True)
+def visibility_at(
+    px, py, pz, nx, ny, nz, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel
+):  # pragma: no cover - compiled
+    """Shadow-map visibility of one world point (compiled; callable from other numba kernels).
+
+    ``(px, py, pz)``: world point; ``(nx, ny, nz)``: its normal (read only when
+    ``normal_offset`` ≠ 0); ``depth``: (F, H, W) maps; ``vp``: (F, 4, 4) world → clip;
+    ``view_z``: (F, 3) row 2 of each view matrix (towards-the-light test of the normal
+    offset); ``face_mode``: 1 for a cube (F = 6, face of the major axis of ``p − light_pos``),
+    else 0; ``kernel``: 0 nearest, 1 bilinear, k for a k×k box. Returns a float in [0, 1]:
+    the formulas of :func:`blinn_phong.shadows.shadow_visibility`.
+    """
+    res_y = float(depth.shape[1])
+    res_x = float(depth.shape[2])
+    f = 0
+    if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
+        rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
+        ax, best, val = 0, abs(rx), rx
+        if abs(ry) > best:
+            ax, best, val = 1, abs(ry), ry
+        if abs(rz) > best:
+            ax, best, val = 2, abs(rz), rz
+        if val == 0:
+            return 1.0
+        f = 2 * ax + (0 if val > 0 else 1)
+    if normal_offset != 0.0:
+        length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+        nx, ny, nz = nx / length, ny / length, nz / length
+        if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
+            nx, ny, nz = -nx, -ny, -nz
+        px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
+    m = vp[f]
+    cx = ((m[0, 0] * px + m[0, 1] * py) + m[0, 2] * pz) + m[0, 3]
+    cy = ((m[1, 0] * px + m[1, 1] * py) + m[1, 2] * pz) + m[1, 3]
+    cz = ((m[2, 0] * px + m[2, 1] * py) + m[2, 2] * pz) + m[2, 3]
+    cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
+    if not cw > 0:
+        return 1.0
+    nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
+    z = (nzd + 1) * 0.5
+    if nxd < -1 or nxd > 1 or nyd < -1 or nyd > 1 or z > 1:
+        return 1.0
+    x = (nxd + 1) * 0.5 * res_x
+    y = res_y - (nyd + 1) * 0.5 * res_y
+    if kernel == 0:
+        return _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
+    if kernel == 1:
+        fx, fy = x - 0.5, y - 0.5
+        x0, y0 = math.floor(fx), math.floor(fy)
+        tx, ty = fx - x0, fy - y0
+        l00 = _lit(depth, f, x0, y0, z, res_x, res_y)
+        l10 = _lit(depth, f, x0 + 1, y0, z, res_x, res_y)
+        l01 = _lit(depth, f, x0, y0 + 1, z, res_x, res_y)
+        l11 = _lit(depth, f, x0 + 1, y0 + 1, z, res_x, res_y)
+        top = l00 + tx * (l10 - l00)
+        bottom = l01 + tx * (l11 - l01)
+        return top + ty * (bottom - top)
+    h = (kernel - 1) // 2
+    col, row = math.floor(x), math.floor(y)
+    total = 0.0
+    for oy in range(-h, h + 1):
+        for ox in range(-h, h + 1):
+            total += _lit(depth, f, col + ox, row + oy, z, res_x, res_y)
+    return total / (kernel * kernel)
+
+
 @numba.njit(parallel=True, cache=True)
 def _lookup(
     points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
 ):  # pragma: no cover
-    res_y = float(depth.shape[1])
-    res_x = float(depth.shape[2])
+    with_normals = normal_offset != 0.0
     for i in numba.prange(points.shape[0]):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        f = 0
-        if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
-            rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
-            ax, best, val = 0, abs(rx), rx
-            if abs(ry) > best:
-                ax, best, val = 1, abs(ry), ry
-            if abs(rz) > best:
-                ax, best, val = 2, abs(rz), rz
-            if val == 0:
-                out[i] = 1.0
-                continue
-            f = 2 * ax + (0 if val > 0 else 1)
-        if normal_offset != 0.0:
-            nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-            length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
-            nx, ny, nz = nx / length, ny / length, nz / length
-            if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
-                nx, ny, nz = -nx, -ny, -nz
-            px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
-        m = vp[f]
-        cx = ((m[0, 0] * px + m[0, 1] * py) + m[0, 2] * pz) + m[0, 3]
-        cy = ((m[1, 0] * px + m[1, 1] * py) + m[1, 2] * pz) + m[1, 3]
-        cz = ((m[2, 0] * px + m[2, 1] * py) + m[2, 2] * pz) + m[2, 3]
-        cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
-        if not cw > 0:
-            out[i] = 1.0
-            continue
-        nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
-        z = (nzd + 1) * 0.5
-        if nxd < -1 or nxd > 1 or nyd < -1 or nyd > 1 or z > 1:
-            out[i] = 1.0
-            continue
-        x = (nxd + 1) * 0.5 * res_x
-        y = res_y - (nyd + 1) * 0.5 * res_y
-        if kernel == 0:
-            out[i] = _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
-        elif kernel == 1:
-            fx, fy = x - 0.5, y - 0.5
-            x0, y0 = math.floor(fx), math.floor(fy)
-            tx, ty = fx - x0, fy - y0
-            l00 = _lit(depth, f, x0, y0, z, res_x, res_y)
-            l10 = _lit(depth, f, x0 + 1, y0, z, res_x, res_y)
-            l01 = _lit(depth, f, x0, y0 + 1, z, res_x, res_y)
-            l11 = _lit(depth, f, x0 + 1, y0 + 1, z, res_x, res_y)
-            top = l00 + tx * (l10 - l00)
-            bottom = l01 + tx * (l11 - l01)
-            out[i] = top + ty * (bottom - top)
-        else:
-            h = (kernel - 1) // 2
-            col, row = math.floor(x), math.floor(y)
-            total = 0.0
-            for oy in range(-h, h + 1):
-                for ox in range(-h, h + 1):
-                    total += _lit(depth, f, col + ox, row + oy, z, res_x, res_y)
-            out[i] = total / (kernel * kernel)
+        nx = normals[i, 0] if with_normals else 0.0
+        ny = normals[i, 1] if with_normals else 0.0
+        nz = normals[i, 2] if with_normals else 0.0
+        out[i] = visibility_at(
+            points[i, 0], points[i, 1], points[i, 2], nx, ny, nz,
+            depth, vp, view_z, face_mode, light_pos, normal_offset, kernel,
+        )  # fmt: skip
 
 
 def lookup_compiled(
