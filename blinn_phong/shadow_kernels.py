@@ -85,7 +85,7 @@ def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma
     x1 = min(np.floor(max(x_0, x_1, x_2) - 0.5), res - 1.0)
     y0 = max(np.ceil(min(y_0, y_1, y_2) - 0.5), 0.0)
     y1 = min(np.floor(max(y_0, y_1, y_2) - 0.5), res - 1.0)
-    if x0 > x1 or y0 > y1:
+    if not (x0 <= x1 and y0 <= y1):  # NaN-safe: no box, no integer cast
         return False
     box[s, 0] = int(x0)
     box[s, 1] = int(x1)
@@ -387,7 +387,7 @@ def visibility_at(
         return 1.0
     nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
     z = (nzd + 1) * 0.5
-    if nxd < -1 or nxd > 1 or nyd < -1 or nyd > 1 or z > 1:
+    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
         return 1.0
     x = (nxd + 1) * 0.5 * res_x
     y = res_y - (nyd + 1) * 0.5 * res_y
