@@ -41,6 +41,7 @@ import numba
 import numpy as np
 
 __all__ = [
+    "area_light_rays",
     "corner_bounds",
     "cube_maps_compiled",
     "depth_map_compiled",
@@ -535,3 +536,22 @@ def corner_bounds(world_triangles):  # pragma: no cover - compiled
                 if v > hi[ch]:
                     hi[ch] = v
     return lo, hi
+
+
+@numba.njit(parallel=True, cache=True)
+def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  # pragma: no cover - compiled
+    """Shadow rays towards one jittered sample ``corner + s·edge_u + t·edge_v`` per point (compiled).
+
+    ``origins``: (n, 3) float64 offset ray origins (world); ``s``, ``t``: (n,) sample
+    coordinates in [0, 1]; ``offset``: (n,) gap left before the light. Writes ``d32`` (n, 3)
+    unit directions and ``t32`` (n,) ``max(distance − offset, 0)``, as
+    :func:`blinn_phong.raytrace.area_light_visibility` computes them with numpy.
+    """
+    for i in numba.prange(origins.shape[0]):
+        dx = (corner[0] + s[i] * edge_u[0] + t[i] * edge_v[0]) - origins[i, 0]
+        dy = (corner[1] + s[i] * edge_u[1] + t[i] * edge_v[1]) - origins[i, 1]
+        dz = (corner[2] + s[i] * edge_u[2] + t[i] * edge_v[2]) - origins[i, 2]
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        scale = 1.0 / dist if dist > 0 else 1.0
+        d32[i, 0], d32[i, 1], d32[i, 2] = dx * scale, dy * scale, dz * scale
+        t32[i] = max(dist - offset[i], 0.0)
