@@ -48,6 +48,7 @@ __all__ = [
     "ENGINES",
     "PCF_KERNELS",
     "SHADOW_METHODS",
+    "ShadowLookup",
     "ShadowMap",
     "light_cameras",
     "light_shadow_maps",
@@ -55,6 +56,7 @@ __all__ = [
     "planar_shadow_mask",
     "planar_shadow_matrix",
     "render_shadow_map",
+    "shadow_lookup",
     "shadow_map_visibility",
     "shadow_visibility",
 ]
@@ -493,6 +495,80 @@ def shadow_map_visibility(
                 maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel, engine="numpy"
             )
     return vis
+
+
+@dataclass(frozen=True, eq=False)
+class ShadowLookup:
+    """The arrays :func:`blinn_phong.shadow_kernels.visibility_at` reads, for one light's maps.
+
+    A compiled shading kernel looks shadows up per fragment with
+    ``visibility_at(px, py, pz, nx, ny, nz, *lookup.arguments())`` (world point, normal),
+    getting exactly :func:`shadow_map_visibility`'s value.
+
+    ``depth``: (F, R, R) maps; ``view_projection``: (F, 4, 4); ``view_z``: (F, 3) row 2 of
+    each view matrix; ``face_mode``: 1 for a cube (F = 6) else 0; ``light_position``: (3,);
+    ``normal_offset``: world units; ``kernel``: 0 nearest, 1 bilinear, k for a k×k box.
+    """
+
+    depth: np.ndarray
+    view_projection: np.ndarray
+    view_z: np.ndarray
+    face_mode: int
+    light_position: np.ndarray
+    normal_offset: float
+    kernel: int
+
+    def arguments(self) -> tuple[object, ...]:
+        """The trailing arguments of ``visibility_at``, in order."""
+        return (
+            self.depth, self.view_projection, self.view_z, self.face_mode, self.light_position,
+            self.normal_offset, self.kernel,
+        )  # fmt: skip
+
+
+def shadow_lookup(
+    light: DirectionalLight | PointLight | SpotLight,
+    maps: list[ShadowMap],
+    *,
+    normal_offset: float = 0.0,
+    kernel: str = "nearest",
+) -> ShadowLookup:
+    """Pack one light's maps (:func:`light_shadow_maps`) for look-ups inside a compiled kernel.
+
+    Args:
+        light: the light the maps were made for.
+        maps: its one map, or six cube faces.
+        normal_offset: see :func:`shadow_visibility`.
+        kernel: one of :data:`PCF_KERNELS`.
+
+    Returns:
+        :class:`ShadowLookup` (contiguous float64 arrays; the cube's faces without a copy when
+        :func:`light_shadow_maps` rendered them into one block).
+    """
+    if kernel not in PCF_KERNELS:
+        raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    if len(maps) not in (1, 6) or (len(maps) == 6 and isinstance(light, DirectionalLight)):
+        raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
+    from .shadow_kernels import KERNEL_CODES
+
+    base = maps[0].depth.base
+    same_block = (
+        len(maps) == 6
+        and isinstance(base, np.ndarray)
+        and base.shape == (6, *maps[0].depth.shape)
+        and all(m.depth.base is base and np.shares_memory(m.depth, base[f]) for f, m in enumerate(maps))
+    )
+    depth = base if same_block else np.stack([m.depth for m in maps])
+    position = getattr(light, "position", (0.0, 0.0, 0.0)) if len(maps) == 6 else (0.0, 0.0, 0.0)
+    return ShadowLookup(
+        np.ascontiguousarray(depth, dtype=np.float64),
+        np.ascontiguousarray(np.stack([m.projection @ m.view for m in maps])),
+        np.ascontiguousarray(np.stack([m.view[2, :3] for m in maps])),
+        1 if len(maps) == 6 else 0,
+        np.asarray(position, dtype=np.float64),
+        float(normal_offset),
+        KERNEL_CODES[kernel],
+    )
 
 
 def planar_shadow_matrix(

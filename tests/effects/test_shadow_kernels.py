@@ -170,3 +170,45 @@ def test_area_light_engines_agree():
     # float64 set-up rounded once to float32: at most a stray ray differs (1/9 of a point)
     assert np.abs(a - b).max() <= 1 / 9 + 1e-12
     assert np.mean(a != b) <= 1e-3
+
+
+@pytest.mark.parametrize("kind", ["directional", "point"])
+def test_visibility_at_inside_another_compiled_kernel(kind):
+    """A shading kernel can look shadows up per fragment: ``visibility_at`` with ``shadow_lookup``."""
+    import numba
+
+    from blinn_phong.shadow_kernels import visibility_at
+    from blinn_phong.shadows import shadow_lookup
+
+    @numba.njit
+    def shade(points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel):
+        out = np.empty(points.shape[0])
+        for i in range(points.shape[0]):
+            p, n = points[i], normals[i]
+            out[i] = visibility_at(
+                p[0],
+                p[1],
+                p[2],
+                n[0],
+                n[1],
+                n[2],
+                depth,
+                vp,
+                view_z,
+                face_mode,
+                light_pos,
+                normal_offset,
+                kernel,
+            )
+        return out
+
+    light = LIGHTS[kind]
+    points, normals = surface_samples(SCENE, 3000)
+    maps = light_shadow_maps(light, SCENE, 128, constant_bias=1e-4, slope_bias=3.0)
+    lookup = shadow_lookup(light, maps, normal_offset=0.02, kernel="bilinear")
+    got = shade(points, normals, *lookup.arguments())
+    ref = shadow_map_visibility(
+        light, maps, points, normals, normal_offset=0.02, kernel="bilinear", engine="numpy"
+    )
+    assert 0.02 < 1 - ref.mean() < 0.98
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
