@@ -108,8 +108,12 @@ def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma
 
 @numba.njit(cache=True)  # serial: ~100 ns a triangle, less than a parallel launch on a busy machine
 def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
+    # slots are filled in order (k counts them), so only the rows of drawn triangles are touched
     n = world.shape[0]
-    clip = np.empty((n, 3, 4))
+    c = np.empty((3, 4))
+    cv = np.empty((3, 4))
+    w = np.zeros((5, 3))
+    k = 0
     sx = np.empty((2 * n, 3))
     sy = np.empty((2 * n, 3))
     sz = np.empty((2 * n, 3))
@@ -123,7 +127,6 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
     valid = np.zeros(2 * n, np.bool_)
     bias = np.empty(2 * n)
     for t in range(n):
-        c = clip[t]
         for j in range(3):
             x, y, z = world[t, j, 0], world[t, j, 1], world[t, j, 2]
             for ch in range(4):
@@ -155,8 +158,6 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
             if det != 0:
                 slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
         b = slope_bias * slope
-        bias[2 * t] = b
-        bias[2 * t + 1] = b
         # near clipping, as raster._clip_near
         d0 = c[0, 2] + c[0, 3]
         d1 = c[1, 2] + c[1, 3]
@@ -164,7 +165,10 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
         inside0, inside1, inside2 = d0 >= 0, d1 >= 0, d2 >= 0
         n_in = int(inside0) + int(inside1) + int(inside2)
         if n_in == 3:
-            valid[2 * t] = _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, 2 * t)
+            if _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
+                bias[k] = b
+                valid[k] = True
+                k += 1
         elif n_in > 0:
             lone_inside = n_in == 1
             ins = (inside0, inside1, inside2)
@@ -178,7 +182,7 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
             t_ab = dd[ia] / (dd[ia] - dd[ib])
             t_ac = dd[ia] / (dd[ia] - dd[ic])
             # weights of the sub-triangles' corners on the source corners (rows), as _clip_near
-            w = np.zeros((5, 3))  # a, b, c, ab, ac
+            w[:] = 0.0  # rows: a, b, c, ab, ac
             w[0, ia] = 1.0
             w[1, ib] = 1.0
             w[2, ic] = 1.0
@@ -191,13 +195,15 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
             else:
                 corners = ((3, 1, 2), (3, 2, 4))
                 count = 2
-            cv = np.empty((3, 4))
             for q in range(count):
                 for j in range(3):
                     r = corners[q][j]
                     for ch in range(4):
                         cv[j, ch] = w[r, 0] * c[0, ch] + w[r, 1] * c[1, ch] + w[r, 2] * c[2, ch]
-                valid[2 * t + q] = _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, 2 * t + q)
+                if _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
+                    bias[k] = b
+                    valid[k] = True
+                    k += 1
     return valid, bias, sx, sy, sz, ea, eb, ec, etl, box
 
 
