@@ -28,6 +28,12 @@ the homogeneous light ``l`` (w = 0 directional, w = 1 positional). Cheap, exact 
 one plane, and only there: no shadows on other receivers, and casters on the far side of
 the plane or behind the light still cast.
 
+Engines: every shadow-map function takes ``engine``: ``numpy`` runs the code in this module
+(the readable reference), ``numba`` the compiled twins of :mod:`blinn_phong.shadow_kernels`
+(same formulas; depths within 1e-12, visibilities within 1e-9), ``auto`` (the default) the
+compiled ones when numba imports. :func:`light_visibility` also accepts per-triangle RGB
+transmittances, for coloured shadows of transparent casters (ray traced).
+
 Image conventions: shadow maps are (height, width) arrays of window depth in [0, 1],
 row 0 at the top (as :func:`~blinn_phong.raster.rasterize` returns them), 1 where no
 caster was drawn.
