@@ -346,14 +346,14 @@ def depth_map_compiled(
     return depth
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
     c = min(max(col, 0.0), res_x - 1.0)
     r = min(max(row, 0.0), res_y - 1.0)
     return 1.0 if z <= depth[f, int(r), int(c)] else 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")  # inlined: a call per point costs more than its body
 def visibility_at(
     px, py, pz, nx, ny, nz, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel
 ):  # pragma: no cover - compiled
