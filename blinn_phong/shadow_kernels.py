@@ -58,7 +58,7 @@ def _threads() -> int:
     return max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma: no cover - compiled
     # cv: (3, 4) clip vertices of one (sub-)triangle; fills slot s; False when it draws nothing.
     for j in range(3):
