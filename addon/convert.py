@@ -39,11 +39,13 @@ from blinn_phong.scene import (
 )
 
 from . import compat, mapping
+from .options import RenderOptions
 
 __all__ = [
     "ConvertedScene",
     "RenderOptions",
     "camera_from_object",
+    "clamp_to_socket_range",
     "derived_light_values",
     "light_from_object",
     "light_radius",
@@ -53,25 +55,6 @@ __all__ = [
     "scene_from_depsgraph",
     "world_ambient",
 ]
-
-
-@dataclass(frozen=True)
-class RenderOptions:
-    """Render settings read from ``Scene.blinn_phong`` (see ``addon/properties.py``)."""
-
-    shading: str = "phong"
-    samples: int = 4
-    tolerance: float = 0.0
-    transparency: str = "AUTO"
-    peel_layers: int = 8
-    shadows: str = "AUTO"
-    shadow_samples: int = 16
-    shadow_bias: float = 1e-3
-    fog: str = "NONE"
-    fog_color: tuple[float, float, float] = (0.5, 0.5, 0.5)
-    fog_density: float = 0.1
-    fog_start: float = 1.0
-    fog_end: float = 50.0
 
 
 @dataclass
@@ -90,6 +73,8 @@ class ConvertedScene:
             shading override, already applied to ``Mesh.shading``).
         light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
             for soft shadows.
+        casts_shadows: per entry of ``scene.lights``, Blender's Light › Cast Shadow
+            (``Light.use_shadow``).
         background: the world colour the frame is composited over (``src_over``) when
             *Film → Transparent* is off, as Blender's own engines show the world behind the
             objects; None when it is on (coverage alpha is kept).
@@ -106,6 +91,7 @@ class ConvertedScene:
     notes: list[str] = field(default_factory=list)
     light_radii: list[float] = field(default_factory=list)
     background: tuple[float, float, float] | None = None
+    casts_shadows: list[bool] = field(default_factory=list)
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -201,8 +187,34 @@ def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, ob
         if socket.is_linked:
             notes.append(f"{material.name}: '{name}' is linked; its unlinked value is used")
         value = socket.default_value
-        values[key] = tuple(value[:3]) if key.endswith("color") else float(value)
+        if key.endswith("color"):
+            values[key] = tuple(float(v) for v in value[:3])
+        else:
+            values[key] = clamp_to_socket_range(socket, float(value), material.name, notes)
     return values, notes
+
+
+def clamp_to_socket_range(
+    socket: bpy.types.NodeSocket, value: float, material: str, notes: list[str]
+) -> float:
+    """``value`` limited to the range the socket declares (``hard_min``/``hard_max`` of its
+    ``default_value``), with a note naming the material when it was outside.
+
+    Blender stores values outside a socket's declared range when they are set from Python
+    (Roughness 1.2, Alpha 1.5); its sockets' declared ranges are the inputs the Principled BSDF is
+    defined for, so such values are rendered as the nearest end of the range, and said so.
+    IOR declares no range (any float): it is checked by ``mapping.blinn_phong_from_principled``.
+    """
+    prop = socket.bl_rna.properties["default_value"]
+    low, high = float(getattr(prop, "hard_min", -math.inf)), float(getattr(prop, "hard_max", math.inf))
+    if math.isfinite(value) and not low <= value <= high:
+        clamped = min(max(value, low), high)
+        notes.append(
+            f"{material}: '{socket.name}' {value:g} is outside Blender's range [{low:g}, {high:g}]; "
+            f"rendered as {clamped:g}"
+        )
+        return clamped
+    return value
 
 
 def material_from_blender(
@@ -384,23 +396,7 @@ def camera_from_object(camera_object: bpy.types.Object, render: bpy.types.Render
 
 def render_options(settings: object | None) -> RenderOptions:
     """Render options from ``Scene.blinn_phong`` (defaults when the property group is missing)."""
-    if settings is None:
-        return RenderOptions()
-    return RenderOptions(
-        shading=settings.shading.lower(),
-        samples=settings.samples_per_axis**2,
-        tolerance=float(settings.tolerance),
-        transparency=settings.transparency,
-        peel_layers=settings.peel_layers,
-        shadows=settings.shadows,
-        shadow_samples=settings.shadow_samples,
-        shadow_bias=settings.shadow_bias,
-        fog=settings.fog,
-        fog_color=tuple(settings.fog_color),
-        fog_density=settings.fog_density,
-        fog_start=settings.fog_start,
-        fog_end=settings.fog_end,
-    )
+    return RenderOptions.from_settings(settings)
 
 
 def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
@@ -437,6 +433,9 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     notes: list[str] = []
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
     light_radii: list[float] = []
+    casts_shadows: list[bool] = []
+    no_shadow_objects: list[str] = []
+    shadow_objects = 0
     geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
 
     for instance in depsgraph.object_instances:
@@ -445,6 +444,8 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
             light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
+            # Light > Cast Shadow off, or Object > Visibility > Ray Visibility > Shadow off on the lamp
+            casts_shadows.append(bool(getattr(obj.data, "use_shadow", True)))
             continue
         if obj.type not in ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"):
             continue
@@ -478,34 +479,61 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
             # A mirroring transform (negative scale) turns counter-clockwise faces clockwise on
             # screen; Blender keeps them front-facing, so the winding is reversed here.
             triangles = triangles[:, ::-1]
+        object_meshes: list[tuple[Mesh, str, dict[str, object]]] = []
+        failed = None
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
-            material, extra, material_notes = material_from_blender(blender_material)
+            material_name = blender_material.name if blender_material else "(none)"
+            try:
+                material, extra, material_notes = material_from_blender(blender_material)
+            except (ValueError, TypeError) as error:
+                failed = (
+                    f"object '{obj.name}', material '{material_name}': {error}; the object is not rendered"
+                )
+                break
             notes.extend(n for n in material_notes if n not in notes)
             used = triangles[material_index == slot_index]
-            meshes.append(
-                Mesh(
-                    positions=positions,
-                    triangles=used,
-                    normals=normals,
-                    transform=matrix,
-                    material=material,
-                    shading=extra.pop("shading"),
-                )
+            mesh = Mesh(
+                positions=positions,
+                triangles=used,
+                normals=normals,
+                transform=matrix,
+                material=material,
+                shading=extra.pop("shading"),
             )
-            names.append(f"{obj.name}/{blender_material.name if blender_material else '(none)'}")
+            object_meshes.append((mesh, f"{obj.name}/{material_name}", extra))
+        if failed is not None:
+            notes.append(failed)
+            continue
+        if getattr(obj, "visible_shadow", True):
+            shadow_objects += 1
+        else:
+            no_shadow_objects.append(obj.name)
+        for mesh, name, extra in object_meshes:
+            meshes.append(mesh)
+            names.append(name)
             extras.append(extra)
 
+    if no_shadow_objects and shadow_objects == 0:
+        # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow.
+        casts_shadows = [False] * len(casts_shadows)
+    elif no_shadow_objects:
+        notes.append(
+            "Ray Visibility > Shadow is off on "
+            + ", ".join(f"'{n}'" for n in no_shadow_objects)
+            + " but on for other objects: this engine cannot exclude single objects from shadow casting, "
+            "so they still cast shadows"
+        )
     ambient = world_ambient(bl_scene.world)
     light_model = LightModel(
-        specular="phong" if settings is not None and settings.specular_model == "PHONG" else "blinn",
+        specular="phong" if options.specular_model == "PHONG" else "blinn",
         local_viewer=camera.kind == "perspective",
-        two_sided=bool(settings.two_sided) if settings is not None else True,
+        two_sided=options.two_sided,
     )
     scene = Scene(
         meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
     )
     background = None if render.film_transparent else ambient
     return ConvertedScene(
-        scene, width, height, region, options, names, extras, notes, light_radii, background
+        scene, width, height, region, options, names, extras, notes, light_radii, background, casts_shadows
     )

@@ -62,8 +62,9 @@ LIGHT_PASSES: tuple[tuple[str, str], ...] = (
 
 LAST_RENDER: dict[str, Any] = {}
 """Status of the most recent render in this process: ``ok``, ``error``, ``seconds``, ``notes``,
-``choices`` (what was rendered how, and why), ``size``. Read by the Render panel and the batch
-runner."""
+``choices`` (what was rendered how, and why: including ``engine``, the kernels that ran, and
+``embree``), ``stats`` (seconds per stage, ``compile`` apart), ``status`` (the status line), ``size``.
+Read by the Render panel and the batch runner."""
 
 
 class RenderCancelled(Exception):
@@ -93,32 +94,24 @@ def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
 
 
 def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> pipeline.FrameResult:
-    """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``)."""
-    o = converted.options
-    options = pipeline.EffectOptions(
-        transparency=o.transparency,
-        peel_layers=o.peel_layers,
-        shadows=o.shadows,
-        shadow_samples=o.shadow_samples,
-        shadow_bias=o.shadow_bias,
-        light_radii=tuple(converted.light_radii),
-        fog=o.fog,
-        fog_color=o.fog_color,
-        fog_density=o.fog_density,
-        fog_start=o.fog_start,
-        fog_end=o.fog_end,
-        tolerance=o.tolerance,
-    )
+    """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``).
+
+    The compiled kernels are loaded (compiled, or read from numba's cache) before the frame and
+    that time is reported separately as ``result.seconds["compile"]``.
+    """
     width, height = converted.region_size
+    compile_seconds = pipeline.warm_kernels(converted.options.engine)
     result = pipeline.render_frame(
         converted.scene,
         width,
         height,
-        shading=o.shading,
-        samples=o.samples,
-        options=options,
+        converted.options,
+        light_radii=tuple(converted.light_radii),
+        casts_shadows=tuple(converted.casts_shadows),
         progress=progress,
     )
+    if compile_seconds:
+        result.seconds["compile"] = compile_seconds
     result.choices["region"] = list(converted.region)
     if converted.background is not None:
         # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
@@ -186,19 +179,23 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         except Exception as error:
             self._fail(scene, full_w, full_h, error, started, layer)
             return
+        notes = [*result.choices.get("warnings", []), *converted.notes]
         LAST_RENDER.update(
             {
                 "ok": True,
                 "seconds": time.perf_counter() - started,
                 "choices": result.choices,
-                "notes": converted.notes,
+                "notes": notes,
                 "size": [full_w, full_h],
                 "stats": result.seconds,
                 "triangles": result.triangles,
             }
         )
-        self.update_stats("", f"Blinn-Phong: done in {LAST_RENDER['seconds']:.2f} s")
-        for note in converted.notes:
+        LAST_RENDER["status"] = pipeline.status_line(result.choices, LAST_RENDER["seconds"], result.seconds)
+        self.update_stats("", LAST_RENDER["status"])
+        for warning in result.choices.get("warnings", []):
+            print(f"Blinn-Phong: warning: {warning}", file=sys.stderr, flush=True)
+        for note in notes:
             self.report({"WARNING"}, note)
 
     # ----------------------------------------------------------------- result

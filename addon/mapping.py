@@ -405,7 +405,9 @@ def blinn_phong_from_principled(
     * ``diffuse = ambient = base_color · (1 − metallic)`` (metals have no diffuse lobe);
     * ``F0 = mix(2 · specular_ior_level · ((ior − 1)/(ior + 1))², base_color, metallic)``: the Fresnel
       reflectance at normal incidence, where Specular IOR Level 0.5 leaves the IOR's value unchanged
-      (Blender manual, Principled BSDF);
+      (Blender manual, Principled BSDF). ``ior`` is the relative index (inside / outside) and may be
+      below 1 (an air bubble in water, 1/1.33 ≈ 0.75): normal-incidence reflectance is symmetric,
+      ``F0(n) = F0(1/n)`` (Fresnel equations at θ = 0), so any ``ior > 0`` is accepted;
     * ``shininess`` = :func:`roughness_to_shininess`;
     * ``specular = F0 · (s + 8) / 8``: the energy-normalised Blinn-Phong lobe ``(s + 8)/(8π) · (n·h)^s``
       (Akenine-Möller et al., Real-Time Rendering 3rd ed., eq. 7.49) with the π absorbed by the light
@@ -422,7 +424,7 @@ def blinn_phong_from_principled(
         if arr.shape != (3,) or not np.isfinite(arr).all() or (arr < 0).any():
             raise ValueError(f"{name}: expected 3 finite non-negative linear RGB values, got {arr.tolist()}")
     m = _finite(metallic, "metallic", low=0.0, high=1.0)
-    n = _finite(ior, "ior", low=1.0)
+    n = _finite(ior, "ior", low=0.0, low_open=True)
     level = _finite(specular_ior_level, "specular_ior_level", low=0.0)
     strength = _finite(emission_strength, "emission_strength", low=0.0)
     a = _finite(alpha, "alpha", low=0.0, high=1.0)
