@@ -190,3 +190,29 @@ emit(results)
     assert got["panels"]["BLINN_PHONG_PT_render_film"] == ["film_transparent"]
     assert "abort_on_error" not in got["panels"]["BLINN_PHONG_PT_render"]
     assert "abort_on_error" in got["panels"]["BLINN_PHONG_PT_render_pipeline"]
+
+
+def test_a_broken_numba_falls_back_to_numpy_with_a_visible_warning(tmp_path: Path) -> None:
+    # numba present but failing to import (a wheel for another numpy, a missing shared library):
+    # the frame still renders, with the numpy kernels, and says so in the report and the status line.
+    got = run_bpy(
+        "import sys\nsys.modules['numba'] = None  # 'import numba' now raises ImportError\n"
+        + SCENE
+        + """
+results = {"broken": render("broken")}
+scene.blinn_phong.engine = "NUMPY"
+results["numpy"] = render("numpy")
+engine.unregister()
+emit(results)
+""",
+        tmp_path,
+        args=(str(tmp_path),),
+    )
+    broken = got["broken"]
+    assert broken["ok"], broken
+    assert any("compiled kernels unavailable" in note and "numpy" in note for note in broken["notes"])
+    assert "| numpy, " in broken["status"] and "WARNING" in broken["status"]
+    # Asking for numpy explicitly is not a fallback: no warning.
+    assert not any("compiled kernels" in note for note in got["numpy"]["notes"])
+    assert "WARNING" not in got["numpy"]["status"]
+    np.testing.assert_allclose(_read(tmp_path / "broken.exr"), _read(tmp_path / "numpy.exr"), atol=0)
