@@ -36,11 +36,14 @@ import numpy as np
 
 from compositing import composite
 
-from . import convert, mapping, pipeline
+from . import convert, mapping, options, pipeline
 
 __all__ = [
     "ENGINE_ID",
+    "LAST_PREVIEW",
     "LAST_RENDER",
+    "PREVIEW_OPTIONS",
+    "PREVIEW_TIMES",
     "BlinnPhongRenderEngine",
     "RenderCancelled",
     "classes",
@@ -65,6 +68,17 @@ LAST_RENDER: dict[str, Any] = {}
 ``choices`` (what was rendered how, and why: including ``engine``, the kernels that ran, and
 ``embree``), ``stats`` (seconds per stage, ``compile`` apart), ``status`` (the status line), ``size``.
 Read by the Render panel and the batch runner."""
+
+
+PREVIEW_OPTIONS = options.RenderOptions(samples_per_axis=2, shadows="NONE", transparency="AUTO")
+"""Settings of material/world previews: 2×2 anti-aliasing, no shadows (the preview's floor and
+backdrop would only add shadow cost to a thumbnail), the planner's transparency."""
+
+LAST_PREVIEW: dict[str, Any] = {}
+"""Status of the most recent preview render: ``ok``, ``error``, ``seconds``, ``size``, ``stats``."""
+
+PREVIEW_TIMES: list[tuple[int, int, float]] = []
+"""``(width, height, seconds)`` of the latest preview renders in this process (at most 64)."""
 
 
 class RenderCancelled(Exception):
@@ -126,10 +140,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
 
     bl_idname = ENGINE_ID
     bl_label = "Blinn-Phong"
-    bl_use_preview = False
+    bl_use_preview = True  # material and world previews are rendered by this engine
     bl_use_postprocess = True
     bl_use_shading_nodes_custom = False
-    bl_use_eevee_viewport = True  # Material Preview in the 3D viewport uses EEVEE
+    bl_use_eevee_viewport = True  # the 3D viewport's Material Preview mode uses EEVEE
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         # Blender 4.4+ passes arguments to RenderEngine.__init__; 4.2 passes none. Forward both.
@@ -146,7 +160,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Shadow", 1, "X", "VALUE")
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
-        """Render one view layer of ``depsgraph`` into a render result."""
+        """Render one view layer of ``depsgraph`` into a render result (or a material preview)."""
+        if self.is_preview:
+            self._render_preview(depsgraph)
+            return
         scene = depsgraph.scene
         render_settings = scene.render
         full_w, full_h = mapping.render_size(
@@ -197,6 +214,42 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             print(f"Blinn-Phong: warning: {warning}", file=sys.stderr, flush=True)
         for note in notes:
             self.report({"WARNING"}, note)
+
+    def _render_preview(self, depsgraph: bpy.types.Depsgraph) -> None:
+        """A material/world preview (``bl_use_preview``): Blender's preview scene, rendered with
+        :data:`PREVIEW_OPTIONS`; recorded in :data:`LAST_PREVIEW`, never in :data:`LAST_RENDER`.
+
+        A failure fills the preview with the error pattern and is recorded; it never ends the
+        process (previews are not frames a render farm waits for).
+        """
+        started = time.perf_counter()
+        layer = depsgraph.view_layer.name
+        render_settings = depsgraph.scene.render
+        full_w, full_h = mapping.render_size(
+            render_settings.resolution_x, render_settings.resolution_y, render_settings.resolution_percentage
+        )
+        try:
+            converted = convert.scene_from_depsgraph(depsgraph)
+            converted.options = PREVIEW_OPTIONS
+            result = render_converted(converted)
+            self._write(converted, result, layer)
+        except Exception as error:
+            LAST_PREVIEW.update({"ok": False, "error": f"{type(error).__name__}: {error}"})
+            self._write_error_pattern(full_w, full_h, layer)
+            return
+        LAST_PREVIEW.clear()
+        LAST_PREVIEW.update(
+            {
+                "ok": True,
+                "size": [full_w, full_h],
+                "seconds": time.perf_counter() - started,
+                "stats": result.seconds,
+                "choices": result.choices,
+                "triangles": result.triangles,
+            }
+        )
+        PREVIEW_TIMES.append((full_w, full_h, LAST_PREVIEW["seconds"]))
+        del PREVIEW_TIMES[:-64]
 
     # ----------------------------------------------------------------- result
 
