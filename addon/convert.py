@@ -45,6 +45,7 @@ __all__ = [
     "ConvertedScene",
     "RenderOptions",
     "camera_from_object",
+    "camera_parameters",
     "clamp_to_socket_range",
     "derived_light_values",
     "light_from_object",
@@ -53,6 +54,7 @@ __all__ = [
     "mesh_arrays",
     "principled_inputs",
     "scene_from_depsgraph",
+    "viewport_camera",
     "world_ambient",
 ]
 
@@ -391,6 +393,47 @@ def camera_from_object(camera_object: bpy.types.Object, render: bpy.types.Render
     return Camera(view_matrix(np.array(camera_object.matrix_world)), projection, kind)
 
 
+def camera_parameters(camera_data: bpy.types.Camera) -> dict[str, object]:
+    """The keyword arguments of ``mapping.camera_projection`` that describe a Blender camera."""
+    if camera_data.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera.type: panoramic cameras are not supported, got {camera_data.type!r}")
+    return {
+        "kind": camera_data.type,
+        "lens_mm": camera_data.lens,
+        "sensor_width_mm": camera_data.sensor_width,
+        "sensor_height_mm": camera_data.sensor_height,
+        "sensor_fit": camera_data.sensor_fit,
+        "ortho_scale": camera_data.ortho_scale,
+        "shift_x": camera_data.shift_x,
+        "shift_y": camera_data.shift_y,
+        "clip_start": camera_data.clip_start,
+        "clip_end": camera_data.clip_end,
+    }
+
+
+def viewport_camera(
+    space: bpy.types.SpaceView3D, region: bpy.types.Region, region_data: bpy.types.RegionView3D
+) -> Camera:
+    """The camera of a 3D view (``context.space_data``, ``context.region``, ``context.region_data``):
+    its view matrix and ``mapping.viewport_projection`` (perspective, orthographic, camera view)."""
+    camera = None
+    if region_data.view_perspective == "CAMERA":
+        camera = camera_parameters(space.camera.data)
+    projection, kind = mapping.viewport_projection(
+        view_perspective=region_data.view_perspective,
+        region_width=int(region.width),
+        region_height=int(region.height),
+        lens_mm=space.lens,
+        clip_start=space.clip_start,
+        clip_end=space.clip_end,
+        view_distance=region_data.view_distance,
+        camera=camera,
+        camera_zoom=region_data.view_camera_zoom,
+        camera_offset=tuple(region_data.view_camera_offset),
+    )
+    return Camera(np.array(region_data.view_matrix, dtype=np.float64), projection, kind)
+
+
 # --------------------------------------------------------------------------- scene
 
 
@@ -399,33 +442,49 @@ def render_options(settings: object | None) -> RenderOptions:
     return RenderOptions.from_settings(settings)
 
 
-def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
+def scene_from_depsgraph(
+    depsgraph: bpy.types.Depsgraph, view: tuple[Camera, int, int] | None = None
+) -> ConvertedScene:
     """Convert the evaluated scene of ``depsgraph`` (meshes, lights, camera, world, settings).
 
+    Args:
+        depsgraph: the evaluated depsgraph (render or viewport).
+        view: for the 3D viewport, ``(camera, width, height)`` replacing the scene camera and the
+            render resolution (``viewport_camera``); the render border does not apply.
+
     Raises:
-        ValueError: the scene has no camera, or the camera is panoramic.
+        ValueError: the scene has no camera (and no ``view``), or the camera is panoramic.
     """
     bl_scene = depsgraph.scene
     render = bl_scene.render
-    if bl_scene.camera is None:
-        raise ValueError("scene.camera: the scene has no camera to render from")
     settings = getattr(bl_scene, "blinn_phong", None)
     options = render_options(settings)
-    camera_object = bl_scene.camera.evaluated_get(depsgraph)
-    camera = camera_from_object(camera_object, render)
-    width, height = mapping.render_size(
-        render.resolution_x, render.resolution_y, render.resolution_percentage
-    )
-    region = (0, 0, width, height)
-    if render.use_border:
-        region = mapping.border_rectangle(
-            render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y, width, height
+    if view is not None:
+        camera, width, height = view
+        region = (0, 0, width, height)
+    else:
+        if bl_scene.camera is None:
+            raise ValueError("scene.camera: the scene has no camera to render from")
+        camera_object = bl_scene.camera.evaluated_get(depsgraph)
+        camera = camera_from_object(camera_object, render)
+        width, height = mapping.render_size(
+            render.resolution_x, render.resolution_y, render.resolution_percentage
         )
-        if region[2] <= region[0] or region[3] <= region[1]:
-            raise ValueError(f"render border: the border covers no pixel ({region})")
-        camera = Camera(
-            camera.view, mapping.crop_projection(camera.projection, width, height, region), camera.kind
-        )
+        region = (0, 0, width, height)
+        if render.use_border:
+            region = mapping.border_rectangle(
+                render.border_min_x,
+                render.border_max_x,
+                render.border_min_y,
+                render.border_max_y,
+                width,
+                height,
+            )
+            if region[2] <= region[0] or region[3] <= region[1]:
+                raise ValueError(f"render border: the border covers no pixel ({region})")
+            camera = Camera(
+                camera.view, mapping.crop_projection(camera.projection, width, height, region), camera.kind
+            )
 
     meshes: list[Mesh] = []
     names: list[str] = []

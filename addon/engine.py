@@ -25,6 +25,7 @@ render farms and scripts see the failure.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -52,6 +53,7 @@ __all__ = [
     "render_converted",
     "unregister",
     "user_cancelled",
+    "viewport_frame",
 ]
 
 ENGINE_ID = "BLINN_PHONG"
@@ -133,6 +135,27 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
         result.rgba = composite(result.rgba, np.broadcast_to(world, result.rgba.shape), "src_over")
         result.choices["background"] = "world colour (Film → Transparent is off)"
     return result
+
+
+VIEWPORT_REDUCTION = 4
+"""The viewport's first frame after a change is rendered at 1/4 of the region per axis."""
+
+
+def viewport_frame(
+    depsgraph: bpy.types.Depsgraph, camera: Any, region_width: int, region_height: int, reduction: int = 1
+) -> tuple[np.ndarray, int, int]:
+    """The pixels handed to ``gpu`` for the 3D view: ``(flat float32 RGBA, width, height)``.
+
+    Renders the depsgraph's scene from ``camera`` (``convert.viewport_camera``) at
+    ``mapping.viewport_size(region, reduction)`` with the scene's settings (1 sample per pixel at
+    reduced resolution), premultiplied linear RGBA, bottom row first (OpenGL texture order).
+    """
+    width, height = mapping.viewport_size(int(region_width), int(region_height), reduction)
+    converted = convert.scene_from_depsgraph(depsgraph, view=(camera, width, height))
+    if reduction > 1:
+        converted.options = dataclasses.replace(converted.options, samples_per_axis=1)
+    result = render_converted(converted)
+    return np.ascontiguousarray(result.rgba[::-1], dtype=np.float32).ravel(), width, height
 
 
 class BlinnPhongRenderEngine(bpy.types.RenderEngine):
@@ -250,6 +273,49 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         )
         PREVIEW_TIMES.append((full_w, full_h, LAST_PREVIEW["seconds"]))
         del PREVIEW_TIMES[:-64]
+
+    # ----------------------------------------------------------------- viewport (Rendered shading)
+
+    def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """The scene changed (or the viewport opened): the next ``view_draw`` converts it again.
+
+        Every change reconverts the whole scene (``convert.scene_from_depsgraph``); per-object
+        incremental updates from ``depsgraph.updates`` are not implemented.
+        """
+        self._view_frames = {}
+        self._view_scene_dirty = True
+
+    def view_draw(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """Draw the viewport frame: first at 1/:data:`VIEWPORT_REDUCTION` of the region, then full.
+
+        The frame is rendered by :func:`viewport_frame` (testable without a display) and drawn through
+        Blender's ``gpu`` module with the display colour management (``bind_display_space_shader``),
+        as Blender's own engines do. The bpy module cannot draw (no GPU context in background mode).
+        """
+        import gpu
+        from gpu_extras.presets import draw_texture_2d
+
+        region = context.region
+        camera = convert.viewport_camera(context.space_data, region, context.region_data)
+        key = (camera.view.tobytes(), camera.projection.tobytes(), region.width, region.height)
+        frames = getattr(self, "_view_frames", {})
+        if getattr(self, "_view_key", None) != key or getattr(self, "_view_scene_dirty", True):
+            frames = {}  # the view or the scene changed: start again at reduced resolution
+        reduction = 1 if VIEWPORT_REDUCTION in frames else VIEWPORT_REDUCTION
+        if reduction not in frames:
+            frames[reduction] = viewport_frame(depsgraph, camera, region.width, region.height, reduction)
+        self._view_frames, self._view_key, self._view_scene_dirty = frames, key, False
+        pixels, width, height = frames[reduction]
+        texture = gpu.types.GPUTexture(
+            (width, height), format="RGBA16F", data=gpu.types.Buffer("FLOAT", pixels.size, pixels)
+        )
+        gpu.state.blend_set("ALPHA_PREMULT")
+        self.bind_display_space_shader(depsgraph.scene)
+        draw_texture_2d(texture, (0, 0), region.width, region.height)
+        self.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+        if reduction != 1:
+            self.tag_redraw()  # the full-resolution frame follows in the next draw
 
     # ----------------------------------------------------------------- result
 
