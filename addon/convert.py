@@ -443,7 +443,9 @@ def render_options(settings: object | None) -> RenderOptions:
 
 
 def scene_from_depsgraph(
-    depsgraph: bpy.types.Depsgraph, view: tuple[Camera, int, int] | None = None
+    depsgraph: bpy.types.Depsgraph,
+    view: tuple[Camera, int, int] | None = None,
+    geometry_cache: dict[str, tuple] | None = None,
 ) -> ConvertedScene:
     """Convert the evaluated scene of ``depsgraph`` (meshes, lights, camera, world, settings).
 
@@ -451,6 +453,9 @@ def scene_from_depsgraph(
         depsgraph: the evaluated depsgraph (render or viewport).
         view: for the 3D viewport, ``(camera, width, height)`` replacing the scene camera and the
             render resolution (``viewport_camera``); the render border does not apply.
+        geometry_cache: object name -> object-space triangle arrays, kept between calls by the
+            viewport (``engine.ViewportState``) so that only objects whose geometry changed are read
+            again; a fresh dict per call when None.
 
     Raises:
         ValueError: the scene has no camera (and no ``view``), or the camera is panoramic.
@@ -495,7 +500,8 @@ def scene_from_depsgraph(
     casts_shadows: list[bool] = []
     no_shadow_objects: list[str] = []
     shadow_objects = 0
-    geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
+    if geometry_cache is None:
+        geometry_cache = {}
 
     for instance in depsgraph.object_instances:
         obj = instance.object

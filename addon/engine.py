@@ -47,6 +47,7 @@ __all__ = [
     "PREVIEW_TIMES",
     "BlinnPhongRenderEngine",
     "RenderCancelled",
+    "ViewportState",
     "classes",
     "error_pattern",
     "register",
@@ -141,8 +142,47 @@ VIEWPORT_REDUCTION = 4
 """The viewport's first frame after a change is rendered at 1/4 of the region per axis."""
 
 
+class ViewportState:
+    """What the viewport keeps between redraws: object-space geometry per object name.
+
+    ``apply_updates(depsgraph.updates)`` (from ``view_update``) drops the geometry of the objects
+    whose geometry changed (``DepsgraphUpdate.is_updated_geometry``: edits, modifiers); a moved
+    object keeps its arrays (transforms are read on every conversion, as are materials, lights and
+    the world, which cost little).
+    """
+
+    def __init__(self) -> None:
+        self.geometry: dict[str, tuple] = {}
+
+    def apply_updates(self, updates: Any) -> list[str]:
+        """Forget the geometry of updated objects (and of every object using an updated mesh);
+        return the names forgotten."""
+        dropped: list[str] = []
+        for update in updates:
+            if not update.is_updated_geometry:
+                continue
+            changed = update.id
+            if isinstance(changed, bpy.types.Object):
+                names = [changed.name]
+            else:  # a Mesh, Curve, ... data-block: every cached object that uses it
+                names = [
+                    name
+                    for name in self.geometry
+                    if (obj := bpy.data.objects.get(name)) is not None and obj.data == changed.original
+                ]
+            for name in names:
+                if self.geometry.pop(name, None) is not None:
+                    dropped.append(name)
+        return dropped
+
+
 def viewport_frame(
-    depsgraph: bpy.types.Depsgraph, camera: Any, region_width: int, region_height: int, reduction: int = 1
+    depsgraph: bpy.types.Depsgraph,
+    camera: Any,
+    region_width: int,
+    region_height: int,
+    reduction: int = 1,
+    state: ViewportState | None = None,
 ) -> tuple[np.ndarray, int, int]:
     """The pixels handed to ``gpu`` for the 3D view: ``(flat float32 RGBA, width, height)``.
 
@@ -151,7 +191,8 @@ def viewport_frame(
     reduced resolution), premultiplied linear RGBA, bottom row first (OpenGL texture order).
     """
     width, height = mapping.viewport_size(int(region_width), int(region_height), reduction)
-    converted = convert.scene_from_depsgraph(depsgraph, view=(camera, width, height))
+    cache = state.geometry if state is not None else None
+    converted = convert.scene_from_depsgraph(depsgraph, view=(camera, width, height), geometry_cache=cache)
     if reduction > 1:
         converted.options = dataclasses.replace(converted.options, samples_per_axis=1)
     result = render_converted(converted)
@@ -277,11 +318,12 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
     # ----------------------------------------------------------------- viewport (Rendered shading)
 
     def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
-        """The scene changed (or the viewport opened): the next ``view_draw`` converts it again.
-
-        Every change reconverts the whole scene (``convert.scene_from_depsgraph``); per-object
-        incremental updates from ``depsgraph.updates`` are not implemented.
-        """
+        """The scene changed (or the viewport opened): the next ``view_draw`` renders it again,
+        reading again only the geometry of objects the depsgraph reports as changed
+        (:class:`ViewportState`)."""
+        if not hasattr(self, "_view_state"):
+            self._view_state = ViewportState()
+        self._view_state.apply_updates(depsgraph.updates)
         self._view_frames = {}
         self._view_scene_dirty = True
 
@@ -303,7 +345,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             frames = {}  # the view or the scene changed: start again at reduced resolution
         reduction = 1 if VIEWPORT_REDUCTION in frames else VIEWPORT_REDUCTION
         if reduction not in frames:
-            frames[reduction] = viewport_frame(depsgraph, camera, region.width, region.height, reduction)
+            state = getattr(self, "_view_state", None)
+            frames[reduction] = viewport_frame(
+                depsgraph, camera, region.width, region.height, reduction, state
+            )
         self._view_frames, self._view_key, self._view_scene_dirty = frames, key, False
         pixels, width, height = frames[reduction]
         texture = gpu.types.GPUTexture(

@@ -73,3 +73,72 @@ finally:
     np.testing.assert_allclose(viewport, read_image(tmp_path / "f12.exr"), atol=1e-6)
     reduced = np.load(tmp_path / "reduced.npy")
     assert reduced.shape == (16, 24, 4) and 0.05 < reduced[..., 3].mean() < 0.95  # the cube, smaller
+
+
+def test_viewport_reads_again_only_the_geometry_that_changed(tmp_path: Path) -> None:
+    # depsgraph.updates (seen by a depsgraph_update_post handler, as view_update sees them): moving
+    # the cube reads no geometry again, editing its mesh reads the cube only, never the plane; the
+    # frame after the move equals a conversion from scratch.
+    got = run_bpy(
+        """
+import math, sys, types
+import bpy
+import numpy as np
+from addon import convert, engine, properties
+properties.register()
+engine.register()
+try:
+    scene = bpy.context.scene
+    scene.render.engine = engine.ENGINE_ID
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+    bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0.0, 0.0, -1.0))
+    cube, cam = bpy.data.objects["Cube"], scene.camera
+    state = engine.ViewportState()
+    dropped = []
+    def handler(scene, depsgraph):
+        dropped.append(state.apply_updates(depsgraph.updates))
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    reads = []
+    original = convert.mesh_arrays
+    def counting(mesh):
+        reads.append(mesh.name)
+        return original(mesh)
+    convert.mesh_arrays = counting
+    space = types.SimpleNamespace(camera=cam, lens=50.0, clip_start=0.01, clip_end=1000.0)
+    region = types.SimpleNamespace(width=64, height=48)
+    rv3d = types.SimpleNamespace(view_perspective="CAMERA", view_matrix=cam.matrix_world.inverted(),
+        view_distance=10.0, view_camera_zoom=50.0 * (2.0 - math.sqrt(2.0)), view_camera_offset=(0.0, 0.0))
+    def frame(use_state=True):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        camera = convert.viewport_camera(space, region, rv3d)
+        return engine.viewport_frame(depsgraph, camera, 64, 48, 1, state if use_state else None)[0]
+    frame()
+    steps = {"first": list(reads)}
+    reads.clear(); dropped.clear()
+    cube.location.x += 0.5
+    bpy.context.view_layer.update()
+    moved = frame()
+    steps["move"] = (list(reads), [d for d in dropped if d])
+    reads.clear(); dropped.clear()
+    fresh = frame(use_state=False)
+    reads.clear(); dropped.clear()
+    cube.data.vertices[0].co.z += 0.5
+    cube.data.update()
+    bpy.context.view_layer.update()
+    frame()
+    steps["edit"] = (list(reads), [d for d in dropped if d])
+    bpy.app.handlers.depsgraph_update_post.remove(handler)
+    convert.mesh_arrays = original
+    emit({"steps": steps, "same": bool(np.array_equal(moved, fresh))})
+finally:
+    scene.render.engine = "CYCLES"
+    engine.unregister()
+    properties.unregister()
+""",
+        tmp_path,
+    )
+    steps = got["steps"]
+    assert sorted(steps["first"]) == ["Cube", "Plane"]
+    assert steps["move"] == [[], []]
+    assert steps["edit"][0] == ["Cube"] and ["Cube"] in steps["edit"][1]
+    assert got["same"]  # the cached arrays are object space: a moved object is drawn where it is now
