@@ -10,6 +10,9 @@ import pytest
 from addon import mapping
 from blinn_phong.scene import perspective_matrix
 
+# numpy 2 renamed trapz to trapezoid (numpy 1.26, for Blender 4.2–5.0, has only trapz).
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
     t = np.clip(x, 0.0, 1.0)
@@ -18,7 +21,7 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
 
 def _mean_over(t: np.ndarray, f: np.ndarray) -> float:
     """Mean of samples f(t) on a uniform grid t (trapezoid rule)."""
-    return float(np.trapz(f, t) / (t[-1] - t[0]))
+    return float(_trapezoid(f, t) / (t[-1] - t[0]))
 
 
 # --------------------------------------------------------------------------- sizes and border
@@ -139,7 +142,7 @@ def test_lambertian_emitter_intensity_integrates_to_its_power() -> None:
     power = 75.0
     i0 = mapping.area_light_intensity(power) * math.pi  # radiant intensity along the normal (W/sr)
     theta = np.linspace(0.0, math.pi / 2, 20001)
-    flux = np.trapz(i0 * np.cos(theta) * np.sin(theta), theta) * 2 * math.pi
+    flux = _trapezoid(i0 * np.cos(theta) * np.sin(theta), theta) * 2 * math.pi
     assert flux == pytest.approx(power, rel=1e-6)
 
 
