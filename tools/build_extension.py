@@ -72,9 +72,10 @@ PLATFORMS: dict[str, tuple[str, ...]] = {
     "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
     "windows-x64": ("win_amd64",),
     "macos-arm64": ("macosx_14_0_arm64", "macosx_12_0_arm64", "macosx_11_0_arm64"),
-    "macos-x64": ("macosx_10_15_x86_64", "macosx_10_9_x86_64", "macosx_10_13_x86_64"),
 }
-"""Blender platform -> pip ``--platform`` tags accepted for it (newest first)."""
+"""Blender platform -> pip ``--platform`` tags accepted for it (newest first). ``macos-x64`` is
+absent: numba publishes no macOS x86-64 wheel for the pinned version (the package index offers
+them only up to 0.63.0b1), so Intel Macs get the extension without wheels (numpy kernels)."""
 
 
 class BuildError(RuntimeError):
@@ -314,10 +315,11 @@ def build_all(
             run_blender_ext(bpy_root, "validate", str(zip_path))
             return [zip_path]
         cache = wheel_cache or default_wheel_cache()
-        files: list[Path] = []
+        files: dict[str, Path] = {}
         for platform in platforms:
-            files.extend(download_wheels(platform, cache))
-        add_wheels(staged, sorted(set(files), key=lambda p: p.name), list(platforms))
+            for wheel in download_wheels(platform, cache):
+                files.setdefault(wheel.name, wheel)  # pure-Python wheels are shared by every platform
+        add_wheels(staged, [files[name] for name in sorted(files)], list(platforms))
         zips = [out_dir / f"{stem}-{platform.replace('-', '_')}.zip" for platform in platforms]
         for zip_path in zips:
             zip_path.unlink(missing_ok=True)
