@@ -67,6 +67,14 @@ scene.render.image_settings.file_format = "OPEN_EXR"
 scene.render.image_settings.color_depth = "32"
 scene.render.image_settings.color_mode = "RGBA"
 
+def finish():
+    # Switch the engine away and unregister everything: a RenderEngine or its panels left registered
+    # at exit crash bpy 4.2.
+    scene.render.engine = "CYCLES"
+    render_ui.unregister()
+    engine.unregister()
+    properties.unregister()
+
 def render(tag):
     scene.render.filepath = f"{sys.argv[1]}/{tag}.exr"
     bpy.ops.render.render(write_still=True)
@@ -105,7 +113,7 @@ cube.visible_shadow = False
 results["cube_off"] = render("cube_off")
 floor.visible_shadow = False
 results["all_off"] = render("all_off")
-engine.unregister()
+finish()
 emit(results)
 """,
         tmp_path,
@@ -161,8 +169,7 @@ def drawn(panel):
     return layout.props
 results["panels"] = {name: drawn(getattr(render_ui, name)) for name in (
     "BLINN_PHONG_PT_render", "BLINN_PHONG_PT_render_film", "BLINN_PHONG_PT_render_pipeline")}
-render_ui.unregister()
-engine.unregister()
+finish()
 emit(results)
 """,
         tmp_path,
@@ -202,7 +209,7 @@ def test_a_broken_numba_falls_back_to_numpy_with_a_visible_warning(tmp_path: Pat
 results = {"broken": render("broken")}
 scene.blinn_phong.engine = "NUMPY"
 results["numpy"] = render("numpy")
-engine.unregister()
+finish()
 emit(results)
 """,
         tmp_path,
