@@ -65,7 +65,7 @@ extension-wheels: setup
 
 # The built zip installed into a bpy-only environment (cached in ~/.cache/blinn-phong-render).
 test-extension: setup
-	$(PY) -m pytest -q tests/addon/test_addon_installed.py
+	PYTHON313=$(PYTHON313) $(PY) -m pytest -q tests/addon/test_addon_installed.py
 
 # Material preview time at 128×128, compiled kernels against numpy.
 bench-preview: setup

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -128,19 +129,77 @@ def _bpy_only_python() -> Path:
     return python
 
 
-@pytest.fixture(scope="module")
-def installed(tmp_path_factory: pytest.TempPathFactory) -> dict:
-    root = tmp_path_factory.mktemp("installed")
-    zip_path = build_extension.build(
-        root / "dist", wheels=True, platforms=("linux-x64",), wheel_cache=_cache_root() / "wheels"
+def _python313() -> str | None:
+    """A working CPython 3.13 (``PYTHON313`` or ``python3.13`` on ``PATH``), else None."""
+    candidate = os.environ.get("PYTHON313") or shutil.which("python3.13")
+    if not candidate:
+        return None
+    done = subprocess.run(
+        [candidate, "-c", "import sys; print(sys.version_info[:2])"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=60,
     )
-    python = _bpy_only_python()
+    return candidate if done.returncode == 0 and "(3, 13)" in done.stdout else None
+
+
+def _bpy52_only_python(python313: str) -> Path:
+    """Python 3.13 with only bpy 5.2, its numpy 2 and bpy's own requirements (cached)."""
+    lock = REPO / "requirements" / "blender52.lock"
+    versions = build_extension.pinned_versions(("bpy", "numpy"), lock=lock)
+    venv = _cache_root() / f"venv-bpy-{versions['bpy']}-numpy-{versions['numpy']}"
+    python = venv / "bin" / "python"
+    if not (venv / ".complete").exists():
+        subprocess.run([python313, "-m", "venv", "--clear", str(venv)], check=True, timeout=300)
+        uv = Path(sys.executable).with_name("uv")
+        subprocess.run(
+            [
+                str(uv),
+                "pip",
+                "install",
+                "--quiet",
+                "--python",
+                str(python),
+                "-c",
+                str(lock),
+                f"bpy=={versions['bpy']}",
+                f"numpy=={versions['numpy']}",
+            ],
+            check=True,
+            timeout=900,
+        )
+        (venv / ".complete").write_text("ok\n")
+    return python
+
+
+def _clean_env(root: Path) -> dict[str, str]:
     env = {
         key: value
         for key, value in os.environ.items()
         if key not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "VIRTUAL_ENV", "PYTHONHOME")
     }
     env.update(PYTHONNOUSERSITE="1", BLENDER_USER_RESOURCES=str(root / "blender_user"))
+    return env
+
+
+@pytest.fixture(scope="module")
+def built_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The self-contained linux-x64 zip (wheels for CPython 3.11 and 3.13)."""
+    return build_extension.build(
+        tmp_path_factory.mktemp("dist"),
+        wheels=True,
+        platforms=("linux-x64",),
+        wheel_cache=_cache_root() / "wheels",
+    )
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory: pytest.TempPathFactory, built_zip: Path) -> dict:
+    root = tmp_path_factory.mktemp("installed")
+    zip_path = built_zip
+    python = _bpy_only_python()
+    env = _clean_env(root)
     script = root / "installed.py"
     script.write_text(INSTALLED, encoding="utf-8")
     runs = []
@@ -241,4 +300,51 @@ def test_installed_image_equals_the_repository_render(installed: dict) -> None:
             installed["runs"][0]["renders"][0]["stats"]["compile"],
             installed["runs"][1]["renders"][0]["stats"]["compile"],
         )
+    )
+
+
+def test_installed_on_blender_52_uses_the_cp313_wheels(
+    installed: dict, built_zip: Path, tmp_path: Path
+) -> None:
+    # Blender 5.2 LTS (CPython 3.13, numpy 2): the same zip installs its cp313 wheels. The image is
+    # compared with the repository's render on Blender 5.0 / numpy 1.26: same kernels, but numpy's
+    # own reductions may round differently between major versions, hence 1e-5 (float32 output).
+    python313 = _python313()
+    if python313 is None:
+        pytest.skip("no working python3.13 (set PYTHON313) to build the Blender 5.2 environment")
+    python = _bpy52_only_python(python313)
+    script = tmp_path / "installed.py"
+    script.write_text(INSTALLED, encoding="utf-8")
+    done = subprocess.run(
+        [
+            str(python),
+            "-s",
+            str(script),
+            str(built_zip),
+            str(tmp_path / "repo"),
+            str(REPO / "blend_files" / "shadows.blend"),
+            str(tmp_path),
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=str(tmp_path),
+        env=_clean_env(tmp_path),
+        check=False,
+    )
+    lines = [line[len(MARK) :] for line in done.stdout.splitlines() if line.startswith(MARK)]
+    assert done.returncode == 0 and lines, (
+        f"exit {done.returncode}\n{done.stdout[-3000:]}\n{done.stderr[-3000:]}"
+    )
+    got = json.loads(lines[-1])
+    assert got["before"] == {"numba": False, "embreex": False, "colour": False}
+    assert "python3.13" in got["origins"]["numba"]
+    render = got["renders"][1]
+    assert render["ok"] and render["choices"]["engine"] == "numba" and render["choices"]["embree"], render
+    np.testing.assert_allclose(
+        read_image(tmp_path / "installed_1.exr"),
+        read_image(installed["root"] / "repository_1.exr"),
+        rtol=0,
+        atol=1e-5,
     )
