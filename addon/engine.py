@@ -295,8 +295,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         try:
             converted = convert.scene_from_depsgraph(depsgraph)
             converted.options = PREVIEW_OPTIONS
+            converted_at = time.perf_counter()
             result = render_converted(converted)
-            self._write(converted, result, layer)
+            rendered_at = time.perf_counter()
+            self._write(converted, result, layer, combined_only=True)
         except Exception as error:
             LAST_PREVIEW.update({"ok": False, "error": f"{type(error).__name__}: {error}"})
             self._write_error_pattern(full_w, full_h, layer)
@@ -307,7 +309,12 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 "ok": True,
                 "size": [full_w, full_h],
                 "seconds": time.perf_counter() - started,
-                "stats": result.seconds,
+                "stats": {
+                    **result.seconds,
+                    "convert": converted_at - started,
+                    "render": rendered_at - converted_at,
+                    "write": time.perf_counter() - rendered_at,
+                },
                 "choices": result.choices,
                 "triangles": result.triangles,
             }
@@ -364,13 +371,16 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
 
     # ----------------------------------------------------------------- result
 
-    def _write(self, converted: convert.ConvertedScene, result: Any, layer: str) -> None:
+    def _write(
+        self, converted: convert.ConvertedScene, result: Any, layer: str, combined_only: bool = False
+    ) -> None:
         x0, y0, x1, y1 = converted.region
         width, height = x1 - x0, y1 - y0
-        self.add_pass("Depth", 1, "Z")
-        for name, _key in LIGHT_PASSES:
-            self.add_pass(name, 3, "RGB")
-        self.add_pass("Shadow", 1, "X")
+        if not combined_only:  # previews show Combined only: no extra passes to fill
+            self.add_pass("Depth", 1, "Z")
+            for name, _key in LIGHT_PASSES:
+                self.add_pass(name, 3, "RGB")
+            self.add_pass("Shadow", 1, "X")
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
         render_result = self.begin_result(0, 0, converted.width, converted.height, layer=layer)
         try:
@@ -380,11 +390,13 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 raise RuntimeError(
                     f"render result is {got[0]}×{got[1]} but the converted region is {width}×{height}"
                 )
-            depth = mapping.window_depth_to_distance(result.depth, converted.scene.camera.projection)
-            buffers = {"Combined": result.rgba, "Depth": depth[..., None]}
-            for name, key in LIGHT_PASSES:
-                buffers[name] = result.passes[key]
-            buffers["Shadow"] = result.passes["shadow"]
+            buffers = {"Combined": result.rgba}
+            if not combined_only:
+                depth = mapping.window_depth_to_distance(result.depth, converted.scene.camera.projection)
+                buffers["Depth"] = depth[..., None]
+                for name, key in LIGHT_PASSES:
+                    buffers[name] = result.passes[key]
+                buffers["Shadow"] = result.passes["shadow"]
             for name, image in buffers.items():
                 render_pass = result_layer.passes.get(name)
                 if render_pass is None:
