@@ -1,9 +1,10 @@
 """Blender extension: the Blinn-Phong render engine and Porter-Duff compositor node groups.
 
 Layout (after Blender's Cycles add-on and glTF-Blender-IO): ``properties``, ``engine`` and
-``render_ui`` hold the render engine; ``operators`` and ``ui`` the Porter-Duff node groups
-(built by ``node_groups``); ``compat`` holds every difference between Blender 4.2, 4.5 and
-5.0; ``mapping`` and ``factor_graph`` are pure logic without ``bpy``; ``verify`` compares
+``render_ui`` hold the render engine, with its settings declared once in ``options``;
+``operators`` and ``ui`` the Porter-Duff node groups (built by ``node_groups``); ``compat`` holds
+every difference between Blender 4.2, 4.5, 5.0 and 5.2; ``options``, ``pipeline``, ``mapping`` and
+``factor_graph`` are pure logic without ``bpy``; ``verify`` compares
 Blender's compositor with :mod:`compositing`.
 
 The extension's metadata lives in ``blender_manifest.toml``. Importing this package does not
