@@ -23,7 +23,6 @@ Writes ``effects.json`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -51,6 +50,7 @@ from blinn_phong.raytrace import (
 from blinn_phong.render import prepare_scene, shade_fragments
 from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import light_shadow_maps, planar_shadow_mask, shadow_map_visibility
+from compositing._atomic import write_json_atomic
 
 __all__ = ["main", "run"]
 
@@ -328,7 +328,7 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 3, size: int = 256) -> dict
     }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "effects.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_json_atomic(out / "effects.json", result, indent=2)
     return result
 
 
