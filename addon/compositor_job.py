@@ -166,7 +166,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     job_path = Path(args[0])
     report = run_job(json.loads(job_path.read_text()))
-    job_path.with_suffix(".report.json").write_text(json.dumps(report, indent=1))
+    report_path = job_path.with_suffix(".report.json")
+    from compositing._atomic import write_json_atomic
+
+    write_json_atomic(report_path, report, indent=1)  # the reader never sees a half-written report
     return 0
 
 

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks._util import machine_info, markdown_table, time_interleaved, write_json
+from benchmarks._util import machine_info, markdown_table, save_figure, time_interleaved, write_json
 from blinn_phong.primitives import grid_plane, uv_sphere
 
 __all__ = ["CASES", "draw", "issue_scene", "main", "run"]
@@ -231,8 +231,7 @@ def draw(data: dict, out_dir: str | Path) -> list[Path]:
         "Frame pipeline scaling: plain z-buffer, A-buffer (one sphere at opacity 0.5), exp fog", fontsize=10
     )
     fig.tight_layout()
-    path = out / "frame_scaling.png"
-    fig.savefig(path, dpi=DPI)
+    path = save_figure(fig, out / "frame_scaling.png", dpi=DPI)  # atomic: a failed save keeps the old chart
     plt.close(fig)
     return [path]
 

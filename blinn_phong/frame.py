@@ -229,6 +229,11 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             "ray_traced",
             f"soft shadows asked for, but {why} has no area: hard ray-traced shadows",
         )
+    if method in ("ray_traced", "planar") and not embree_available():
+        method, reason = (
+            "shadow_volume",
+            f"Embree (embreex) is not installed: shadow volumes, exact too, instead of {method} ({reason})",
+        )
     if method in _NEEDS_EMBREE and not embree_available():
         method, reason = (
             "shadow_map",

@@ -112,7 +112,8 @@ def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_pla
                 ray_scene.append(RayScene(tris))
             columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
         else:
-            columns.append(light_visibility(c.method, light, tris, world, normal, **c.params))  # type: ignore[arg-type]
+            extra = {"camera": scene.camera} if c.method == "shadow_volume" else {}
+            columns.append(light_visibility(c.method, light, tris, world, normal, **c.params, **extra))  # type: ignore[arg-type]
     return np.stack(columns, axis=1) if columns else None
 
 

@@ -32,12 +32,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from blinn_phong._feedback import start_feedback
 from blinn_phong.frame import Fog, frame_plan, scene_with_planned_shading
 from blinn_phong.pipeline import render_frame
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene, prepare_scene
 from blinn_phong.resolve import resolve_nearest_buffers, resolve_samples
-from blinn_phong.scene import Scene
+from blinn_phong.scene import Scene, prepare_render_inputs
 from blinn_phong.shading import (
     FragmentShading,
     _check_shading,
@@ -151,7 +152,11 @@ def render(
             (visibility lists, lighting, transparency models, fog, transparency resolves and
             box filter; the buffers agree with the reference to 1e-6); ``"auto"`` — numba when
             it can be imported, else numpy.
-        progress: optional ``callback(stage, fraction_done)`` called as stages finish.
+        progress: ``callback(stage, fraction_done)`` called as stages finish; ``None`` (default)
+            prints ``render: <stage> <percent>`` to stderr, if it is a terminal, once the render
+            has run 3 s; ``True`` from the start, ``False`` never (:mod:`blinn_phong._feedback`).
+            When numba compiles the kernels (once per machine) ``compiling kernels (once per
+            machine)…`` is printed to stderr.
         transparency: ``None``/``"auto"`` (the planner's choice) or one of
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
             alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,
@@ -179,6 +184,9 @@ def render(
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    # Size/memory, gl_compat light model, meshes without triangles dropped (blinn_phong/scene.py).
+    scene = prepare_render_inputs(scene, width, height, samples, gl_compat)
+    progress = start_feedback(engine, progress)  # compile notice, progress lines (blinn_phong/_feedback.py)
     if fog is not None and not isinstance(fog, Fog):
         raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")
     if gl_compat:
