@@ -281,12 +281,12 @@ def test_without_embree_hard_shadows_fall_back_to_shadow_volumes(monkeypatch):
 
 def test_addon_shadow_setting_selects_shadow_volumes():
     """The add-on's "Shadow Volumes" setting reaches render() and matches ray tracing off the edges."""
-    from addon.pipeline import EffectOptions, render_frame
+    from addon.pipeline import RenderOptions, render_frame
 
     light = LIGHTS["directional"]
     scene = scene_with(casters("box"), light, outside_camera())
-    volume = render_frame(scene, 48, 36, options=EffectOptions(shadows="VOLUME"))
-    traced = render_frame(scene, 48, 36, options=EffectOptions(shadows="HARD"))
+    volume = render_frame(scene, 48, 36, options=RenderOptions(samples_per_axis=1, shadows="VOLUME"))
+    traced = render_frame(scene, 48, 36, options=RenderOptions(samples_per_axis=1, shadows="HARD"))
     assert volume.choices["shadows"] == ["shadow_volume"] and traced.choices["shadows"] == ["ray_traced"]
     shadow = traced.passes["shadow"][..., 0]
     assert (shadow < 0.5).sum() > 20
