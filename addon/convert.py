@@ -38,7 +38,7 @@ from blinn_phong.scene import (
     SpotLight,
 )
 
-from . import compat, mapping
+from . import compat, mapping, textures
 
 __all__ = [
     "ConvertedScene",
@@ -438,6 +438,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
     light_radii: list[float] = []
     geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
+    uv_cache: dict[str, dict[str, np.ndarray]] = {}  # per-corner UV layers (image textures)
 
     for instance in depsgraph.object_instances:
         obj = instance.object
@@ -463,6 +464,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
                 continue
             try:
                 arrays = mesh_arrays(mesh)
+                uv_cache[key] = textures.mesh_uvs(mesh)
             finally:
                 obj.to_mesh_clear()
             slots = [slot.material for slot in obj.material_slots]
@@ -481,6 +483,9 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
             material, extra, material_notes = material_from_blender(blender_material)
+            material, uv = textures.textured_material(
+                material, blender_material, material_notes, uv_cache[key]
+            )  # image textures (addon/textures.py)
             notes.extend(n for n in material_notes if n not in notes)
             used = triangles[material_index == slot_index]
             meshes.append(
@@ -491,6 +496,7 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
                     transform=matrix,
                     material=material,
                     shading=extra.pop("shading"),
+                    uv=uv,
                 )
             )
             names.append(f"{obj.name}/{blender_material.name if blender_material else '(none)'}")
