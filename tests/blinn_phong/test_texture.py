@@ -210,3 +210,26 @@ def test_specular_is_added_after_modulation() -> None:
     # n = v = l = (0, 0, 1): n·h = 1, so specular = s_cm · s_cl = 0.5; ambient, diffuse × 0.
     np.testing.assert_allclose(out[..., :3], 0.5, atol=1e-12)
     np.testing.assert_allclose(out[..., 3], 1.0)
+
+
+@pytest.mark.parametrize("engine", ["numpy", "numba"])
+def test_alpha_clipped_and_translucent_texels_over_an_opaque_surface(engine: str) -> None:
+    # Front quad (z = 0.5): left texel alpha 0.2, right texel alpha 0.8, emission 1 (white).
+    # Back quad (z = 0): opaque emission (0, 0, 1). Orthographic view down -z.
+    img = np.array([[[0.2, 0.2, 0.2, 0.2], [0.8, 0.8, 0.8, 0.8]]], np.float32)  # premultiplied white
+    camera = bp.Camera(bp.look_at((0, 0, 2), (0, 0, 0)), bp.orthographic_matrix(-1, 1, -1, 1, 0.5, 5))
+    back = quad_scene(bp.Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0, 0, 1)), camera).meshes[0]
+    lift = np.eye(4)
+    lift[2, 3] = 0.5
+    for clip, expected in ((None, [[0.2, 0.2, 1.0], [0.8, 0.8, 1.0]]), (0.5, [[0, 0, 1], [1, 1, 1]])):
+        front_material = emissive(Texture(img, interpolation="closest"), alpha_clip=clip)
+        front = quad_scene(front_material, camera).meshes[0]
+        front = bp.Mesh(
+            front.positions, front.triangles, transform=lift, material=front.material, uv=front.uv
+        )
+        scene = bp.Scene([back, front], [], camera, ambient=(0.0, 0.0, 0.0))
+        result = bp.render(scene, 2, 1, engine=engine)
+        assert result.plan.transparency.method != "zbuffer"  # the planner saw a transparent material
+        # α·white + (1 − α)·blue: (α, α, 1); alpha clip: blue where α < 0.5, white where kept.
+        np.testing.assert_allclose(result.rgba[0, :, :3], expected, atol=1e-6)
+        np.testing.assert_allclose(result.rgba[0, :, 3], 1.0, atol=1e-6)
