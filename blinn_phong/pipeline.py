@@ -231,7 +231,9 @@ def render_frame(
             visibility=band_vis,
             engine=stage_engine,
         )
-        shaded = texture_fragments(prepared, band.fragments, shaded, gl_compat=gl_compat)  # image textures
+        shaded = texture_fragments(  # image textures
+            prepared, band.fragments, shaded, gl_compat=gl_compat, engine=stage_engine
+        )
         colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
         seconds["shade"] += time.perf_counter() - t
         t = time.perf_counter()
