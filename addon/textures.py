@@ -117,6 +117,8 @@ def texture_from_node(node: bpy.types.Node, base: bool, alpha: bool, notes: list
     if extension is None:
         notes.append(f"{node.name}: {node.extension} extension is rendered as Repeat")
         extension = "repeat"
+    if (image_in < 0.0).any():
+        notes.append(f"{image.name}: negative pixel values are rendered as 0 (a texture holds light, >= 0)")
     return Texture(
         np.clip(image_in, 0.0, None),
         interpolation=interpolation,
