@@ -38,7 +38,7 @@ from blinn_phong.scene import (
     SpotLight,
 )
 
-from . import compat, mapping
+from . import compat, mapping, textures
 from .options import RenderOptions
 
 __all__ = [
@@ -529,11 +529,12 @@ def scene_from_depsgraph(
                 continue
             try:
                 arrays = mesh_arrays(mesh)
+                uvs = textures.mesh_uvs(mesh)  # per-corner UV layers (image textures)
             finally:
                 obj.to_mesh_clear()
             slots = [slot.material for slot in obj.material_slots]
-            geometry_cache[key] = (*arrays, slots)
-        positions, normals, triangles, material_index, slots = geometry_cache[key]
+            geometry_cache[key] = (*arrays, slots, uvs)
+        positions, normals, triangles, material_index, slots, uvs = geometry_cache[key]
         if len(triangles) == 0:
             continue
         determinant = np.linalg.det(matrix[:3, :3])
@@ -551,6 +552,9 @@ def scene_from_depsgraph(
             material_name = blender_material.name if blender_material else "(none)"
             try:
                 material, extra, material_notes = material_from_blender(blender_material)
+                material, uv = textures.textured_material(
+                    material, blender_material, material_notes, uvs
+                )  # image textures (addon/textures.py)
             except (ValueError, TypeError) as error:
                 failed = (
                     f"object '{obj.name}', material '{material_name}': {error}; the object is not rendered"
@@ -565,6 +569,7 @@ def scene_from_depsgraph(
                 transform=matrix,
                 material=material,
                 shading=extra.pop("shading"),
+                uv=uv,
             )
             object_meshes.append((mesh, f"{obj.name}/{material_name}", extra))
         if failed is not None:

@@ -37,6 +37,7 @@ from blinn_phong.scene import (
     orthographic_matrix,
     perspective_matrix,
 )
+from blinn_phong.texture import Texture
 from blinn_phong.visibility import visible_fragments
 
 __all__ = [
@@ -60,6 +61,7 @@ __all__ = [
     "ShadingTerms",
     "ShadowOptions",
     "SpotLight",
+    "Texture",
     "gl_clamp",
     "interpolate",
     "lights_in_eye_space",

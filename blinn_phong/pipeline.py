@@ -38,6 +38,7 @@ from blinn_phong.resolve import FogParameters, FrameImage, fragment_colours, res
 from blinn_phong.scene import AmbientLight, Scene
 from blinn_phong.shading import shade_fragments
 from blinn_phong.shadows import light_visibility
+from blinn_phong.texturing import texture_fragments
 from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
 
 __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
@@ -230,6 +231,9 @@ def render_frame(
             gl_compat=gl_compat,
             visibility=band_vis,
             engine=stage_engine,
+        )
+        shaded = texture_fragments(  # image textures
+            prepared, band.fragments, shaded, gl_compat=gl_compat, engine=stage_engine
         )
         colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
         seconds["shade"] += time.perf_counter() - t

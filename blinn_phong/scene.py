@@ -51,6 +51,7 @@ from typing import Literal
 import numpy as np
 
 from blinn_phong._checks import check_frame_size, colour3, float_array, number, vector3
+from blinn_phong.texture import Texture
 
 __all__ = [
     "AmbientLight",
@@ -108,6 +109,15 @@ class Material:
             normal, replacing ``opacity``; t values in [0, 1], power > 0. None: constant opacity.
         specular_washout: highlights wash out transparency: the opacity becomes
             ``min(1, α + specular luminance)`` (``opaque fraction = (1 − t) + specular``).
+        base_color_texture: a :class:`~blinn_phong.texture.Texture` modulating the surface
+            (OpenGL ``GL_MODULATE`` with ``GL_SEPARATE_SPECULAR_COLOR``): the fragment colour is
+            ``(emission + ambient + diffuse terms) × texel RGB + specular`` (texel RGB straight,
+            linear) and its opacity ``opacity × texel alpha``. Looked up at the mesh's
+            perspective-correct interpolated ``uv`` (the mesh must have ``uv``). Under
+            ``kay_greenberg`` the texture's alpha is not used (the opacity comes from the normal).
+        alpha_clip: threshold in [0, 1] or None: the fragment's opacity (after the texture)
+            becomes 1 where it is ``>= alpha_clip`` and 0 elsewhere (OpenGL's
+            ``glAlphaFunc(GL_GEQUAL, alpha_clip)``; Blender EEVEE's *Alpha Clip*): leaves, decals.
 
     Defaults are OpenGL's (spec §2.14.1 table 2.11 — ambient 0.2, diffuse 0.8,
     specular 0, emission 0, shininess 0). The transparency fields only matter to
@@ -123,8 +133,20 @@ class Material:
     transparency_model: TransparencyModel = "partial_occlusion"
     kay_greenberg: tuple[float, float, float] | None = None
     specular_washout: bool = False
+    base_color_texture: Texture | None = None
+    alpha_clip: float | None = None
 
     def __post_init__(self) -> None:
+        if self.base_color_texture is not None and not isinstance(self.base_color_texture, Texture):
+            raise TypeError(
+                "Material.base_color_texture: expected a blinn_phong.texture.Texture or None, "
+                f"got {type(self.base_color_texture).__name__}"
+            )
+        if self.alpha_clip is not None:
+            clip = number(self.alpha_clip, "Material.alpha_clip", low=0.0, high=1.0)
+            object.__setattr__(self, "alpha_clip", clip)
+            if self.kay_greenberg is not None:
+                raise ValueError("Material.alpha_clip: cannot be combined with kay_greenberg (set one)")
         for name in ("ambient", "diffuse", "specular", "emission"):
             object.__setattr__(self, name, colour3(getattr(self, name), f"Material.{name}"))
         object.__setattr__(self, "shininess", number(self.shininess, "Material.shininess", low=0.0))
@@ -158,7 +180,17 @@ class Material:
         """The lowest opacity of a fragment of this material (Kay–Greenberg: ``1 − max(t_min, t_max)``)."""
         if self.kay_greenberg is not None:
             return 1.0 - max(self.kay_greenberg[0], self.kay_greenberg[1])
-        return self.opacity
+        low = self.opacity
+        if self.base_color_texture is not None:
+            low *= self.base_color_texture.min_alpha
+        if self.alpha_clip is not None:
+            return 1.0 if low >= self.alpha_clip else 0.0
+        return low
+
+    @property
+    def textured(self) -> bool:
+        """True when fragments need the texture stage (a base colour texture or an alpha clip)."""
+        return self.base_color_texture is not None or self.alpha_clip is not None
 
 
 # --------------------------------------------------------------------------- lights
@@ -421,6 +453,10 @@ class Mesh:
         shading: per-mesh shading frequency overriding the render's, or None.
         normal_weighting: ``"area"`` or ``"angle"`` weighting of face normals
             when averaging vertex normals.
+        uv: optional (V, 2) per-vertex texture coordinates, finite; ``u`` left → right and
+            ``v`` bottom → top of the image (Blender's and OpenGL's convention, see
+            :mod:`blinn_phong.texture`); interpolated perspective-correctly. Required when
+            a material has a ``base_color_texture``. A UV seam needs split vertices.
     """
 
     positions: np.ndarray
@@ -431,6 +467,7 @@ class Mesh:
     back_material: Material | None = None
     shading: Shading | None = None
     normal_weighting: Literal["area", "angle"] = "area"
+    uv: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         positions = float_array(self.positions, "Mesh.positions", (None, 3))
@@ -475,6 +512,14 @@ class Mesh:
             raise ValueError(
                 f"Mesh.normal_weighting: expected 'area' or 'angle', got {self.normal_weighting!r}"
             )
+        if self.uv is not None:
+            object.__setattr__(self, "uv", float_array(self.uv, "Mesh.uv", (len(positions), 2)))
+        for label, mat in (("material", self.material), ("back_material", self.back_material)):
+            if mat is not None and mat.base_color_texture is not None and self.uv is None:
+                raise ValueError(
+                    f"Mesh.uv: required (shape (V, 2) = ({len(positions)}, 2)) because "
+                    f"Mesh.{label} has a base_color_texture, got None"
+                )
 
 
 # --------------------------------------------------------------------------- camera

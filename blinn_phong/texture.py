@@ -1,0 +1,219 @@
+"""Image textures: a :class:`Texture` and its texel lookup (no renderer dependencies).
+
+Conventions:
+
+* The stored image is the project's: float32 linear-light **premultiplied** RGBA, shape
+  (H, W, 4), **row 0 at the top**. :class:`Texture` converts other inputs once, on
+  construction (an sRGB-encoded or straight-alpha image, or an RGB image with no alpha).
+* Texture coordinates follow Blender and OpenGL: ``u`` runs left → right and ``v``
+  **bottom → top**: ``(0, 0)`` is the bottom-left corner of the image, ``(1, 1)`` the top
+  right. OpenGL's ``t = 0`` is the first row uploaded by ``glTexImage2D``, so the image
+  goes to GL flipped vertically (:meth:`Texture.gl_rows`).
+* Texel ``(i, j)`` (column ``i`` from the left, ``j`` from the bottom) has its centre at
+  ``((i + 0.5)/W, (j + 0.5)/H)`` (OpenGL 2.1 §3.8.8).
+
+Filtering (OpenGL 2.1 §3.8.8, equations 3.25–3.27):
+
+* ``"closest"`` (``GL_NEAREST``): the texel ``(floor(u·W), floor(v·H))``;
+* ``"linear"`` (``GL_LINEAR``): with ``x = u·W − 0.5``, ``y = v·H − 0.5``,
+  ``i0 = floor(x)``, ``α = x − i0`` (same for ``j0``, ``β``), the bilinear blend
+  ``(1−α)(1−β)·T[i0,j0] + α(1−β)·T[i0+1,j0] + (1−α)β·T[i0,j0+1] + αβ·T[i0+1,j0+1]``.
+  The blend is done on premultiplied texels (colour of fully transparent texels does not
+  bleed); for an opaque image this is exactly GL's blend of the stored values.
+
+Extension (wrap) of texel indices outside the image:
+
+* ``"repeat"`` (``GL_REPEAT``): ``i mod W``;
+* ``"extend"`` (``GL_CLAMP_TO_EDGE``): ``clamp(i, 0, W − 1)``;
+* ``"clip"`` (Blender's *Clip*; ``GL_CLAMP_TO_BORDER`` with a transparent black border):
+  texels outside the image are ``(0, 0, 0, 0)``.
+
+Colour spaces of the input image: ``"linear"`` (alias ``"Linear Rec.709"``) and
+``"Non-Color"`` are used as given; ``"sRGB"`` is decoded with the exact sRGB EOTF of
+IEC 61966-2-1:1999 (:func:`srgb_to_linear`) before filtering, as OpenGL does for sRGB
+textures (EXT_texture_sRGB: "conversion … is performed prior to filtering").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "ALPHAS",
+    "COLORSPACES",
+    "EXTENSIONS",
+    "INTERPOLATIONS",
+    "Texture",
+    "srgb_to_linear",
+    "straight_colour",
+]
+
+INTERPOLATIONS: tuple[str, ...] = ("closest", "linear")
+EXTENSIONS: tuple[str, ...] = ("repeat", "extend", "clip")
+COLORSPACES: tuple[str, ...] = ("linear", "Linear Rec.709", "Non-Color", "sRGB")
+ALPHAS: tuple[str, ...] = ("premultiplied", "straight")
+
+
+def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
+    """The sRGB EOTF (IEC 61966-2-1:1999, §5.2): encoded value in [0, 1] → linear light.
+
+    ``c/12.92`` for ``c ≤ 0.04045``, else ``((c + 0.055)/1.055)^2.4``. Computed in float64.
+    """
+    c = np.asarray(encoded, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
+
+
+def straight_colour(premultiplied: np.ndarray) -> np.ndarray:
+    """Straight (un-premultiplied) RGB of (N, 4) premultiplied RGBA; 0 where alpha is 0."""
+    rgba = np.asarray(premultiplied, dtype=np.float64)
+    a = rgba[:, 3:4]
+    safe = np.where(a > 0.0, a, 1.0)
+    return np.where(a > 0.0, rgba[:, :3] / safe, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class Texture:
+    """An image texture sampled by ``(u, v)`` texture coordinates (see the module docstring).
+
+    Attributes:
+        image: (H, W, 4) or (H, W, 3) real image, row 0 at the top (3 channels: alpha 1).
+            After construction: the (H, W, 4) float32 linear premultiplied RGBA.
+        interpolation: ``"closest"`` (GL_NEAREST) or ``"linear"`` (GL_LINEAR).
+        extension: ``"repeat"`` (GL_REPEAT), ``"extend"`` (GL_CLAMP_TO_EDGE) or ``"clip"``
+            (transparent black outside [0, 1]², Blender's Clip).
+        colorspace: the colour space of the given image's RGB: ``"linear"``/``"Linear Rec.709"``
+            or ``"Non-Color"`` (used as given) or ``"sRGB"`` (encoded values in [0, 1],
+            decoded with :func:`srgb_to_linear`). After construction the stored image is linear.
+        alpha: how the given image's RGB relates to its alpha: ``"premultiplied"`` (the
+            project's convention) or ``"straight"``. sRGB encoding applies to the straight
+            colour, so a premultiplied sRGB image is un-premultiplied, decoded and
+            premultiplied again.
+
+    Raises ValueError/TypeError naming the field for a wrong shape, dtype, non-finite value,
+    alpha outside [0, 1], negative colour, sRGB values outside [0, 1] or an unknown option.
+    """
+
+    image: np.ndarray
+    interpolation: str = "linear"
+    extension: str = "repeat"
+    colorspace: str = "linear"
+    alpha: str = "premultiplied"
+
+    def __post_init__(self) -> None:
+        for name, allowed in (
+            ("interpolation", INTERPOLATIONS),
+            ("extension", EXTENSIONS),
+            ("colorspace", COLORSPACES),
+            ("alpha", ALPHAS),
+        ):
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"Texture.{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+        arr = np.asarray(self.image)
+        if arr.dtype.kind != "f":
+            raise TypeError(
+                f"Texture.image: expected a float32/float64 array (linear values, not bytes: divide "
+                f"8-bit data by 255), got dtype {arr.dtype}"
+            )
+        if arr.ndim != 3 or arr.shape[2] not in (3, 4) or arr.shape[0] < 1 or arr.shape[1] < 1:
+            raise ValueError(
+                f"Texture.image: expected shape (H, W, 4) or (H, W, 3), H, W >= 1, got {arr.shape}"
+            )
+        if not np.isfinite(arr).all():
+            raise ValueError(
+                f"Texture.image: expected finite values; got {int(np.count_nonzero(~np.isfinite(arr)))} "
+                f"NaN/Inf of {arr.size}"
+            )
+        rgba = np.empty((*arr.shape[:2], 4), np.float64)
+        rgba[..., : arr.shape[2]] = arr
+        if arr.shape[2] == 3:
+            rgba[..., 3] = 1.0
+        a = rgba[..., 3]
+        if a.min() < 0.0 or a.max() > 1.0:
+            raise ValueError(
+                f"Texture.image: expected alpha in [0, 1], got range [{float(a.min())!r}, {float(a.max())!r}]"
+            )
+        if rgba[..., :3].min() < 0.0:
+            raise ValueError(
+                f"Texture.image: expected non-negative colour, got minimum {float(rgba[..., :3].min())!r}"
+            )
+        straight = rgba[..., :3]
+        if self.alpha == "premultiplied":
+            safe = np.where(a > 0.0, a, 1.0)[..., None]
+            straight = np.where(a[..., None] > 0.0, rgba[..., :3] / safe, 0.0)
+        if self.colorspace == "sRGB":
+            if straight.max() > 1.0:
+                raise ValueError(
+                    "Texture.image: sRGB-encoded (straight) colour must lie in [0, 1], "
+                    f"got maximum {float(straight.max())!r}"
+                )
+            straight = srgb_to_linear(straight)
+        out = np.empty_like(rgba)
+        out[..., :3] = straight * a[..., None]
+        out[..., 3] = a
+        object.__setattr__(self, "image", out.astype(np.float32))
+
+    @property
+    def width(self) -> int:
+        """W, texels per row."""
+        return int(self.image.shape[1])
+
+    @property
+    def height(self) -> int:
+        """H, rows."""
+        return int(self.image.shape[0])
+
+    @property
+    def min_alpha(self) -> float:
+        """The smallest alpha any lookup can return (0 with ``extension="clip"``)."""
+        if self.extension == "clip":
+            return 0.0
+        return float(self.image[..., 3].min())
+
+    def gl_rows(self) -> np.ndarray:
+        """The image with row 0 at the bottom (OpenGL's ``glTexImage2D`` order), C-contiguous."""
+        return np.ascontiguousarray(self.image[::-1])
+
+    def _fetch(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Texels at integer column ``i`` (from the left) and row ``j`` (from the bottom), wrapped."""
+        w, h = self.width, self.height
+        if self.extension == "repeat":
+            ii, jj, inside = np.mod(i, w), np.mod(j, h), None
+        else:
+            ii, jj = np.clip(i, 0, w - 1), np.clip(j, 0, h - 1)
+            inside = (i >= 0) & (i < w) & (j >= 0) & (j < h) if self.extension == "clip" else None
+        texels = self.image[h - 1 - jj, ii].astype(np.float64)
+        if inside is not None:
+            texels[~inside] = 0.0
+        return texels
+
+    def sample(self, uv: np.ndarray) -> np.ndarray:
+        """Filtered texels at texture coordinates ``uv`` (N, 2): (N, 4) float64 premultiplied linear RGBA.
+
+        ``u`` left → right, ``v`` bottom → top (module docstring); filtering and wrapping as
+        ``interpolation`` and ``extension`` say (OpenGL 2.1 §3.8.7–3.8.8).
+        """
+        coords = np.asarray(uv, dtype=np.float64)
+        if coords.ndim != 2 or coords.shape[1] != 2:
+            raise ValueError(f"uv: expected shape (N, 2), got {coords.shape}")
+        if not np.isfinite(coords).all():
+            raise ValueError("uv: expected finite texture coordinates")
+        x = coords[:, 0] * self.width
+        y = coords[:, 1] * self.height
+        if self.interpolation == "closest":
+            return self._fetch(np.floor(x).astype(np.int64), np.floor(y).astype(np.int64))
+        x -= 0.5
+        y -= 0.5
+        i0, j0 = np.floor(x), np.floor(y)
+        fa, fb = (x - i0)[:, None], (y - j0)[:, None]
+        i0, j0 = i0.astype(np.int64), j0.astype(np.int64)
+        out = (
+            (1 - fa) * (1 - fb) * self._fetch(i0, j0)
+            + fa * (1 - fb) * self._fetch(i0 + 1, j0)
+            + (1 - fa) * fb * self._fetch(i0, j0 + 1)
+            + fa * fb * self._fetch(i0 + 1, j0 + 1)
+        )
+        # A convex blend of alphas in [0, 1]: only rounding (an ulp) can leave [0, 1].
+        np.clip(out[:, 3], 0.0, 1.0, out=out[:, 3])
+        return out
