@@ -176,31 +176,6 @@ class Fog:
 # --------------------------------------------------------------------------- choices
 
 
-def _planning_scene(scene: Scene) -> Scene:
-    """``scene`` as the planner should see it: each mesh at the lowest opacity its fragments can have.
-
-    The planner reads ``mesh.material.opacity``; a Kay–Greenberg material reaches ``1 − max(t)``,
-    an emission-model one hides nothing behind it (fragment alpha 0) so it plans as opacity 0,
-    and under two-sided lighting the back material counts too.
-    """
-
-    def lowest(material: Material) -> float:
-        if not material.transparent:
-            return 1.0
-        return 0.0 if material.transparency_model == "emission" else material.min_opacity
-
-    two_sided = scene.light_model.two_sided
-    meshes = []
-    for mesh in scene.meshes:
-        sides = [mesh.material] + ([mesh.back_material] if two_sided and mesh.back_material else [])
-        opacity = min(lowest(m) for m in sides)
-        front = mesh.material
-        if opacity != front.opacity or front.kay_greenberg is not None:
-            mesh = replace(mesh, material=replace(front, opacity=opacity, kay_greenberg=None))
-        meshes.append(mesh)
-    return replace(scene, meshes=tuple(meshes))
-
-
 def _shadow_list(shadows: object, n_lights: int) -> list[ShadowOptions]:
     """Normalise ``render(shadows=...)`` to one :class:`ShadowOptions` per entry of ``scene.lights``."""
 
@@ -296,6 +271,9 @@ def frame_plan(
     wboit_weight: str = "eq10",
     shadows: object = None,
     gl_compat: bool = False,
+    width: int | None = None,
+    height: int | None = None,
+    samples: int = 1,
 ) -> Plan:
     """The plan a render follows: :func:`blinn_phong.planner.plan`, with the caller's choices replacing it.
 
@@ -314,6 +292,9 @@ def frame_plan(
             or a list of those with one entry per ``scene.lights`` entry.
         gl_compat: the OpenGL 2.1 preset: no effects (fixed-function OpenGL has neither shadows
             nor order-independent transparency); asking for one raises ``ValueError``.
+        width: frame width in pixels, for the cost models (None: the planner's default frame).
+        height: frame height in pixels (None: the planner's default frame).
+        samples: k for k×k samples per pixel.
 
     Returns:
         A :class:`~blinn_phong.planner.Plan` whose choices carry the keyword parameters of the
@@ -332,7 +313,7 @@ def frame_plan(
     if wboit_weight not in WBOIT_WEIGHTS:
         raise ValueError(f"wboit_weight: expected one of {WBOIT_WEIGHTS}, got {wboit_weight!r}")
     per_light = _shadow_list(shadows, len(scene.lights))
-    planned = plan(_planning_scene(scene), tolerance)
+    planned = plan(scene, tolerance, width=width, height=height, samples=samples)
 
     if gl_compat:
         if transparency not in (*_AUTO, "zbuffer"):

@@ -702,6 +702,9 @@ def render(
         wboit_weight=wboit_weight,
         shadows=shadows,
         gl_compat=gl_compat,
+        width=width,
+        height=height,
+        samples=samples,
     )
     seconds["plan"] = time.perf_counter() - t
     if shading == "auto":
