@@ -593,9 +593,10 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
     half-space beyond the plane, where no point of the mesh lies: no self-shadow. With
     one-sided lighting every fragment, back faces included, is lit with the outward normal,
     so that is every lit point. Two-sided lighting lights back faces with ``−n``, from the
-    inner side, whose rays cross the mesh: they are never seen only when the mesh is closed
-    and the camera outside it, which holds when the whole mesh lies beyond the near plane.
-    A planar mesh never shades itself (a ray leaving its plane does not return to it).
+    inner side, whose rays cross the mesh: they are never seen only when the mesh is closed,
+    opaque (a transparent front shows the inside) and the camera outside it, which holds
+    when the whole mesh lies beyond the near plane. A planar mesh never shades itself (a ray
+    leaving its plane does not return to it).
     """
     if f.planar:
         return "planar"
@@ -603,6 +604,8 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
         return None
     if not scene.light_model.two_sided:
         return "convex, lit one-sided (inside faces with the outward normal)"
+    if _lowest_opacity(scene, f.mesh) < 1.0:
+        return None
     if scene.camera is not None and len(f.world):
         hom = np.c_[f.world, np.ones(len(f.world))]
         clip = hom @ (scene.camera.projection @ scene.camera.view).T
@@ -683,7 +686,11 @@ def _plan_shadow(
                 )
     a, b = pairs[0]
     if a == b:
-        why_self = "open or not convex" if not facts[a].convex else "two-sided lighting may show its inside"
+        why_self = (
+            "open or not convex"
+            if not facts[a].convex
+            else "two-sided lighting lights its inside, which may be seen"
+        )
         what = f"mesh {a} can shade itself ({why_self})"
     else:
         what = f"mesh {a} can shadow mesh {b}"
