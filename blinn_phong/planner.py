@@ -6,14 +6,13 @@ saying why, and for approximations the predicted error and relative cost) for
 transparency, one per light for shadows and one per mesh for the shading frequency. It
 renders nothing. Exact methods are picked from conservative geometric facts; with a
 tolerance ``T > 0`` in **8-bit steps** (1/255 of the unit range) an approximate method is
-picked where the measured error model of :mod:`blinn_phong.calibration` predicts at most
-``T`` and its measured cost model predicts it faster than the exact method. ``T = 0``
-means exact methods only. The error ``T`` bounds, per concern:
+picked where a bound (or the measured error model of :mod:`blinn_phong.calibration`)
+keeps it within ``T`` and its measured cost model predicts it faster than the exact method
+for the frame (``width``, ``height``, ``samples``). ``T = 0`` means exact methods only.
 
-* transparency: the max error of any channel of the resolved image against the A-buffer;
-* shadows: the mean error, over the covered pixels, against ray-traced shadows (any shadow
-  map is a whole light's contribution off somewhere on a hard edge, so the max is no use);
-* shading: the max error on interior pixels against per-pixel shading of the exact surface.
+``T`` means one thing for every concern (docs/speed_accuracy.md, "What the tolerance
+promises"): **no channel of any pixel differs by more than T steps** from the image every
+exact method gives (A-buffer, ray-traced shadows, per-pixel shading of the exact surface).
 
 Transparency (methods of :mod:`blinn_phong.oit`):
 
@@ -26,25 +25,34 @@ Transparency (methods of :mod:`blinn_phong.oit`):
   (each as in ``draw_last``) follows the per-pixel order everywhere.
 * ``depth_peeling`` — with a tolerance: the fewest layers ``k`` whose predicted max error
   ``255·c·B·(1 − α_min)^k`` is within it (what lies behind ``k`` layers is scaled by their
-  transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them,
-  at least 1 because alpha counts too, divided by ``α_min`` for the absorption model whose
-  fragments are not premultiplied by their opacity; ``c`` measured), if its predicted cost
-  ``t₀ + t₁·k`` is below the A-buffer's.
+  transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them
+  with every factor of the lighting equation — emission, ambient, light colours, and the
+  attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the smallest distance from the light to a
+  mesh, above 1 when ``k_c < 1`` — see :func:`_max_radiance`; at least 1 because alpha
+  counts too; divided by ``α_min`` for the absorption model whose fragments are not
+  premultiplied by their opacity; ``c`` measured), if its predicted cost ``t₀ + t₁·k`` is
+  below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
 Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
 
 * ``none`` — ambient lights; or no mesh can shade another from this light: every caster's
   shadow volume (the cylinder or cone its bounding sphere sweeps away from the light)
-  misses every other mesh's bounding sphere, and no mesh can shade itself (planar, or
-  convex, whose self-shadowed faces face away from the light and are unlit anyway).
+  misses every other mesh's bounding sphere, and no mesh can shade itself: planar, or
+  closed and convex (:func:`_convex_surface`, a tolerance from the coordinates' precision)
+  and never lit from inside — one-sided lighting, or two-sided with the mesh opaque and
+  wholly beyond the near plane (:func:`_self_shadow_free`). An open box under two-sided
+  lighting shades its own floor.
 * ``planar`` — every receiver that can be shadowed is a planar mesh on one common plane and
   every caster lies between that plane and the light: Blinn's projected shadows are exact.
-* ``shadow_map`` — with a tolerance, directional lights (the calibrated case): the smallest
-  power-of-two resolution ``R`` whose predicted mean error ``255·c·w·D/(r·R)`` is within it
-  (``D`` the scene's diameter, ``r`` the smallest caster's radius, ``w`` the largest change
-  a pixel sees between lit and shadowed, the shadowed share taken as 1), if its predicted
-  cost ``t₀ + t₂·R²`` is below ray tracing's.
+* ``shadow_map`` — with a tolerance, directional lights (the calibrated case), only when
+  ``255·w ≤ T``: ``w`` is the largest change a pixel sees between lit and shadowed (the
+  light's diffuse and specular colours times the materials', times the attenuation bound),
+  which a misplaced hard edge costs in full. The resolution is the smallest power of two
+  whose texel ``D/R`` (``D`` the map's span) is at most half the thinnest caster seen from
+  the light (the smallest extent of its projection across the light direction,
+  :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
+  ray tracing's.
 * ``ray_traced`` — otherwise: exact hard shadows.
 
 Shading frequency, per mesh (:mod:`blinn_phong.render`):
@@ -70,7 +78,7 @@ from . import calibration
 from .normals import vertex_normals
 from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
 
-__all__ = ["Choice", "Plan", "plan"]
+__all__ = ["DEFAULT_FRAME", "Choice", "Plan", "coordinate_tolerance", "plan", "shadow_map_geometry"]
 
 _EPS = 1e-9
 
@@ -615,13 +623,15 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
 
 
 def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
-    """Smallest extent (world units) of a mesh's vertices seen along ``direction``, the light's view.
+    """Smallest extent (world units) of a mesh seen along ``direction``, the light's view.
 
-    The vertices are projected on the plane across ``direction``; the width of that point set
-    is taken along its principal axes and 16 evenly spread directions, and the smallest of
-    these (at most 2 % above the true minimum width of a convex outline, 0 for a pane seen
-    edge-on) is what a shadow-map texel must resolve.
+    The vertices are projected on the plane across ``direction``; the minimum width of a
+    planar point set is attained across one edge of its convex hull (rotating calipers,
+    Toussaint 1983), so it is the smallest, over the hull's edges, of the extent of the hull
+    along the edge's normal. 0 for a pane seen edge-on.
     """
+    from scipy.spatial import ConvexHull, QhullError
+
     d = direction / np.linalg.norm(direction)
     helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = np.cross(d, helper)
@@ -629,20 +639,19 @@ def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
     v = np.cross(d, u)
     flat = np.c_[f.world @ u, f.world @ v]
     flat = flat - flat.mean(axis=0)
-    axes = [np.array([math.cos(a), math.sin(a)]) for a in np.linspace(0.0, math.pi, 16, endpoint=False)]
-    if len(flat) >= 2:
-        _, vectors = np.linalg.eigh(flat.T @ flat)
-        axes += [vectors[:, 0], vectors[:, 1]]
-    widths = [float(np.ptp(flat @ axis)) for axis in axes]
-    return min(widths)
+    try:
+        hull = ConvexHull(flat)
+    except (QhullError, ValueError):  # collinear or too few points: no area seen from the light
+        return 0.0
+    corners = flat[hull.vertices]
+    along = corners @ hull.equations[:, :2].T  # (H, E): unit edge normals
+    return float(np.min(along.max(axis=0) - along.min(axis=0)))
 
 
-def _plan_shadow(
-    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict, frame: _Frame
-) -> Choice:
-    light = scene.lights[index]
-    if isinstance(light, AmbientLight):
-        return Choice("none", "an ambient light has no direction and casts no shadow")
+def _shadow_pairs(
+    scene: Scene, facts: list[_MeshFacts], light: DirectionalLight | PointLight | SpotLight
+) -> list[tuple[int, int]]:
+    """Every ``(caster, receiver)`` pair of mesh indices that may shadow (``a == b``: itself)."""
     pairs = []
     for a, fa in enumerate(facts):
         if fa.n_tris == 0:
@@ -655,6 +664,44 @@ def _plan_shadow(
                     pairs.append((a, b))
             elif _may_shadow(fa, fb, light):
                 pairs.append((a, b))
+    return pairs
+
+
+def _map_geometry(facts: list[_MeshFacts], light: DirectionalLight, casters: set[int]) -> tuple[float, float]:
+    """``(span, feature)``: the side a directional shadow map covers (the diameter of the sphere
+    around every vertex, as :func:`blinn_phong.shadows.light_shadow_maps` frames it) and the
+    thinnest caster seen from the light (:func:`_projected_width`), world units."""
+    world = np.concatenate([f.world for f in facts if len(f.world)])
+    centre = (world.min(axis=0) + world.max(axis=0)) / 2
+    span = 2.0 * float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
+    direction = np.asarray(light.direction, dtype=np.float64)
+    return span, min(_projected_width(facts[c], direction) for c in casters)
+
+
+def shadow_map_geometry(scene: Scene, index: int) -> tuple[float, float]:
+    """``(span, feature)`` the planner feeds the shadow-map models for directional light ``index``.
+
+    ``span``: side of the square the map covers (world units); ``feature``: the smallest
+    extent, seen from the light, of a mesh that may cast a shadow (world units). Used by
+    :mod:`benchmarks.error_models` to fit the models with the planner's own inputs.
+    """
+    light = scene.lights[index]
+    if not isinstance(light, DirectionalLight):
+        raise ValueError(f"index: expected a directional light, got {type(light).__name__}")
+    facts = [_mesh_facts(mesh) for mesh in scene.meshes]
+    casters = {a for a, _ in _shadow_pairs(scene, facts, light)}
+    if not casters:
+        raise ValueError("scene: no mesh casts a shadow from this light")
+    return _map_geometry(facts, light, casters)
+
+
+def _plan_shadow(
+    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict, frame: _Frame
+) -> Choice:
+    light = scene.lights[index]
+    if isinstance(light, AmbientLight):
+        return Choice("none", "an ambient light has no direction and casts no shadow")
+    pairs = _shadow_pairs(scene, facts, light)
     if not pairs:
         return Choice(
             "none",
@@ -716,11 +763,7 @@ def _plan_shadow(
             f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > "
             f"tolerance {tolerance:g}",
         )
-    world = np.concatenate([f.world for f in facts if len(f.world)])
-    centre = (world.min(axis=0) + world.max(axis=0)) / 2
-    span = 2.0 * float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
-    direction = np.asarray(light.direction, dtype=np.float64)
-    feature = min(_projected_width(facts[c], direction) for c in casters)
+    span, feature = _map_geometry(facts, light, casters)
     if span <= 0 or feature <= 0:
         return replace(
             exact,
