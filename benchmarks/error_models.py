@@ -15,8 +15,9 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   seen from the light, both as the planner computes them, ``R`` resolution); ``c`` the
   largest ratio on the calibration scene. Cost relative to ray tracing: ``t₀ + t₂·R²`` at
   the calibration scene's receiver count, and the frame-aware
-  ``(m₀ + m₂·R² + m_N·N)/(b₀ + b_N·N)`` fitted (least squares, in seconds) to the times
-  measured at several receiver counts ``N``.
+  ``(m₀ + m₂·R² + m_N·N)/(b₀·τ + b_N·N)`` fitted (least squares, in seconds) to the times
+  measured at several receiver counts ``N`` (``τ``: the scene's triangle count relative to
+  the calibration scene's, for the ray tracer's scene build).
 * ``shading`` — interior max error of flat/Gouraud/Phong against per-pixel shading of the
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
+from blinn_phong.planner import MapGeometry
 
 __all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save"]
 
@@ -74,7 +76,8 @@ def _fit_depth_peeling(data: dict) -> dict:
     }
 
 
-def _fit_shadow_map(data: dict, span: float, feature: float) -> dict:
+def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
+    span, feature = geometry.span, geometry.feature
     ratios, res, cost = [], [], []
     shadowed = data["shadowed_share"]
     for case in data["cases"]:
@@ -121,6 +124,7 @@ def _fit_shadow_map(data: dict, span: float, feature: float) -> dict:
                 "b0": float(b[0]),
                 "bn": float(b[1]),
                 "receivers": int(data["points"]),
+                "triangles": geometry.triangles,
             }
         )
     return model
@@ -162,7 +166,7 @@ def fit(tradeoffs: dict) -> dict:
         models["depth_peeling"] = _fit_depth_peeling(families["transparency"])
     if "shadows" in families:
         # the planner's own inputs: the map's span and the thinnest caster seen from the light
-        models["shadow_map"] = _fit_shadow_map(families["shadows"], *shadow_map_geometry(shadow_scene(), 0))
+        models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
     return models

@@ -78,7 +78,15 @@ from . import calibration
 from .normals import vertex_normals
 from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
 
-__all__ = ["DEFAULT_FRAME", "Choice", "Plan", "coordinate_tolerance", "plan", "shadow_map_geometry"]
+__all__ = [
+    "DEFAULT_FRAME",
+    "Choice",
+    "MapGeometry",
+    "Plan",
+    "coordinate_tolerance",
+    "plan",
+    "shadow_map_geometry",
+]
 
 _EPS = 1e-9
 
@@ -667,23 +675,35 @@ def _shadow_pairs(
     return pairs
 
 
-def _map_geometry(facts: list[_MeshFacts], light: DirectionalLight, casters: set[int]) -> tuple[float, float]:
-    """``(span, feature)``: the side a directional shadow map covers (the diameter of the sphere
-    around every vertex, as :func:`blinn_phong.shadows.light_shadow_maps` frames it) and the
-    thinnest caster seen from the light (:func:`_projected_width`), world units."""
+@dataclass(frozen=True)
+class MapGeometry:
+    """What the shadow-map models read of a scene, for one directional light (world units).
+
+    Attributes:
+        span: side of the square the map covers (the diameter of the sphere around every
+            vertex, as :func:`blinn_phong.shadows.light_shadow_maps` frames it).
+        feature: the thinnest caster seen from the light (:func:`_projected_width`).
+        triangles: triangles in the scene (what the ray tracer's scene build scales with).
+    """
+
+    span: float
+    feature: float
+    triangles: int
+
+
+def _map_geometry(facts: list[_MeshFacts], light: DirectionalLight, casters: set[int]) -> MapGeometry:
     world = np.concatenate([f.world for f in facts if len(f.world)])
     centre = (world.min(axis=0) + world.max(axis=0)) / 2
     span = 2.0 * float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
     direction = np.asarray(light.direction, dtype=np.float64)
-    return span, min(_projected_width(facts[c], direction) for c in casters)
+    feature = min(_projected_width(facts[c], direction) for c in casters)
+    return MapGeometry(span, feature, sum(f.n_tris for f in facts))
 
 
-def shadow_map_geometry(scene: Scene, index: int) -> tuple[float, float]:
-    """``(span, feature)`` the planner feeds the shadow-map models for directional light ``index``.
+def shadow_map_geometry(scene: Scene, index: int) -> MapGeometry:
+    """The :class:`MapGeometry` the planner feeds the shadow-map models for directional light ``index``.
 
-    ``span``: side of the square the map covers (world units); ``feature``: the smallest
-    extent, seen from the light, of a mesh that may cast a shadow (world units). Used by
-    :mod:`benchmarks.error_models` to fit the models with the planner's own inputs.
+    Used by :mod:`benchmarks.error_models` to fit the models with the planner's own inputs.
     """
     light = scene.lights[index]
     if not isinstance(light, DirectionalLight):
@@ -763,7 +783,8 @@ def _plan_shadow(
             f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > "
             f"tolerance {tolerance:g}",
         )
-    span, feature = _map_geometry(facts, light, casters)
+    geometry = _map_geometry(facts, light, casters)
+    span, feature = geometry.span, geometry.feature
     if span <= 0 or feature <= 0:
         return replace(
             exact,
@@ -771,7 +792,14 @@ def _plan_shadow(
             "(a pane edge-on), which no shadow-map resolution resolves",
         )
     pick = calibration.choose_shadow_map(
-        models, tolerance, span, feature, 1.0, weight, receivers=frame.receivers
+        models,
+        tolerance,
+        span,
+        feature,
+        1.0,
+        weight,
+        receivers=frame.receivers,
+        triangles=geometry.triangles,
     )
     if pick["method"] == "shadow_map":
         res, cost = pick["resolution"], pick["predicted_cost"]
