@@ -265,7 +265,7 @@ def frame_plan(
     scene: Scene,
     *,
     tolerance: float = 0.0,
-    shading: str = "phong",
+    shading: str = "auto",
     transparency: str | None = None,
     peel_layers: int | None = None,
     wboit_weight: str = "eq10",

@@ -617,7 +617,7 @@ def render(
     width: int,
     height: int,
     *,
-    shading: str = "phong",
+    shading: str = "auto",
     samples: int = 1,
     gl_compat: bool = False,
     cull_backfaces: bool = False,
@@ -642,7 +642,9 @@ def render(
         scene: the :class:`~blinn_phong.scene.Scene` (camera required).
         width: image width in pixels.
         height: image height in pixels.
-        shading: ``"flat"``, ``"gouraud"`` or ``"phong"`` (a mesh's ``shading`` overrides it).
+        shading: ``"auto"`` — the planner's per-mesh shading frequency (flat where it is exact,
+            else Phong at tolerance 0); or ``"flat"``, ``"gouraud"``, ``"phong"`` for every mesh
+            (a mesh's ``shading`` overrides it).
         samples: supersampling: k² samples per pixel on an ordered k×k grid; the result's
             alpha is the covered fraction.
         gl_compat: the OpenGL 2.1 fixed-function preset (see the module docstring).
@@ -665,7 +667,6 @@ def render(
         tolerance: the planner's tolerance in 8-bit steps (0: exact methods only; see
             :func:`blinn_phong.planner.plan` for the error each concern bounds).
 
-    ``shading="auto"`` uses the planner's per-mesh shading frequency (flat where it is exact).
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
 
