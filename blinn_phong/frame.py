@@ -40,7 +40,7 @@ from blinn_phong.oit import TRANSPARENCY_METHODS, transparency_pass
 from blinn_phong.planner import Choice, Plan, plan
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.render import FragmentShading, PreparedScene, resolve_nearest_buffers, resolve_samples
-from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
+from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene, SpotLight
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS, light_visibility
 from blinn_phong.transparency import kay_greenberg_transparency, transparent_fragment, washed_out_opacity
 
@@ -82,7 +82,9 @@ class ShadowOptions:
         slope_bias: shadow-map slope-scaled bias (None: 2.0), as ``glPolygonOffset``.
         kernel: percentage-closer filter, one of :data:`blinn_phong.shadows.PCF_KERNELS` (None: nearest).
         plane: ``(a, b, c, d)`` receiving plane for ``planar`` (None: the planner's).
-        samples: rays per point for ``soft`` (rounded to the nearest square m², m ≥ 1).
+        samples: rays per point for ``soft``; a stratified grid is square, so ``m×m`` rays with
+            ``m = round(√samples)`` are cast and, when that differs from ``samples``, the plan's
+            reason says so (e.g. 20 → 4×4 = 16).
         radius: half-side of the square area light for ``soft``, world units.
         offset: ray-origin offset along the normal for ``soft``, world units.
 
@@ -251,11 +253,10 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             )
         params["plane"] = plane
     elif method == "soft":
-        params = {
-            "samples_per_axis": max(1, round(math.sqrt(options.samples))),
-            "radius": options.radius,
-            "offset": options.offset,
-        }
+        m = max(1, round(math.sqrt(options.samples)))
+        params = {"samples_per_axis": m, "radius": options.radius, "offset": options.offset}
+        if m * m != options.samples:
+            reason = f"{reason}; {options.samples} samples asked, {m}×{m} = {m * m} cast (strata are square)"
     if method == planned.method and reason == planned.reason:
         return replace(planned, params=params)  # the planner's choice keeps its predictions
     return Choice(method, reason, params)
@@ -395,13 +396,19 @@ def _world_triangles(scene: Scene) -> np.ndarray:
 def _soft_visibility(
     light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
-    """Area-light visibility: a square of side ``2·radius`` at the light, facing the receivers' centroid."""
+    """Area-light visibility: a square of side ``2·radius`` at the light, facing along a spot light's
+    axis, else towards the centre of the scene's bounding box (never the camera's view)."""
     from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
 
     radius = float(params["radius"])  # type: ignore[arg-type]
     centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
-    axis = points.mean(axis=0) - centre
-    axis /= max(float(np.linalg.norm(axis)), 1e-12)
+    corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
+    axis = (corners.min(axis=0) + corners.max(axis=0)) / 2 - centre
+    if isinstance(light, SpotLight):
+        axis = np.array(light.direction, dtype=np.float64)
+    if float(np.linalg.norm(axis)) < 1e-12:
+        axis = np.array([0.0, 0.0, -1.0])  # the light at the scene's centre: any orientation
+    axis /= float(np.linalg.norm(axis))
     helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     u = np.cross(axis, helper)
     u /= np.linalg.norm(u)
