@@ -629,6 +629,7 @@ def render(
     shadows: object = None,
     fog: Fog | None = None,
     tolerance: float = 0.0,
+    layers: int | None = None,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
 
@@ -657,7 +658,7 @@ def render(
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
             alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,
             ``depth_peeling``, ``a_buffer`` (exact), ``weighted_blended``.
-        peel_layers: layers for depth peeling (None: the planner's, else 8).
+        peel_layers: layers for depth peeling (None: the planner's, else 8); older name of ``layers``.
         wboit_weight: weighted blended OIT weight, ``"eq10"`` (McGuire & Bavoil eq. 10) or ``"constant"``.
         shadows: ``None``/``"auto"`` (the planner's choice per light), a method of
             :data:`blinn_phong.frame.SHADOW_CHOICES` or a :class:`blinn_phong.frame.ShadowOptions`
@@ -666,6 +667,8 @@ def render(
         fog: a :class:`blinn_phong.frame.Fog` applied per fragment before blending, or None.
         tolerance: the planner's tolerance in 8-bit steps (0: exact methods only; see
             :func:`blinn_phong.planner.plan` for the error each concern bounds).
+        layers: layers for depth peeling, the name the plan's parameters use
+            (``result.plan.transparency.params["layers"]``); same as ``peel_layers``.
 
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
@@ -674,6 +677,13 @@ def render(
         :class:`RenderResult`, with ``plan`` the plan followed.
     """
     from blinn_phong import frame  # the effects stages build on this module's stages
+
+    if layers is not None:
+        if peel_layers is not None and peel_layers != layers:
+            raise ValueError(
+                f"layers, peel_layers: two names for one setting, got {layers!r} and {peel_layers!r}"
+            )
+        peel_layers = layers
 
     if shading != "auto":
         shading = _check_shading(shading)

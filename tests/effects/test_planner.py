@@ -452,3 +452,13 @@ def test_soft_shadows_do_not_depend_on_the_camera_and_say_how_many_rays(monkeypa
     assert choice.params["samples_per_axis"] == 4 and "20 samples asked, 4×4 = 16 cast" in choice.reason
     exact = _shadow_choice(light, ShadowOptions("soft", samples=16, radius=0.4), planned)
     assert "samples asked" not in exact.reason
+
+
+def test_render_takes_layers_as_the_plan_names_them_and_peel_layers_as_before():
+    scene = scene_of(crossing_quads(0.5), [LIGHT])
+    new = render(scene, 32, 32, transparency="depth_peeling", layers=2)
+    old = render(scene, 32, 32, transparency="depth_peeling", peel_layers=2)
+    assert new.plan.transparency.params == {"layers": 2} == old.plan.transparency.params
+    np.testing.assert_array_equal(new.rgba, old.rgba)  # the same call, deterministic
+    with pytest.raises(ValueError, match="layers, peel_layers"):
+        render(scene, 32, 32, transparency="depth_peeling", layers=2, peel_layers=3)
