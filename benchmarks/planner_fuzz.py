@@ -20,7 +20,7 @@ triangle (for any light) are left out of the comparison and counted (``terminato
 ``python -m benchmarks.planner_fuzz [N]`` runs seeds ``0 … N−1`` at tolerances 0, 2, 8 and 32
 and writes ``benchmarks/results/planner_fuzz.json``: per tolerance, how many cases exceeded
 the promise (more than 1 step at tolerance 0, more than T otherwise), by how much, and the
-per-concern choices.
+per-concern choices; and the time to plan a 100k-triangle scene (:func:`planning_time`).
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from blinn_phong.primitives import uv_sphere
 from blinn_phong.raster import rasterize
 from blinn_phong.render import prepare_scene
 
-__all__ = ["TOLERANCES", "check", "random_scene", "terminator_mask"]
+__all__ = ["TOLERANCES", "check", "planning_time", "random_scene", "sweep", "terminator_mask"]
 
 #: Tolerances (8-bit steps) every scene is planned and checked at.
 TOLERANCES = (0.0, 2.0, 8.0, 32.0)
@@ -262,16 +262,58 @@ def sweep(seeds: range, size: int = 40, progress: bool = True) -> dict:
     return {"size": size, "seeds": [seeds.start, seeds.stop], "summary": summary, "cases": rows}
 
 
+def planning_time(repeat: int = 5) -> dict:
+    """Seconds to plan a 100 172-triangle UV sphere (317×159) over a floor under a sun, against a
+    plain z-buffer frame of it at 640×360 measured in the same run (the peer).
+
+    ``cold``: new mesh arrays every call (the convexity test runs); ``warm``: the same arrays
+    (the object-space facts are cached by array identity, as for repeated renders of a scene).
+    """
+    from benchmarks._util import time_interleaved
+
+    p, t, n = uv_sphere(317, 159)
+    floor = bp.Mesh(*_box(np.array([3.0, 3.0, 0.05])), material=bp.Material(diffuse=(0.6, 0.6, 0.6)))
+    lift = np.eye(4)
+    lift[2, 3] = 1.2
+    camera = bp.Camera.perspective(
+        45.0, 16 / 9, 0.5, 40.0, view=bp.look_at((4, -5, 3), (0, 0, 0.8), (0, 0, 1))
+    )
+
+    def scene(fresh: bool) -> bp.Scene:
+        sphere = bp.Mesh(p.copy() if fresh else p, t, n, transform=lift)
+        return bp.Scene([floor, sphere], [bp.DirectionalLight((0.3, 0.2, -1.0))], camera)
+
+    warm_scene = scene(False)
+    times = time_interleaved(
+        {
+            "cold": lambda: bp.plan(scene(True)),
+            "warm": lambda: bp.plan(warm_scene),
+            "frame 640x360": lambda: bp.render(warm_scene, 640, 360, shadows="none"),
+        },
+        repeat=repeat,
+    )
+    frame = times["frame 640x360"]["median_s"]
+    return {
+        "triangles": int(len(t) + len(floor.triangles)),
+        "plan": str(bp.plan(warm_scene)),
+        **{k: {"median_s": v["median_s"], "ratio_to_frame": v["median_s"] / frame} for k, v in times.items()},
+    }
+
+
 def main(argv: list[str] | None = None) -> None:
-    """``python -m benchmarks.planner_fuzz [N]``: sweep seeds 0 … N−1 (default 200), write the JSON."""
+    """``python -m benchmarks.planner_fuzz [N]``: sweep seeds 0 … N−1 (default 200) and time the
+    planning of a 100k-triangle scene; ``python -m benchmarks.planner_fuzz planning`` only times."""
     args = sys.argv[1:] if argv is None else argv
-    n = int(args[0]) if args else 200
-    result = sweep(range(n))
     out = Path(__file__).resolve().parent / "results" / "planner_fuzz.json"
+    if args and args[0] == "planning":
+        result = json.loads(out.read_text()) if out.exists() else {}
+    else:
+        result = sweep(range(int(args[0]) if args else 200))
+    result["planning"] = planning_time()
     tmp = out.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n")
     tmp.replace(out)
-    print(json.dumps(result["summary"], indent=1))
+    print(json.dumps({k: result[k] for k in ("summary", "planning") if k in result}, indent=1))
 
 
 if __name__ == "__main__":

@@ -69,6 +69,7 @@ Shading frequency, per mesh (:mod:`blinn_phong.render`):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -150,6 +151,7 @@ class _ObjectFacts:
 
     used: np.ndarray  # (V,) bool: vertex used by a triangle
     good: np.ndarray  # (T,) bool: triangle of non-zero area
+    planar: bool  # every used vertex within the tolerance of the first good triangle's plane
     closed: bool
     convex: bool  # closed, every triangle on a supporting plane, counter-clockwise = outward
     flat_normals: bool
@@ -288,6 +290,9 @@ def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tu
     src, dst = keys // n, keys % n
     start = np.searchsorted(src, np.arange(len(points) + 1))
     corners = triangles[good].reshape(-1)
+    if len(corners) >= _COMPILED_STARS and _star_kernel() is not None:
+        highest = _star_kernel()(points, corners, unit, offset, start, dst, tol)  # type: ignore[operator]
+        return True, bool(highest <= tol)
     deg = start[corners + 1] - start[corners]
     total = int(deg.sum())
     owner = np.repeat(np.arange(len(corners)) // 3, deg)
@@ -295,6 +300,40 @@ def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tu
     neighbour = dst[first + np.arange(total)]
     height = np.einsum("ij,ij->i", points[neighbour], unit[owner]) - offset[owner]
     return True, bool(np.all(height <= tol))
+
+
+#: Corners from which the vertex-star test runs compiled (numba), when numba imports.
+_COMPILED_STARS = 60_000
+
+
+@functools.lru_cache(maxsize=1)
+def _star_kernel() -> object | None:
+    """The vertex-star test of :func:`_convex_surface` compiled with numba (None without numba):
+    the largest height of a neighbour of a corner above its triangle's plane, stopping at the
+    first one above ``tol``. Same arithmetic as the numpy path, one pass, no gathered copies."""
+    try:
+        import numba
+    except Exception:
+        return None
+
+    @numba.njit(cache=True)
+    def highest(points, corners, unit, offset, start, dst, tol):  # pragma: no cover - compiled
+        worst = -np.inf
+        for c in range(corners.shape[0]):
+            g = c // 3
+            v = corners[c]
+            for e in range(start[v], start[v + 1]):
+                w = dst[e]
+                h = (
+                    points[w, 0] * unit[g, 0] + points[w, 1] * unit[g, 1] + points[w, 2] * unit[g, 2]
+                ) - offset[g]
+                if h > worst:
+                    worst = h
+                    if worst > tol:
+                        return worst
+        return worst
+
+    return highest
 
 
 _OBJECT_FACTS: dict[tuple[int, int, int], tuple[Mesh, _ObjectFacts]] = {}
@@ -325,6 +364,11 @@ def _object_facts(mesh: Mesh) -> _ObjectFacts:
     else:
         fn, fn_len, good = np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=bool)
         closed = convex = False
+    planar = False
+    if good.any():
+        first = int(np.argmax(good))
+        n0 = fn[first] / fn_len[first]
+        planar = bool(np.all(np.abs((pos[used] - pos[tri[first, 0]]) @ n0) <= tol))
     if mesh.normals is None or not good.any():
         flat_normals = mesh.normals is None  # decided from planarity by the caller
     else:
@@ -332,15 +376,23 @@ def _object_facts(mesh: Mesh) -> _ObjectFacts:
         unit = fn[good] / fn_len[good, None]
         cos = np.einsum("tkc,tc->tk", nrm[tri[good]], unit)
         flat_normals = bool(np.all(cos >= 1 - 1e-9))
-    facts = _ObjectFacts(used, good, closed, convex, flat_normals)
+    facts = _ObjectFacts(used, good, planar, closed, convex, flat_normals)
     if len(_OBJECT_FACTS) >= 64:
         _OBJECT_FACTS.pop(next(iter(_OBJECT_FACTS)))
     _OBJECT_FACTS[key] = (mesh, facts)
     return facts
 
 
+_WORLD_FACTS: dict[tuple[int, int, int, bytes], _MeshFacts] = {}
+
+
 def _mesh_facts(mesh: Mesh) -> _MeshFacts:
+    """World-space facts of ``mesh``, cached by its arrays' identity and its transform."""
     obj = _object_facts(mesh)
+    key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals), mesh.transform.tobytes())
+    hit = _WORLD_FACTS.get(key)
+    if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
+        return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
     linear = mesh.transform[:3, :3]
     world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
     if len(world) == 0:
@@ -349,22 +401,22 @@ def _mesh_facts(mesh: Mesh) -> _MeshFacts:
     centre = (lo + hi) / 2
     radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
     plane = None
-    planar = False
-    good = np.flatnonzero(obj.good)
-    if len(good):
-        corner = (np.c_[mesh.positions[mesh.triangles[good[0]]], np.ones(3)] @ mesh.transform.T)[:, :3]
+    if obj.planar:  # an affine map keeps a plane: its world equation from the first good face
+        first = int(np.argmax(obj.good))
+        corner = (np.c_[mesh.positions[mesh.triangles[first]], np.ones(3)] @ mesh.transform.T)[:, :3]
         n0 = np.cross(corner[1] - corner[0], corner[2] - corner[0])
         n0 = n0 / np.linalg.norm(n0)
-        d0 = -float(n0 @ corner[0])
-        planar = bool(np.all(np.abs(world @ n0 + d0) <= coordinate_tolerance(world) + 1e-12 * radius))
-        if planar:
-            plane = np.r_[n0, d0]
+        plane = np.r_[n0, -float(n0 @ corner[0])]
     # an invertible affine map keeps convexity; a mirror (det < 0) turns the winding inwards
     convex = obj.convex and float(np.linalg.det(linear)) > 0
-    flat_normals = planar if mesh.normals is None else obj.flat_normals
-    return _MeshFacts(
-        world, mesh, len(mesh.triangles), centre, radius, planar, plane, obj.closed, convex, flat_normals
+    flat_normals = obj.planar if mesh.normals is None else obj.flat_normals
+    facts = _MeshFacts(
+        world, mesh, len(mesh.triangles), centre, radius, obj.planar, plane, obj.closed, convex, flat_normals
     )
+    if len(_WORLD_FACTS) >= 64:
+        _WORLD_FACTS.pop(next(iter(_WORLD_FACTS)))
+    _WORLD_FACTS[key] = facts
+    return facts
 
 
 def _screen_rect_and_depth(facts: _MeshFacts, scene: Scene) -> tuple[np.ndarray, tuple[float, float]]:
