@@ -5,6 +5,8 @@ Every message names the argument, the expectation and what was received.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -12,9 +14,17 @@ def float_array(value: object, name: str, shape: tuple[int | None, ...]) -> np.n
     """Return ``value`` as a finite float64 array of ``shape`` (``None`` = any length), or raise.
 
     Raises:
-        TypeError: not numeric.
+        TypeError: not numeric, or complex (the imaginary part would be dropped silently).
         ValueError: wrong shape, or NaN/Inf present (the count is reported).
     """
+    raw = value if isinstance(value, np.ndarray) else None
+    if raw is None:
+        try:
+            raw = np.asarray(value)
+        except (TypeError, ValueError):
+            raw = None
+    if raw is not None and raw.dtype.kind == "c":
+        raise TypeError(f"{name}: expected real numbers of shape {_fmt(shape)}, got dtype {raw.dtype}")
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -109,3 +119,66 @@ def _fmt(shape: tuple[int | None, ...]) -> str:
     return (
         "(" + ", ".join("N" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
     )
+
+
+#: Lower bound of the memory one frame sample needs: the z-buffer pass (float64 depth and
+#: int64 winner, 16 bytes) and the float32 per-sample buffers the resolve fills (RGBA 4, the
+#: ambient/diffuse/specular passes 3 + 3 + 3, normal 3, depth 1: 68 bytes).
+BYTES_PER_SAMPLE = 16 + 17 * 4
+#: Lower bound per pixel: the float32 output images (RGBA, three passes, normal, depth).
+BYTES_PER_PIXEL = 17 * 4
+
+
+def frame_bytes(width: int, height: int, samples: int) -> int:
+    """A lower bound of the bytes a ``width × height`` frame with ``samples`` per pixel allocates.
+
+    Counts only the buffers every render fills (:data:`BYTES_PER_SAMPLE` per sample,
+    :data:`BYTES_PER_PIXEL` per pixel); fragments, transparency layers and shadow maps
+    come on top.
+    """
+    return int(width) * int(height) * (int(samples) * BYTES_PER_SAMPLE + BYTES_PER_PIXEL)
+
+
+def physical_memory() -> int | None:
+    """Bytes of physical memory of this machine, or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _bytes_text(n: float) -> str:
+    for unit in ("bytes", "KB", "MB", "GB", "TB", "PB"):
+        if n < 1000 or unit == "PB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1000
+    raise AssertionError("unreachable")
+
+
+def check_frame_size(width: object, height: object, samples: object, memory: int | None = None) -> None:
+    """Refuse a frame whose buffers cannot fit in memory, before anything is allocated.
+
+    Args:
+        width: image width in pixels, a positive integer.
+        height: image height in pixels, a positive integer.
+        samples: samples per pixel, a positive integer (the rasterizer checks it is a square).
+        memory: bytes available; default: the machine's physical memory.
+
+    Raises:
+        ValueError: a size that is not a positive integer, or :func:`frame_bytes` above
+            ``memory``; the message names width, height, samples and the bytes needed.
+    """
+    for value, name in ((width, "width"), (height, "height")):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+            raise ValueError(f"{name}: expected a positive integer number of pixels, got {value!r}")
+    if isinstance(samples, bool) or not isinstance(samples, int | np.integer) or samples < 1:
+        raise ValueError(f"samples: expected a positive perfect square (1, 4, 9, 16, ...), got {samples!r}")
+    limit = physical_memory() if memory is None else memory
+    need = frame_bytes(width, height, samples)
+    if limit is not None and need > limit:
+        raise ValueError(
+            f"width, height, samples: a {width} × {height} frame with {samples} sample(s) per pixel "
+            f"needs at least {_bytes_text(need)} ({need} bytes: {BYTES_PER_SAMPLE} per sample + "
+            f"{BYTES_PER_PIXEL} per pixel) but this machine has {_bytes_text(limit)} of memory; "
+            "render fewer pixels or samples (or in tiles)"
+        )

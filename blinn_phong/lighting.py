@@ -15,7 +15,9 @@ with ``u ⊙ v = max(u·v, 0)``,
 * ``spec_i = n ⊙ h_i`` with ``h_i = normalize(l_i + v)`` (Blinn 1977, the OpenGL form) or
   ``spec_i = r_i ⊙ v`` with ``r_i = 2(n·l_i)n - l_i`` (Phong 1975);
 * ``v = -normalize(p)`` for a local viewer, ``(0, 0, 1)`` for a viewer at infinity;
-* ``att_i = 1/(k_c + k_l·d + k_q·d²)`` for positional lights (d = distance), 1 for directional;
+* ``att_i = 1/(k_c + k_l·d + k_q·d²)`` for positional lights, 1 for directional; ``d`` is the
+  **eye-space** distance from the point to the light, as in OpenGL (``‖VP_pli‖`` in eye
+  coordinates); it differs from the world-space distance when the view matrix scales or shears;
 * ``spot_i = (-l_i ⊙ s_i)^exponent`` if ``-l_i·s_i >= cos(cutoff)``, else 0; 1 for non-spots;
 * ``vis_i`` an optional per-point, per-light visibility in [0, 1] (shadows), 1 by default;
 * ``I_amb`` the :class:`~blinn_phong.scene.AmbientLight` radiances, ``a_cs`` the scene's global ambient.
@@ -399,8 +401,9 @@ def _light_direction(
     ``l = position.xyz`` for a directional light (``position.w = 0``, xyz already the unit
     direction towards it), else ``normalize(position.xyz/w − p)`` (zero at the light itself;
     plain length, as in :func:`_view_vector`); ``att = 1/(k_c + k_l·d + k_q·d²)`` with ``d``
-    the distance for positional lights, 1 for directional ones; ``spot = max(−l·s, 0)^exponent``
-    inside the cone ``−l·s ≥ cos(cutoff)``, 0 outside, 1 for non-spots (``cos_cutoff = −inf``).
+    the eye-space distance (p and the light are both in eye space) for positional lights,
+    1 for directional ones; ``spot = max(−l·s, 0)^exponent`` inside the cone
+    ``−l·s ≥ cos(cutoff)``, 0 outside, 1 for non-spots (``cos_cutoff = −inf``).
 
     ``position`` (4,), ``spot_direction`` (3,), ``cos_cutoff``, ``spot_exponent`` and
     ``attenuation`` (3,) are one light's rows of :class:`EyeLights`. Written once for both

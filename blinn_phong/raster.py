@@ -311,10 +311,12 @@ def _setup_triangles(
     if cull_backfaces:
         keep &= front
     # Screen bounding boxes in (fine) pixel indices: first/last pixel whose centre lies inside.
-    x0 = np.maximum(np.ceil(x.min(axis=1) - 0.5), 0).astype(np.int64)
-    x1 = np.minimum(np.floor(x.max(axis=1) - 0.5), fine_w - 1).astype(np.int64)
-    y0 = np.maximum(np.ceil(y.min(axis=1) - 0.5), 0).astype(np.int64)
-    y1 = np.minimum(np.floor(y.max(axis=1) - 0.5), fine_h - 1).astype(np.int64)
+    # Clipped to [-1, size] before the integer cast: window coordinates far outside the image
+    # (vertices near 1e30, say) give an empty box instead of an overflowing cast.
+    x0 = np.clip(np.ceil(x.min(axis=1) - 0.5), 0, fine_w).astype(np.int64)
+    x1 = np.clip(np.floor(x.max(axis=1) - 0.5), -1, fine_w - 1).astype(np.int64)
+    y0 = np.clip(np.ceil(y.min(axis=1) - 0.5), 0, fine_h).astype(np.int64)
+    y1 = np.clip(np.floor(y.max(axis=1) - 0.5), -1, fine_h - 1).astype(np.int64)
     keep &= (x0 <= x1) & (y0 <= y1)
 
     # Edge functions E_i(p) = a_i·px + b_i·py + c_i for the edge opposite vertex i, signed so the

@@ -36,11 +36,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from blinn_phong._feedback import start_feedback
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade, shade_many
 from blinn_phong.normals import face_normals, normalize, transform_normals, vertex_normals
 from blinn_phong.planner import Plan
 from blinn_phong.raster import Fragments, interpolate, visible_fragments
-from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
+from blinn_phong.scene import SHADINGS, Material, Mesh, Scene, prepare_render_inputs
 
 if TYPE_CHECKING:
     from blinn_phong.frame import Fog
@@ -653,7 +654,11 @@ def render(
         engine: ``"numpy"`` — the reference implementation; ``"numba"`` — the compiled
             visibility pass and lighting kernel (same results to ~1e-12); ``"auto"`` —
             numba when it can be imported, else numpy.
-        progress: optional ``callback(stage, fraction_done)`` called as stages finish.
+        progress: ``callback(stage, fraction_done)`` called as stages finish; ``None`` (default)
+            prints ``render: <stage> <percent>`` to stderr, if it is a terminal, once the render
+            has run 3 s; ``True`` from the start, ``False`` never (:mod:`blinn_phong._feedback`).
+            When numba compiles the kernels (once per machine) ``compiling kernels (once per
+            machine)…`` is printed to stderr.
         transparency: ``None``/``"auto"`` (the planner's choice) or one of
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
             alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,
@@ -691,6 +696,9 @@ def render(
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    # Size/memory, gl_compat light model, meshes without triangles dropped (blinn_phong/scene.py).
+    scene = prepare_render_inputs(scene, width, height, samples, gl_compat)
+    progress = start_feedback(engine, progress)  # compile notice, progress lines (blinn_phong/_feedback.py)
     if fog is not None and not isinstance(fog, frame.Fog):
         raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")
     if gl_compat:

@@ -13,6 +13,31 @@ implementation unchanged):
   to eye space with the view matrix, as ``glLight`` does with the modelview current
   at the call.
 
+OpenGL equivalents (what ``gl_compat=True`` and the Mesa tests hand to OpenGL 2.1):
+
+=======================================  ===============================================
+here                                     OpenGL 2.1 fixed function
+=======================================  ===============================================
+``DirectionalLight(direction=d)``        ``GL_POSITION = (−d, 0)``: GL stores the vector
+                                         *towards* the light; ``d`` is the direction the
+                                         light travels
+``PointLight(position=p)``               ``GL_POSITION = (p, 1)``
+``SpotLight(direction=s)``               ``GL_SPOT_DIRECTION = s`` (same sense in both)
+attenuation distance ``d``               eye-space distance, as GL (§2.14.1 ``‖VP_pli‖``)
+``LightModel(local_viewer=True)``        ``GL_LIGHT_MODEL_LOCAL_VIEWER = GL_TRUE``; GL's
+  (the default here)                     default is ``GL_FALSE``: pass
+                                         ``local_viewer=False`` for GL's default
+``LightModel(specular="blinn")``         the only GL form; ``"phong"`` has no fixed-
+                                         function equivalent and ``gl_compat`` refuses it
+``LightModel(two_sided=...)``            ``GL_LIGHT_MODEL_TWO_SIDE``
+``LightModel(separate_specular=...)``    ``GL_LIGHT_MODEL_COLOR_CONTROL =
+                                         GL_SEPARATE_SPECULAR_COLOR``
+``Scene(ambient=a)``                     ``GL_LIGHT_MODEL_AMBIENT = (a, 1)`` (default 0.2)
+``Material`` fields                      ``glMaterial`` (shininess in [0, 128] under
+                                         ``gl_compat``)
+``Mesh`` drawn in order                  ``glDepthFunc(GL_LESS)``: ties keep the earlier
+=======================================  ===============================================
+
 Every class validates on construction and raises ``ValueError``/``TypeError``
 naming the field, the expectation and the value received.
 """
@@ -25,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from blinn_phong._checks import colour3, float_array, number, vector3
+from blinn_phong._checks import check_frame_size, colour3, float_array, number, vector3
 
 __all__ = [
     "AmbientLight",
@@ -41,6 +66,7 @@ __all__ = [
     "look_at",
     "orthographic_matrix",
     "perspective_matrix",
+    "prepare_render_inputs",
 ]
 
 Colour = tuple[float, float, float]
@@ -181,6 +207,11 @@ class AmbientLight:
 class DirectionalLight:
     """A light at infinity shining along ``direction`` (world space; OpenGL position w = 0).
 
+    ``direction`` is the direction the light *travels* (from the light into the scene):
+    the default ``(0, 0, -1)`` shines down -Z. OpenGL stores the opposite vector, the
+    direction *towards* the light, as ``GL_POSITION = (x, y, z, 0)``; the GL equivalent
+    of ``DirectionalLight(direction=d)`` is ``glLightfv(GL_POSITION, (-d, 0))``.
+
     Colours: either ``color`` × ``intensity`` for diffuse and specular (ambient 0),
     or explicit ``ambient``/``diffuse``/``specular`` as ``glLight`` takes them
     (an explicit value overrides the one derived from ``color``).
@@ -210,7 +241,14 @@ class DirectionalLight:
 
 @dataclass(frozen=True, init=False)
 class PointLight:
-    """A positional light with attenuation ``1 / (kc + kl·d + kq·d²)`` (d = distance, world units).
+    """A positional light with attenuation ``1 / (kc + kl·d + kq·d²)``.
+
+    ``position`` is given in world space and moved to eye space by the camera's view
+    matrix (as ``glLight`` does with the current modelview). ``d`` is the **eye-space**
+    distance between the lit point and the light, as in OpenGL (§2.14.1, ``‖VP_pli‖``
+    in eye coordinates); it equals the world-space distance only when the view matrix
+    is rigid (rotation and translation), and differs under a scaled or sheared view.
+    OpenGL equivalent: ``GL_POSITION = (position, 1)``, ``GL_CONSTANT_ATTENUATION`` etc.
 
     Colours as for :class:`DirectionalLight`. ``constant``, ``linear``,
     ``quadratic`` must be >= 0 and not all zero (OpenGL 2.1 §2.14.1, eq. 2.4).
@@ -255,7 +293,8 @@ class SpotLight:
     Inside the cone (angle between the light→point direction and ``direction``
     at most ``cutoff`` degrees) the factor is ``cos(angle)^exponent``; outside it
     is 0 (OpenGL 2.1 §2.14.1). ``cutoff`` is in (0, 90] degrees, ``exponent`` >= 0.
-    Attenuation and colours as for :class:`PointLight`.
+    ``direction`` is where the spot points, the same sense as ``GL_SPOT_DIRECTION``.
+    Attenuation (eye-space distance) and colours as for :class:`PointLight`.
     """
 
     position: tuple[float, float, float]
@@ -312,11 +351,15 @@ class LightModel:
     Attributes:
         specular: ``"blinn"`` — ``(n·h)^s`` with the half vector (Blinn 1977; the
             OpenGL equation), or ``"phong"`` — ``(r·v)^s`` with the mirror
-            reflection of the light direction (Phong 1975).
-        local_viewer: True: the view vector is ``-normalize(p_eye)`` (the eye at the
-            eye-space origin); False: the viewer is at infinity, ``v = (0, 0, 1)``
-            (``GL_LIGHT_MODEL_LOCAL_VIEWER``). With an orthographic camera the true
-            view direction is (0, 0, 1) everywhere, i.e. ``local_viewer=False``.
+            reflection of the light direction (Phong 1975). Fixed-function OpenGL
+            has no Phong form, so ``render(..., gl_compat=True)`` refuses ``"phong"``.
+        local_viewer: True (the default here): the view vector is ``-normalize(p_eye)``
+            (the eye at the eye-space origin), correct for a perspective camera;
+            False: the viewer is at infinity, ``v = (0, 0, 1)``. OpenGL's
+            ``GL_LIGHT_MODEL_LOCAL_VIEWER`` defaults to **False**: to match a GL
+            program that never sets it, pass ``local_viewer=False`` (``gl_compat`` does
+            not change the field for you). With an orthographic camera the true view
+            direction is (0, 0, 1) everywhere, i.e. ``local_viewer=False``.
         two_sided: light back faces with the flipped normal and the mesh's
             ``back_material`` (``GL_LIGHT_MODEL_TWO_SIDE``). When False back faces
             are lit with the front normal, as OpenGL does.
@@ -339,6 +382,23 @@ class LightModel:
 
 
 # --------------------------------------------------------------------------- mesh
+
+#: The largest coordinate magnitude a mesh may have: float32's maximum, the range of
+#: OpenGL vertex data. Beyond it squared lengths and cross products of edges overflow
+#: float64 in the normal and distance computations.
+MAX_COORDINATE = float(np.finfo(np.float32).max)
+
+
+def _check_coordinate_range(values: np.ndarray, name: str) -> None:
+    """Refuse coordinates whose magnitude exceeds :data:`MAX_COORDINATE` (finite ones only reach here)."""
+    if values.size:
+        largest = float(np.max(np.abs(values)))
+        if largest > MAX_COORDINATE:
+            count = int(np.count_nonzero(np.abs(values) > MAX_COORDINATE))
+            raise ValueError(
+                f"{name}: expected coordinates within ±{MAX_COORDINATE:.4g} (float32's range, what "
+                f"OpenGL vertex data can hold); got {count} beyond it, largest magnitude {largest:.4g}"
+            )
 
 
 @dataclass(frozen=True, eq=False)
@@ -374,6 +434,7 @@ class Mesh:
 
     def __post_init__(self) -> None:
         positions = float_array(self.positions, "Mesh.positions", (None, 3))
+        _check_coordinate_range(positions, "Mesh.positions")
         tri = np.asarray(self.triangles)
         if tri.ndim != 2 or tri.shape[1] != 3:
             raise ValueError(f"Mesh.triangles: expected shape (T, 3), got shape {tri.shape}")
@@ -393,10 +454,14 @@ class Mesh:
                 self, "normals", float_array(self.normals, "Mesh.normals", (len(positions), 3))
             )
         transform = float_array(self.transform, "Mesh.transform", (4, 4))
+        _check_coordinate_range(transform, "Mesh.transform")
         if abs(np.linalg.det(transform[:3, :3])) < 1e-300:
             raise ValueError(
                 "Mesh.transform: the upper 3×3 must be invertible (normals use its inverse-transpose)"
             )
+        if len(positions):
+            world = positions @ transform[:3, :3].T + transform[:3, 3]
+            _check_coordinate_range(world, "Mesh.positions in world space (transform applied)")
         object.__setattr__(self, "transform", transform)
         if not isinstance(self.material, Material):
             raise TypeError(f"Mesh.material: expected a Material, got {type(self.material).__name__}")
@@ -554,8 +619,9 @@ class Scene:
 
     Attributes:
         meshes: the meshes, drawn in order (ties in depth go to the earlier one,
-            as OpenGL's ``GL_LESS`` does).
-        lights: any mix of the four light types.
+            as OpenGL's ``GL_LESS`` does); a single :class:`Mesh` is accepted. A mesh
+            without vertices or triangles (Blender scenes have them) renders as nothing.
+        lights: any mix of the four light types; a single light is accepted.
         camera: the camera (required).
         ambient: the global ambient ``a_cs`` (``GL_LIGHT_MODEL_AMBIENT``, default 0.2 grey).
         light_model: see :class:`LightModel`.
@@ -568,11 +634,13 @@ class Scene:
     light_model: LightModel = field(default_factory=LightModel)
 
     def __post_init__(self) -> None:
-        meshes = tuple(self.meshes)
+        meshes = _as_tuple(self.meshes, (Mesh,), "Scene.meshes", "a Mesh or a sequence of Meshes")
         for i, m in enumerate(meshes):
             if not isinstance(m, Mesh):
                 raise TypeError(f"Scene.meshes[{i}]: expected a Mesh, got {type(m).__name__}")
-        lights = tuple(self.lights)
+        lights = _as_tuple(
+            self.lights, LIGHT_TYPES, "Scene.lights", "a light or a sequence of lights (may be empty)"
+        )
         for i, light in enumerate(lights):
             if not isinstance(light, LIGHT_TYPES):
                 raise TypeError(
@@ -590,3 +658,48 @@ class Scene:
         object.__setattr__(self, "meshes", meshes)
         object.__setattr__(self, "lights", lights)
         object.__setattr__(self, "ambient", colour3(self.ambient, "Scene.ambient"))
+
+
+def _as_tuple(value: object, single: tuple[type, ...], name: str, expected: str) -> tuple:
+    """``(value,)`` for one item of the ``single`` types, else ``tuple(value)``; TypeError names ``name``."""
+    if isinstance(value, single):
+        return (value,)
+    if isinstance(value, str | bytes) or not hasattr(value, "__iter__"):
+        raise TypeError(f"{name}: expected {expected}, got {type(value).__name__}")
+    return tuple(value)
+
+
+def prepare_render_inputs(
+    scene: Scene, width: object, height: object, samples: object, gl_compat: bool
+) -> Scene:
+    """Checks :func:`blinn_phong.render` runs before any work; returns the scene to render.
+
+    * ``width``, ``height``, ``samples``: positive integers whose frame fits in memory
+      (:func:`blinn_phong._checks.check_frame_size`: refused up front, the message names
+      the three and the bytes needed, instead of a ``MemoryError`` or a long stall).
+    * ``gl_compat=True``: the light model must be one fixed-function OpenGL has
+      (``specular="blinn"``), as shininess must lie in [0, 128].
+    * Meshes without triangles (no vertices, or vertices only) are left out: they cover
+      no pixel and cast no shadow. The plan then numbers the remaining meshes.
+
+    Raises:
+        TypeError: ``scene`` is not a :class:`Scene`.
+        ValueError: as above, naming the argument.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    check_frame_size(width, height, samples)
+    if gl_compat and scene.light_model.specular != "blinn":
+        raise ValueError(
+            "scene.light_model.specular: OpenGL's fixed-function lighting has only the Blinn half-vector "
+            f"form (gl_compat=True needs 'blinn'), got {scene.light_model.specular!r}"
+        )
+    if all(len(m.triangles) for m in scene.meshes):
+        return scene
+    return Scene(
+        tuple(m for m in scene.meshes if len(m.triangles)),
+        scene.lights,
+        scene.camera,
+        scene.ambient,
+        scene.light_model,
+    )

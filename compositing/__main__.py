@@ -1,6 +1,6 @@
 """Command line: composite two image files.
 
-``python -m compositing OP SRC DST -o OUT [--factor F]``
+``python -m compositing OP SRC DST -o OUT [--factor F]`` (or ``--operator OP SRC DST ...``)
     ``OUT = composite(SRC, DST, OP, factor=F)``, e.g. ``src_over a.png b.png -o c.exr``.
 
 ``python -m compositing blend SRC DST -o OUT --src-factor S --dst-factor D [--equation E] ...``
@@ -10,15 +10,20 @@
     the operators with their (Fa, Fb) factors.
 
 Files are read and written with :mod:`compositing.io` (8/16-bit files are sRGB with
-straight alpha, EXR is linear premultiplied). Exit status 2 with a message on a
-usage error (unknown operator: the valid names and the closest match), 1 on bad
-input data.
+straight alpha, EXR is linear premultiplied; JPEG and HDR need ``--flatten``). The
+operator is positional or given as ``--operator`` (alias ``--op``), the spelling the
+other command lines of the project use. On success the command prints
+``wrote <path>``. Exit status, as for every command line of the project: 0 success,
+1 a check on the data failed (an input cannot be read, the result does not fit the
+output format, ...; the message says which), 2 usage error (unknown operator: the
+valid names and the closest match).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 from .factors import ALL_OPERATORS, describe
@@ -28,25 +33,42 @@ from .operators import composite, resolve_operator
 __all__ = ["main"]
 
 
-def _io_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("src", type=Path, help="source image (A, the fragment)")
-    parser.add_argument("dst", type=Path, help="destination image (B, the framebuffer)")
+def _io_options(parser: argparse.ArgumentParser, *, images: bool = True) -> None:
+    if images:
+        parser.add_argument("src", type=Path, help="source image (A, the fragment)")
+        parser.add_argument("dst", type=Path, help="destination image (B, the framebuffer)")
     parser.add_argument("-o", "--out", type=Path, required=True, help="output image (.exr, .png, .tif, ...)")
     parser.add_argument("--bits", type=int, default=8, choices=(8, 16), help="bits for PNG/TIFF output")
     parser.add_argument(
         "--clip", action="store_true", help="clip to [0, 1] when an 8/16-bit file cannot hold the result"
+    )
+    parser.add_argument(
+        "--flatten",
+        action="store_true",
+        help="for JPEG or HDR output (no alpha channel): store the image over black",
     )
 
 
 def _composite_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m compositing",
+        usage="python -m compositing OP SRC DST -o OUT [options]\n"
+        "       python -m compositing --operator OP SRC DST -o OUT [options]\n"
+        "       python -m compositing blend SRC DST -o OUT --src-factor S --dst-factor D [options]\n"
+        "       python -m compositing list",
         description="Composite SRC with DST by a Porter-Duff (or disjoint/conjoint) operator.",
-        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators). Operators: "
-        + ", ".join(ALL_OPERATORS),
+        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators). Exit status: 0 success, "
+        "1 a check on the data failed, 2 usage error. Operators: " + ", ".join(ALL_OPERATORS),
     )
-    parser.add_argument("op", help="operator name, e.g. src_over")
-    _io_options(parser)
+    parser.add_argument(
+        "images",
+        nargs="+",
+        metavar="OP SRC DST",
+        help="operator name (e.g. src_over) unless --operator is given, then the source image "
+        "(A, the fragment) and the destination image (B, the framebuffer)",
+    )
+    parser.add_argument("--operator", "--op", dest="operator", default=None, help="operator name")
+    _io_options(parser, images=False)
     parser.add_argument("--factor", type=float, default=1.0, help="mix with DST, in [0, 1] (default 1)")
     return parser
 
@@ -103,34 +125,56 @@ def _blend(argv: list[str]) -> None:
         if "blend factor" in str(exc) or "equation" in str(exc) or "target" in str(exc):
             parser.error(str(exc))
         raise
-    write_image(args.out, result, bits=args.bits, clip=args.clip)
+    _write(args, result)
+
+
+def _write(args: argparse.Namespace, result) -> None:
+    write_image(args.out, result, bits=args.bits, clip=args.clip, flatten=args.flatten)
+    print(f"wrote {args.out}")
 
 
 def _composite(argv: list[str]) -> None:
     parser = _composite_parser()
     args = parser.parse_args(argv)
+    images = list(args.images)
+    if args.operator is None:
+        if len(images) != 3:
+            parser.error(f"expected OP SRC DST (or --operator OP SRC DST), got {images}")
+        op = images.pop(0)
+    else:
+        if len(images) != 2:
+            parser.error(f"expected SRC DST after --operator, got {images}")
+        op = args.operator
     try:
-        spec = resolve_operator(args.op)
+        spec = resolve_operator(op)
     except ValueError as exc:
         parser.error(str(exc))
-    result = composite(read_image(args.src), read_image(args.dst), spec, factor=args.factor)
-    write_image(args.out, result, bits=args.bits, clip=args.clip)
+    src, dst = (Path(p) for p in images)
+    result = composite(read_image(src), read_image(dst), spec, factor=args.factor)
+    _write(args, result)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the command line; returns the exit status (usage errors exit with 2 via argparse)."""
+    """Run the command line; returns the exit status: 0 ok, 1 a data check failed, 2 usage (via argparse)."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    try:
-        if argv[:1] == ["list"]:
-            _list()
-        elif argv[:1] == ["blend"]:
-            _blend(argv[1:])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)  # e.g. which channels of a file were read
+        try:
+            if argv[:1] == ["list"]:
+                _list()
+            elif argv[:1] == ["blend"]:
+                _blend(argv[1:])
+            else:
+                _composite(argv)
+        except (ValueError, TypeError, OSError) as exc:
+            status = 1
+            print(f"error: {exc}", file=sys.stderr)
         else:
-            _composite(argv)
-    except (ValueError, TypeError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    return 0
+            status = 0
+        finally:
+            for warning in caught:
+                print(f"warning: {warning.message}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Composite the two bundled sample images with every operator and write the results.
 
-``python -m compositing.demo --out DIR`` reads ``blend_files/images/sample_a.png``
+``python -m compositing.demo [--out DIR]`` (default ``out/demo-compositing`` under the
+current directory; the absolute path is printed before and after) reads ``blend_files/images/sample_a.png``
 (A, the source) and ``sample_b.png`` (B, the destination), computes
 ``composite(A, B, op)`` for every operator, and writes for each:
 
@@ -16,12 +17,13 @@ colour, time).
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from ._atomic import write_json_atomic
 from .factors import ALL_OPERATORS, describe
 from .io import read_image, write_image
 from .operators import composite
@@ -113,18 +115,39 @@ def run_demo(out: Path, a_path: Path | None = None, b_path: Path | None = None) 
             }
         )
     write_image(out / "contact_sheet.png", contact_sheet(results), clip=True)
-    (out / "results.json").write_text(json.dumps(rows, indent=1) + "\n")
+    write_json_atomic(out / "results.json", rows, indent=1)
     return rows
 
 
-def main(argv: list[str] | None = None) -> None:
-    """Command-line entry: ``python -m compositing.demo --out DIR``."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output directory")
+#: Where ``python -m compositing.demo`` writes without ``--out`` (relative to the current directory).
+DEFAULT_OUT = Path("out") / "demo-compositing"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry: ``python -m compositing.demo [--out DIR]``; returns the exit status.
+
+    Exit status: 0 success, 1 an input image could not be read or an output not
+    written (the message says which), 2 usage error.
+    """
+    parser = argparse.ArgumentParser(
+        prog="python -m compositing.demo", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=DEFAULT_OUT,
+        help=f"output directory (default: {DEFAULT_OUT} under the current directory)",
+    )
     parser.add_argument("--a", type=Path, default=None, help="source image A (default: bundled sample)")
     parser.add_argument("--b", type=Path, default=None, help="destination image B (default: bundled sample)")
     args = parser.parse_args(argv)
-    rows = run_demo(args.out, args.a, args.b)
+    out = args.out.resolve()
+    print(f"writing to {out}")
+    try:
+        rows = run_demo(out, args.a, args.b)
+    except (ValueError, TypeError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
     print(f"| {'operator':<18} | {'Fa':<24} | {'Fb':<24} | mean α | ms    |")
     print(f"|{'-' * 20}|{'-' * 26}|{'-' * 26}|--------|-------|")
     for row in rows:
@@ -132,10 +155,9 @@ def main(argv: list[str] | None = None) -> None:
             f"| {row['operator']:<18} | {row['Fa']:<24} | {row['Fb']:<24} | {row['mean_alpha']:.4f} "
             f"| {row['ms']:5.2f} |"
         )
-    print(
-        f"wrote {len(rows)} operators (.exr linear, .png sRGB), contact_sheet.png, results.json to {args.out}"
-    )
+    print(f"wrote {len(rows)} operators (.exr linear, .png sRGB), contact_sheet.png, results.json to {out}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -11,9 +11,22 @@ colour-science's (IEC 61966-2-1:1999, ``colour.models.eotf_sRGB`` and
   unpremultiplies (α = 0 keeps its colour), encodes and quantises (round to
   nearest). OpenImageIO's own alpha association is turned off
   (``oiio:UnassociatedAlpha``) so it never premultiplies encoded values.
-* A file without alpha gets α = 1 (opaque), not 0. Grey files become grey RGB.
-* JPEG has no alpha: writing one stores the premultiplied colour (the image over
-  black) and needs ``alpha`` to be dropped explicitly with ``flatten=True``.
+* Channels are chosen by name, never guessed from their count. Alpha is the
+  file's declared alpha channel (OpenImageIO's ``spec.alpha_channel``) or a
+  channel named ``A``/``alpha``; without one alpha is 1 (opaque), not 0. Colour is
+  the channels named ``R``, ``G``, ``B`` (or ``layer.R`` ...); failing that, a single remaining channel
+  is grey and two or more fill R, G (and B) in file order, B = 0 when only two.
+  Whenever channels are ignored or not named R, G, B (an ``R,G,B,Z`` EXR, a
+  ``U,V`` file) :func:`read_image` warns (``UserWarning``) saying which channels
+  it read; :func:`image_channels` gives the same mapping without reading pixels.
+* JPEG and Radiance HDR (RGBE) have no alpha: writing one stores the premultiplied
+  colour (the image over black) and needs alpha to be dropped explicitly with
+  ``flatten=True``. RGBE cannot hold negative colour either (refused unless
+  ``clip=True``).
+* Every write is atomic (:mod:`compositing._atomic`): the file is written next to
+  the target under a temporary name and renamed over it only after a successful
+  close, so a failed write (full disk, bad value, killed process) leaves an
+  existing file byte-for-byte intact.
 * Float files are written and read as they are, even with alpha above 1 (the
   result of ``plus``, say). Values an integer file cannot hold (alpha outside
   [0, 1], straight colour above 1 or below 0) raise a ValueError unless
@@ -23,14 +36,24 @@ colour-science's (IEC 61966-2-1:1999, ``colour.models.eotf_sRGB`` and
 from __future__ import annotations
 
 import os
+import warnings
+from dataclasses import dataclass
 
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the name OpenImageIO documents)
 
+from ._atomic import atomic_path
 from .alpha import premultiply, unpremultiply
 from .validate import as_rgba, check_alpha_range
 
-__all__ = ["FLOAT_EXTENSIONS", "INTEGER_EXTENSIONS", "read_image", "write_image"]
+__all__ = [
+    "FLOAT_EXTENSIONS",
+    "INTEGER_EXTENSIONS",
+    "ChannelMap",
+    "image_channels",
+    "read_image",
+    "write_image",
+]
 
 
 def _srgb():
@@ -46,31 +69,115 @@ FLOAT_EXTENSIONS = (".exr", ".hdr")
 INTEGER_EXTENSIONS = (".png", ".tif", ".tiff", ".jpg", ".jpeg")
 
 
-def _to_rgba(pixels: np.ndarray, alpha_channel: int, path: str) -> tuple[np.ndarray, bool]:
-    """Arrange ``(H, W, C)`` pixels as RGB + A; returns the array and whether the file had alpha."""
-    h, w, c = pixels.shape
-    has_alpha = 0 <= alpha_channel < c or c in (2, 4)
-    a_index = alpha_channel if 0 <= alpha_channel < c else (c - 1 if c in (2, 4) else None)
-    colour_channels = [i for i in range(c) if i != a_index]
-    if len(colour_channels) == 1:
-        rgb = np.repeat(pixels[..., colour_channels[0] : colour_channels[0] + 1], 3, axis=-1)
-    elif len(colour_channels) >= 3:
-        rgb = pixels[..., colour_channels[:3]]
+@dataclass(frozen=True)
+class ChannelMap:
+    """Which file channels :func:`read_image` reads as R, G, B and A.
+
+    Attributes:
+        names: the file's channel names, in file order.
+        rgb: three channel indices for R, G, B; ``-1`` means 0 (B of a two-channel file).
+        alpha: the alpha channel's index, or None (alpha = 1).
+        ignored: indices of channels not read.
+        guessed: True when the colour channels are not named R, G, B (taken by position).
+    """
+
+    names: tuple[str, ...]
+    rgb: tuple[int, int, int]
+    alpha: int | None
+    ignored: tuple[int, ...]
+    guessed: bool
+
+    def describe(self) -> str:
+        """One line, e.g. ``"R←R, G←G, B←B; alpha = 1 (no alpha channel); ignored: Z"``."""
+        parts = [
+            f"{target}←{self.names[i] if i >= 0 else '0'}" for target, i in zip("RGB", self.rgb, strict=True)
+        ]
+        text = ", ".join(parts) + "; "
+        if self.alpha is not None:
+            text += f"A←{self.names[self.alpha]}"
+        else:
+            text += "alpha = 1 (no alpha channel declared)"
+        if self.ignored:
+            text += "; ignored: " + ", ".join(self.names[i] for i in self.ignored)
+        return text
+
+
+def _channel_map(names: tuple[str, ...], declared_alpha: int, path: str) -> ChannelMap:
+    """The channel mapping of a file with channel ``names`` and OIIO's ``alpha_channel``."""
+    c = len(names)
+    lower = [n.rsplit(".", 1)[-1].lower() for n in names]  # "Combined.R" (a layered EXR) counts as R
+    if 0 <= declared_alpha < c:
+        alpha: int | None = declared_alpha
     else:
-        raise ValueError(f"path: cannot read {path!r}: expected 1-4 channels (grey, RGB, ±alpha), got {c}")
-    alpha = pixels[..., a_index : a_index + 1] if a_index is not None else np.ones((h, w, 1), pixels.dtype)
-    return np.concatenate([rgb, alpha], axis=-1).astype(np.float32), has_alpha
+        named = [i for i, n in enumerate(lower) if n in ("a", "alpha")]
+        alpha = named[0] if named else None
+    rest = [i for i in range(c) if i != alpha]
+    by_name = {n: i for i, n in enumerate(lower) if i != alpha}
+    guessed = False
+    if all(k in by_name for k in ("r", "g", "b")):
+        rgb = (by_name["r"], by_name["g"], by_name["b"])
+    elif len(rest) == 1:
+        rgb = (rest[0],) * 3
+        guessed = lower[rest[0]] not in ("y", "l", "grey", "gray", "luminance", "i")
+    elif len(rest) >= 2:
+        rgb = (rest[0], rest[1], rest[2] if len(rest) > 2 else -1)
+        guessed = True
+    else:
+        raise ValueError(
+            f"path: cannot read {path!r}: no colour channel among {list(names)} (only alpha)"
+        )
+    used = {i for i in rgb if i >= 0} | ({alpha} if alpha is not None else set())
+    ignored = tuple(i for i in range(c) if i not in used)
+    return ChannelMap(tuple(names), rgb, alpha, ignored, guessed)
+
+
+def _channel_names(spec) -> tuple[str, ...]:
+    names = tuple(spec.channelnames)
+    if len(names) != spec.nchannels:  # a format without names: OIIO's defaults
+        names = tuple(f"channel{i}" for i in range(spec.nchannels))
+    return names
+
+
+def image_channels(path: str | os.PathLike) -> ChannelMap:
+    """The channels :func:`read_image` would read from ``path`` as R, G, B, A (no pixels read).
+
+    Raises:
+        OSError: the file cannot be opened.
+        ValueError: the file has no colour channel.
+    """
+    path = os.fspath(path)
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise OSError(f"path: cannot open {path!r}: {oiio.geterror()}")
+    try:
+        spec = inp.spec()
+    finally:
+        inp.close()
+    return _channel_map(_channel_names(spec), spec.alpha_channel, path)
+
+
+def _to_rgba(pixels: np.ndarray, mapping: ChannelMap) -> np.ndarray:
+    """Arrange ``(H, W, C)`` pixels as float32 RGBA following ``mapping``."""
+    h, w, _ = pixels.shape
+    out = np.empty((h, w, 4), np.float32)
+    for k, i in enumerate(mapping.rgb):
+        out[..., k] = pixels[..., i] if i >= 0 else 0.0
+    out[..., 3] = pixels[..., mapping.alpha] if mapping.alpha is not None else 1.0
+    return out
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read an image file as linear premultiplied float32 RGBA ``(H, W, 4)``, row 0 at the top.
 
     8/16-bit files are decoded from sRGB (straight alpha) and premultiplied;
-    float files are taken as linear premultiplied. Missing alpha becomes 1.
+    float files are taken as linear premultiplied. Channels are chosen by name (module
+    docstring): alpha is the declared alpha channel or one named ``A``/``alpha``, else 1;
+    a ``UserWarning`` says which channels were read when some are ignored or the colour
+    channels are not named R, G, B.
 
     Raises:
         OSError: the file cannot be opened or read (OpenImageIO's message).
-        ValueError: unsupported channel layout, or non-finite values in a float file.
+        ValueError: no colour channel, or non-finite values in a float file.
     """
     path = os.fspath(path)
     config = oiio.ImageSpec()
@@ -86,7 +193,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     finally:
         inp.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
-    rgba, _ = _to_rgba(pixels, spec.alpha_channel, path)
+    mapping = _channel_map(_channel_names(spec), spec.alpha_channel, path)
+    if mapping.guessed or mapping.ignored:
+        warnings.warn(f"{path}: read {mapping.describe()}", UserWarning, stacklevel=2)
+    rgba = _to_rgba(pixels, mapping)
     if spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE):
         return as_rgba(rgba, f"pixels of {path}")
     rgba[..., :3] = _srgb()[0](rgba[..., :3])
@@ -112,13 +222,19 @@ def write_image(
         bits: 8 or 16 for integer files (JPEG: 8 only).
         clip: for an integer file, clip alpha and then straight colour to [0, 1]
             instead of raising.
-        flatten: required for JPEG, which has no alpha channel: stores the
-            premultiplied colour, i.e. the image over black.
+        flatten: required for JPEG and ``.hdr`` (Radiance RGBE), which have no
+            alpha channel: stores the premultiplied colour, i.e. the image over black.
         float_format: ``"float"`` (exact) or ``"half"`` for EXR.
 
+    The file is written under a temporary name in the same directory and renamed
+    over ``path`` only after a successful close: a failed write leaves an existing
+    ``path`` untouched.
+
     Raises:
-        ValueError: bad image, unknown extension, bad ``bits``, JPEG without
-            ``flatten``, or colour outside [0, 1] for an integer file without ``clip``.
+        ValueError: bad image, unknown extension, bad ``bits``, JPEG/HDR without
+            ``flatten``, colour outside [0, 1] for an integer file (or negative for
+            HDR) without ``clip``.
+        OSError: the file cannot be written (OpenImageIO's message); ``path`` is unchanged.
     """
     path = os.fspath(path)
     img = as_rgba(rgba, "rgba", allow_scalar_colour=False)
@@ -135,7 +251,21 @@ def write_image(
         fmt = oiio.FLOAT if float_format == "float" else oiio.HALF
         channels = img.astype(np.float32)
         names = ("R", "G", "B", "A")
-        if ext == ".hdr":  # RGBE has no alpha: store the image over black
+        if ext == ".hdr":  # RGBE has no alpha and no sign: store the image over black
+            if not flatten:
+                raise ValueError(
+                    "flatten: Radiance HDR (RGBE) has no alpha; pass flatten=True to store the image "
+                    "over black, or write .exr to keep alpha"
+                )
+            negative = channels[..., :3] < 0
+            if negative.any():
+                if not clip:
+                    raise ValueError(
+                        f"rgba: {int(np.count_nonzero(negative.any(axis=-1)))} pixels have negative colour "
+                        f"(min {float(channels[..., :3].min()):.6g}), which RGBE cannot hold; "
+                        "pass clip=True to clip to 0, or write .exr"
+                    )
+                channels = np.maximum(channels, 0.0)
             channels, names = channels[..., :3], names[:3]
         _write(path, np.ascontiguousarray(channels), names, fmt, unassociated=False)
         return
@@ -174,19 +304,23 @@ def write_image(
 
 
 def _write(path: str, pixels: np.ndarray, names: tuple[str, ...], fmt, *, unassociated: bool) -> None:
+    """Write ``pixels`` with OpenImageIO to a temporary file, then rename it over ``path``."""
     h, w, c = pixels.shape
     spec = oiio.ImageSpec(w, h, c, fmt)
     spec.channelnames = names
     spec.alpha_channel = 3 if c == 4 else -1
     if unassociated:
         spec.attribute("oiio:UnassociatedAlpha", 1)
-    out = oiio.ImageOutput.create(path)
-    if out is None:
-        raise OSError(f"path: cannot create {path!r}: {oiio.geterror()}")
-    try:
-        if not out.open(path, spec):
-            raise OSError(f"path: cannot open {path!r} for writing: {out.geterror()}")
-        if not out.write_image(pixels):
-            raise OSError(f"path: cannot write {path!r}: {out.geterror()}")
-    finally:
-        out.close()
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(tmp)
+        if out is None:
+            raise OSError(f"path: cannot create {path!r}: {oiio.geterror()}")
+        try:
+            if not out.open(tmp, spec):
+                raise OSError(f"path: cannot open {path!r} for writing: {out.geterror()}")
+            if not out.write_image(pixels):
+                raise OSError(f"path: cannot write {path!r}: {out.geterror()}")
+        finally:
+            closed = out.close()
+        if not closed:
+            raise OSError(f"path: cannot finish writing {path!r}: {out.geterror()}")

@@ -72,16 +72,28 @@ def emission(emitted: np.ndarray, background: np.ndarray) -> np.ndarray:
         pixel ``(emitted, 0)`` and ``glBlendFunc(ONE, ONE)`` with source alpha 0.
     """
     light = _as_rgb(emitted, "emitted", unit_range=False)
-    return composite(_with_alpha(light, 0.0), background, "plus")
+    b = _checked_rgba(background, "background")
+    broadcast_shapes(emitted=_with_alpha(light, 0.0), background=b)
+    return composite(_with_alpha(light, 0.0), b, "plus")
+
+
+def _checked_rgba(x: object, name: str) -> np.ndarray:
+    """Premultiplied RGBA with alpha in [0, 1], errors naming the caller's argument ``name``."""
+    arr = as_rgba(x, name)
+    check_alpha_range(arr, name)
+    return arr
 
 
 def partial_occlusion(surface: np.ndarray, background: np.ndarray) -> np.ndarray:
     """Alpha blending: a surface of premultiplied colour ``S`` and coverage ``αS`` over the background.
 
     ``S + B·(1 − αS)``, Porter & Duff's ``over``; both arguments premultiplied RGBA
-    ``(..., 4)`` with alpha in [0, 1].
+    ``(..., 4)`` with alpha in [0, 1]. Errors name ``surface`` or ``background``.
     """
-    return composite(surface, background, "src_over")
+    s = _checked_rgba(surface, "surface")
+    b = _checked_rgba(background, "background")
+    broadcast_shapes(surface=s, background=b)
+    return composite(s, b, "src_over")
 
 
 def absorption(transmittance: np.ndarray, background: np.ndarray) -> np.ndarray:
