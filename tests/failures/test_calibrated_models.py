@@ -227,6 +227,12 @@ def test_the_calibration_fits_are_well_conditioned() -> None:
         vander = np.vander(x, 2)
         vander = vander / np.sqrt((vander * vander).sum(axis=0))  # np.polyfit's column scaling
         assert np.linalg.cond(vander) < 1e3
+    # the frame-aware shadow cost fit ([1, N] and [1, R², N], unit-norm columns as fitted)
+    rows = families["shadows"]["frame_cost"]
+    for method in ("ray_traced", "shadow_map"):
+        design = em.frame_cost_design([r for r in rows if r["method"] == method])
+        design = design / np.sqrt((design * design).sum(axis=0))
+        assert np.linalg.cond(design) < 1e3
 
 
 def test_bad_model_inputs_name_the_argument() -> None:
