@@ -301,14 +301,18 @@ def planning_time(repeat: int = 5) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m benchmarks.planner_fuzz [N]``: sweep seeds 0 … N−1 (default 200) and time the
-    planning of a 100k-triangle scene; ``python -m benchmarks.planner_fuzz planning`` only times."""
+    """``python -m benchmarks.planner_fuzz [N [SIZE]]``: sweep seeds 0 … N−1 (default 200) at SIZE²
+    pixels (default 40; other sizes write ``planner_fuzz_<SIZE>.json``: a larger frame makes
+    shadow maps cheaper than ray tracing, so they get exercised) and time the planning of a
+    100k-triangle scene; ``python -m benchmarks.planner_fuzz planning`` only times."""
     args = sys.argv[1:] if argv is None else argv
-    out = Path(__file__).resolve().parent / "results" / "planner_fuzz.json"
+    size = int(args[1]) if len(args) > 1 else 40
+    name = "planner_fuzz.json" if size == 40 else f"planner_fuzz_{size}.json"
+    out = Path(__file__).resolve().parent / "results" / name
     if args and args[0] == "planning":
         result = json.loads(out.read_text()) if out.exists() else {}
     else:
-        result = sweep(range(int(args[0]) if args else 200))
+        result = sweep(range(int(args[0]) if args else 200), size)
     result["planning"] = planning_time()
     tmp = out.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(result, indent=1) + "\n")
