@@ -12,9 +12,10 @@ pixel, in 8-bit steps:
 * at ``T = 2, 8, 32`` every pixel within ``T``,
 
 outside the pixels of polygon-terminator triangles, where the two exact methods answer
-different questions (smooth shading normals against the facets a ray tracer sees; see
-:mod:`benchmarks.planner_fuzz`). The reference is independent of the planner: it forces the
-exact method of every concern. The larger sweep with exceedance rates is
+different questions (smooth shading normals against the facets a ray tracer sees), and of
+silhouette ties (a front and a back fragment of one mesh at equal depth, whose order no
+method defines); see :mod:`benchmarks.planner_fuzz`. The reference is independent of the
+planner: it forces the exact method of every concern. The larger sweep with exceedance rates is
 ``python -m benchmarks.planner_fuzz``.
 """
 
@@ -23,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.planner_fuzz import TOLERANCES, check, random_scene, terminator_mask
+from benchmarks.planner_fuzz import TOLERANCES, check, random_scene, silhouette_tie_mask, terminator_mask
 from blinn_phong.frame import embree_available
 from blinn_phong.planner import plan
 
@@ -77,3 +78,17 @@ def test_the_terminator_rule_marks_only_curved_meshes_facing_a_light_edge_on() -
     assert 0 < mask.sum() < 0.2 * 32 * 32
     cols = np.flatnonzero(mask.any(axis=0))
     assert abs(cols.mean() - 15.5) < 3  # around the middle column, x = 0 seen from -y
+
+
+def test_silhouette_ties_lie_on_the_outline_of_a_closed_mesh_only():
+    import blinn_phong as bp
+    from blinn_phong.primitives import uv_sphere
+
+    camera = bp.Camera.perspective(40.0, 1.0, 0.5, 30.0, view=bp.look_at((0, -5, 0.5), (0, 0, 0), (0, 0, 1)))
+    ball = bp.Scene([bp.Mesh(*uv_sphere(24, 12))], [bp.DirectionalLight((1.0, 0.0, 0.0))], camera)
+    ties = silhouette_tie_mask(ball, 64)
+    covered = bp.render(ball, 64, 64).rgba[..., 3] > 0
+    interior = covered.copy()
+    interior[1:-1, 1:-1] &= covered[:-2, 1:-1] & covered[2:, 1:-1] & covered[1:-1, :-2] & covered[1:-1, 2:]
+    interior[[0, -1], :] = interior[:, [0, -1]] = False
+    assert not (ties & interior).any()  # front and back never tie inside the outline
