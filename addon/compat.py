@@ -41,6 +41,7 @@ __all__ = [
     "math_node_type",
     "new_group_tree",
     "set_full_precision",
+    "set_image_format",
     "world_uses_nodes",
 ]
 
@@ -188,6 +189,20 @@ def add_render_output(tree: bpy.types.NodeTree) -> bpy.types.NodeSocket:
         tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
     node = tree.nodes.new("NodeGroupOutput")
     return node.inputs["Image"]
+
+
+def set_image_format(
+    settings: bpy.types.ImageFormatSettings, file_format: str, color_depth: str | None
+) -> None:
+    """Set an output format by its 4.x identifier (``OPEN_EXR_MULTILAYER`` included) and, if given, depth.
+
+    5.0 moved multilayer EXR behind ``media_type = "MULTI_LAYER_IMAGE"``; 4.x has no ``media_type``.
+    """
+    if hasattr(settings, "media_type"):
+        settings.media_type = "MULTI_LAYER_IMAGE" if file_format == "OPEN_EXR_MULTILAYER" else "IMAGE"
+    settings.file_format = file_format
+    if color_depth:
+        settings.color_depth = color_depth
 
 
 def set_full_precision(scene: bpy.types.Scene) -> None:

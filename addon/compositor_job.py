@@ -166,7 +166,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     job_path = Path(args[0])
     report = run_job(json.loads(job_path.read_text()))
-    job_path.with_suffix(".report.json").write_text(json.dumps(report, indent=1))
+    report_path = job_path.with_suffix(".report.json")
+    tmp = report_path.with_name(f".{report_path.name}.tmp")
+    tmp.write_text(json.dumps(report, indent=1))
+    tmp.replace(report_path)  # the reader never sees a half-written report
     return 0
 
 

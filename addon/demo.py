@@ -29,6 +29,8 @@ import numpy as np
 from compositing import composite
 from compositing.io import read_image, write_image
 
+from .batch import atomic_target, write_text_atomic
+
 __all__ = ["main", "run_demo"]
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,15 +53,16 @@ def _render_with_engine(blend: Path, out: Path) -> dict:
         settings = scene.render.image_settings
         settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
         scene.render.use_compositing = False
-        scene.render.filepath = str(out / "render.exr")
         seconds_blender = []
         for _ in range(2):  # the first render also compiles the renderer's numba kernels
             t = time.perf_counter()
-            bpy.ops.render.render(write_still=True)
+            bpy.ops.render.render()
             seconds_blender.append(time.perf_counter() - t)
         status = dict(engine.LAST_RENDER)
         if not status.get("ok"):
             raise RuntimeError(f"the engine failed: {status.get('error')}")
+        with atomic_target(out / "render.exr") as tmp:  # a temporary file, renamed when complete
+            bpy.data.images["Render Result"].save_render(filepath=str(tmp), scene=scene)
         t = time.perf_counter()
         converted = convert.scene_from_depsgraph(bpy.context.evaluated_depsgraph_get())
         core = engine.render_converted(converted)
@@ -98,11 +101,13 @@ def run_demo(out: Path, *, blend: Path = SHOWCASE, backplate_path: Path = BACKPL
     check = verify(render, backplate, "src_over", via="alpha_over")
     seconds_blender = time.perf_counter() - t
 
-    write_image(out / "render.png", render, clip=True)
+    images = [("render.png", render)]
     for name, image in (("composite_ours", ours), ("composite_blender", check.blender)):
-        write_image(out / f"{name}.exr", image)
-        write_image(out / f"{name}.png", image, clip=True)
-    write_image(out / "difference.exr", np.abs(ours - check.blender).astype(np.float32))
+        images += [(f"{name}.exr", image), (f"{name}.png", image)]
+    images.append(("difference.exr", np.abs(ours - check.blender).astype(np.float32)))
+    for name, image in images:
+        with atomic_target(out / name) as tmp:
+            write_image(tmp, image, clip=name.endswith(".png"))
     results = {
         "scene": str(blend.relative_to(REPO)) if blend.is_relative_to(REPO) else str(blend),
         "size": rendered["size"],
@@ -116,7 +121,7 @@ def run_demo(out: Path, *, blend: Path = SHOWCASE, backplate_path: Path = BACKPL
         "composite_max_abs_error": check.max_abs_error,
         "composite_mean_abs_error": check.mean_abs_error,
     }
-    (out / "results.json").write_text(json.dumps(results, indent=1))
+    write_text_atomic(out / "results.json", json.dumps(results, indent=1))
     return results
 
 

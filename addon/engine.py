@@ -19,8 +19,9 @@ Failures: Blender ignores exceptions raised in ``render()`` and writes whatever 
 (black) as if it had succeeded. Here every failure is reported through ``report`` (the status bar
 and the log), ``error_set``, stderr, and :data:`LAST_RENDER`; the image is filled with a
 magenta/black error pattern instead of a plausible black frame; and in background mode, when
-``Scene.blinn_phong.abort_on_error`` is set (the default), the process then exits with code 1 so
-render farms and scripts see the failure.
+``Scene.blinn_phong.abort_on_error`` is set (the default), a ``blender -b`` process then exits
+with code 1 so render farms see the failure. Inside the ``bpy`` module (an embedding Python)
+``bpy.ops.render.render`` raises ``RuntimeError`` with the message instead.
 """
 
 from __future__ import annotations
@@ -260,7 +261,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         self.error_set(message)
         self._write_error_pattern(width, height, layer)
         settings = getattr(scene, "blinn_phong", None)
-        if bpy.app.background and (settings is None or settings.abort_on_error):
+        # Only under Blender's own command line (``blender -b``): inside an embedding Python (the
+        # ``bpy`` module, empty ``binary_path``) the error report above already makes
+        # ``bpy.ops.render.render`` raise RuntimeError, so the caller's try/except/finally runs.
+        if bpy.app.background and bpy.app.binary_path and (settings is None or settings.abort_on_error):
             print(
                 "Blinn-Phong: exiting with code 1 (Scene.blinn_phong.abort_on_error)",
                 file=sys.stderr,

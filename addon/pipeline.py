@@ -4,7 +4,8 @@
 effects the plan needs (``blinn_phong.frame``) and returns the plan with a reason per decision.
 This module only translates the add-on's settings into its arguments ("Auto" = the planner's
 choice). In Blender's own Python, which has no Embree (``embreex``), ``render`` itself replaces
-ray-traced, soft and planar shadows by shadow maps and says so in the plan.
+ray-traced and planar shadows by shadow volumes and soft shadows by shadow maps, and says so in
+the plan.
 
 Outputs follow the project conventions (float32 premultiplied linear RGBA, row 0 at the top).
 """
@@ -37,7 +38,13 @@ TRANSPARENCY_SETTINGS: dict[str, str | None] = {
 }
 """Render-setting value -> ``render(transparency=...)`` (None: the planner's choice)."""
 
-SHADOW_SETTINGS: dict[str, str | None] = {"AUTO": None, "NONE": "none", "HARD": "ray_traced", "SOFT": "soft"}
+SHADOW_SETTINGS: dict[str, str | None] = {
+    "AUTO": None,
+    "NONE": "none",
+    "HARD": "ray_traced",
+    "SOFT": "soft",
+    "VOLUME": "shadow_volume",
+}
 """Render-setting value -> shadow method (None: the planner's choice per light)."""
 
 

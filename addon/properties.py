@@ -52,6 +52,7 @@ SHADOW_ITEMS = (
     ("NONE", "None", "No shadows"),
     ("HARD", "Hard", "Ray-traced hard shadows from point, spot and sun lights"),
     ("SOFT", "Soft", "Ray-traced soft shadows sampling the light's radius"),
+    ("VOLUME", "Shadow Volumes", "Exact hard shadows by stencil counting (z-fail), no ray tracer needed"),
 )
 
 FOG_ITEMS = (

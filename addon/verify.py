@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -50,6 +51,7 @@ from compositing.validate import as_rgba, check_alpha_range, check_factor
 
 __all__ = [
     "ALPHA_OVER_OPERATORS",
+    "DEFAULT_TOLERANCE",
     "BlenderRun",
     "Case",
     "Verification",
@@ -67,6 +69,13 @@ __all__ = [
 #: Operators that Blender's Alpha Over node realises, by mode (Disjoint/Conjoint need 5.0).
 ALPHA_OVER_OPERATORS: tuple[str, ...] = ("src_over", "disjoint_over", "conjoint_over")
 _KINDS = ("node_group", "alpha_over", "alpha_convert")
+
+DEFAULT_TOLERANCE = 1e-6
+"""Default ``--tolerance`` of ``addon.verify`` and ``addon.batch --verify``: max |ours − Blender|.
+
+Both sides compute in float32 with the same formula, so differences are a few units in the last
+place of values up to ~3 (HDR samples): 1e-6 ≈ 4 ulp at 2.0. The compositor bridge tests hold
+the whole matrix to it."""
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -399,64 +408,138 @@ def standard_cases(alpha_over_operators: Sequence[str] = ALPHA_OVER_OPERATORS) -
     return cases
 
 
+#: Largest ``--size`` side: sample images, their EXR copies and Blender's buffers stay in memory.
+MAX_SIDE = 8192
+
+
 def _parse_size(text: str) -> tuple[int, int]:
     try:
         width, height = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 97x61, got {text!r}") from None
+    if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT with each side in 1..{MAX_SIDE}, got {text!r}"
+        )
     return width, height
 
 
-def _read_image(path: str) -> np.ndarray:
+def _parse_tolerance(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text!r}")
+    return value
+
+
+def _parse_factor(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
+    return value
+
+
+def _parse_python(text: str) -> str:
+    found = shutil.which(text) if os.sep not in text else (text if os.access(text, os.X_OK) else None)
+    if not found or not Path(found).is_file():
+        raise argparse.ArgumentTypeError(f"expected an executable Python interpreter with bpy, got {text!r}")
+    return found
+
+
+def _read_image(path: str, flag: str) -> np.ndarray:
+    if not Path(path).is_file():
+        raise ValueError(f"{flag}: no such file {path!r}")
     buf = oiio.ImageBuf(path)
     if buf.has_error:
-        raise OSError(f"cannot read {path}: {buf.geterror()}")
+        raise ValueError(f"{flag}: cannot read {path}: {buf.geterror().strip()}")
     pixels = buf.get_pixels(oiio.FLOAT)
     if pixels.ndim != 3 or pixels.shape[2] != 4:
-        raise ValueError(f"{path}: expected an RGBA image, got {pixels.shape[-1]} channel(s)")
+        raise ValueError(f"{flag}: {path}: expected an RGBA image, got {pixels.shape[-1]} channel(s)")
     return pixels
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """CLI: verify one operation on two EXR files, or the whole matrix on sample images."""
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (``python -m addon.verify --help``)."""
     parser = argparse.ArgumentParser(
         prog="python -m addon.verify",
         description="Composite two premultiplied RGBA images in Blender's compositor and with numpy, "
         "and report the difference. Without --src/--dst, random 97x61 sample images with α = 0, "
         "α = 1, glow, HDR and negative colour values are used.",
+        epilog="Exit codes: 0 every case within --tolerance, 1 a case exceeded it, 2 usage error "
+        "(nothing ran).",
     )
     parser.add_argument("--src", help="source (foreground) image: premultiplied linear RGBA, e.g. EXR")
     parser.add_argument("--dst", help="destination (background) image, same size")
     parser.add_argument(
-        "--op", help=f"operator (one of {', '.join(ALL_OPERATORS)}; or premultiply/unpremultiply)"
+        "--operator",
+        "--op",
+        dest="operator",
+        help=f"operator (one of {', '.join(ALL_OPERATORS)}; or premultiply/unpremultiply with "
+        "--via alpha_convert)",
     )
     parser.add_argument("--via", choices=_KINDS, default="node_group", help="what runs in Blender")
-    parser.add_argument("--factor", type=float, default=1.0, help="Factor in [0, 1] (default 1)")
+    parser.add_argument("--factor", type=_parse_factor, default=1.0, help="Factor in [0, 1] (default 1)")
     parser.add_argument("--straight-alpha", action="store_true", help="Alpha Over's Straight Alpha switch")
     parser.add_argument("--all", action="store_true", help="run the whole matrix (standard_cases)")
-    parser.add_argument("--size", type=_parse_size, default=(97, 61), help="sample image size WxH")
-    parser.add_argument("--python", help="Python with bpy (default: this one)")
+    parser.add_argument(
+        "--size", type=_parse_size, default=(97, 61), help=f"sample image size WxH, sides 1..{MAX_SIDE}"
+    )
+    parser.add_argument("--python", type=_parse_python, help="Python with bpy (default: this one)")
     parser.add_argument("--out", help="directory for blender/ours/difference EXRs (single operation)")
-    parser.add_argument("--tolerance", type=float, default=1e-6, help="max abs error accepted (exit 1 above)")
+    parser.add_argument(
+        "--tolerance",
+        type=_parse_tolerance,
+        default=DEFAULT_TOLERANCE,
+        help=f"max abs error accepted, exit 1 above (default {DEFAULT_TOLERANCE:g})",
+    )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """CLI: verify one operation on two EXR files, or the whole matrix on sample images.
+
+    Exit codes: 0 within ``--tolerance``, 1 above it, 2 usage error (before Blender starts).
+    """
+    parser = build_parser()
     args = parser.parse_args(argv)
 
     if (args.src is None) != (args.dst is None):
         parser.error("--src and --dst go together")
-    if not args.all and not args.op:
-        parser.error("give --op OPERATOR or --all")
+    if args.all and args.operator:
+        parser.error("--operator: give --operator OPERATOR or --all, not both")
+    if not args.all and not args.operator:
+        parser.error("--operator: give --operator OPERATOR (alias --op) or --all")
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out: {args.out} exists and is not a directory")
     try:
         if args.src:
-            src, dst = _checked_images(_read_image(args.src), _read_image(args.dst))
+            src = _read_image(args.src, "--src")
+            dst = _read_image(args.dst, "--dst")
+            if src.shape != dst.shape:
+                raise ValueError(f"--src, --dst: expected equal sizes, got {src.shape} and {dst.shape}")
+            src, dst = _checked_images(src, dst)
         else:
             src, dst = sample_images(height=args.size[1], width=args.size[0])
         if args.all:
             probe = run_blender(src, dst, [Case("alpha_over", "src_over")], python=args.python)
             cases = standard_cases(tuple(probe.report["alpha_over_modes"]))
         else:
-            cases = [Case(args.via, args.op, args.factor, args.straight_alpha)]
+            try:
+                cases = [Case(args.via, args.operator, args.factor, args.straight_alpha)]
+            except ValueError as error:
+                raise ValueError(f"--operator/--via: {error}") from None
     except (OSError, ValueError, TypeError) as error:
         parser.error(str(error))
-    results, report = verify_cases(src, dst, cases, python=args.python)
+    try:
+        results, report = verify_cases(src, dst, cases, python=args.python)
+    except (RuntimeError, subprocess.TimeoutExpired) as error:
+        print(f"{parser.prog}: Blender's side failed: {str(error).strip()}", file=sys.stderr)
+        return 1
     print(f"Blender {report['blender_version']}, {src.shape[1]}x{src.shape[0]}, {len(results)} case(s)")
     print(f"{'case':48s} {'max abs error':>14s} {'mean abs error':>15s}")
     worst = 0.0
@@ -468,8 +551,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         for name in ("blender", "ours", "difference"):
-            write_exr(out / f"{name}.exr", getattr(results[0], name))
-        print(f"images written to {out}")
+            target = out / f"{name}.exr"
+            tmp = target.with_name(f".{name}.tmp-{os.getpid()}.exr")
+            try:
+                write_exr(tmp, getattr(results[0], name))
+                os.replace(tmp, target)
+            finally:
+                tmp.unlink(missing_ok=True)
+            print(f"wrote {target}")
     print(f"worst max abs error {worst:.3e} (tolerance {args.tolerance:g})")
     return 0 if worst <= args.tolerance else 1
 

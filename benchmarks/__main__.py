@@ -29,7 +29,7 @@ from pathlib import Path
 
 from benchmarks._util import machine_info, write_json
 
-MODULES = ("compositing_vs_oiio", "gl_blend", "effects", "renderer", "blender_compositor")
+MODULES = ("compositing_vs_oiio", "gl_blend", "effects", "renderer", "blender_compositor", "shadow_volume")
 
 
 def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[], object]:
@@ -56,6 +56,10 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_blender_compositor
 
         return lambda: bench_blender_compositor.run(out, repeat=repeat)
+    if name == "shadow_volume":
+        from benchmarks import bench_shadow_volume
+
+        return lambda: bench_shadow_volume.run(out, repeat=repeat, quick=quick)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 

@@ -4,7 +4,8 @@ For a few blend states (the Porter-Duff ``src_over`` pair, a separate-alpha stat
 constant-colour state, ``SRC_ALPHA_SATURATE``) and both targets (RGBA32F / ``"float32"`` and
 RGBA8 / ``"unorm8"``) this times
 
-* ``compositing.gl_blend`` on the numpy frame, and
+* ``compositing.gl_blend`` on the numpy frame (for RGBA8, on the frame's 8-bit codes as
+  ``uint8`` arrays, in and out, as an RGBA8 framebuffer holds them), and
 * :func:`oracles.gl_blend.mesa_blend` on the same pixels: texture upload, one draw, readback
   (the shader for the state is compiled in a warm-up call first, so compilation is not timed).
 
@@ -22,7 +23,6 @@ Writes ``gl_blend.json`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks._util import write_json
 from compositing.gl_blend import gl_blend, gl_factors
 from oracles.egl import gl_context
 from oracles.gl_blend import BlendState, mesa_blend
@@ -93,24 +94,26 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 5) -> dict:
     src, dst = _frame(rng), _frame(rng)
     src_list, dst_list = src.reshape(1, -1, 4), dst.reshape(1, -1, 4)
     dst_bytes = np.rint(dst_list * 255).astype(np.uint8)
-    dst_unorm = dst_bytes.reshape(dst.shape) / np.float32(255)
+    # llvmpipe quantises the float fragment colour to 8 bits; gl_blend takes those codes.
+    src_bytes = np.rint(np.clip(src, 0, 1) * 255).astype(np.uint8)
+    dst_codes = dst_bytes.reshape(dst.shape)
 
     cases = []
     for name, state in STATES.items():
         for target in ("float32", "unorm8"):
             mesa_dst = dst_list if target == "float32" else dst_bytes
-            ours_dst = dst if target == "float32" else dst_unorm
+            ours_src, ours_dst = (src, dst) if target == "float32" else (src_bytes, dst_codes)
             t_ours, t_mesa = _paired_best_times(
-                lambda s=state, t=target, d=ours_dst: _ours(src, d, s, t),
+                lambda s=state, t=target, a=ours_src, d=ours_dst: _ours(a, d, s, t),
                 lambda s=state, t=target, d=mesa_dst: mesa_blend(src_list, d, [s], t),
                 repeat,
             )
-            model = _ours(src, ours_dst, state, target).reshape(1, -1, 4)
+            model = _ours(ours_src, ours_dst, state, target).reshape(1, -1, 4)
             got = mesa_blend(src_list, mesa_dst, [state], target)
             if target == "float32":
                 agreement = {"max_abs_difference": float(np.abs(model - got).max())}
             else:
-                steps = np.abs(np.rint(model * 255) - got)
+                steps = np.abs(model.astype(np.int64) - got)
                 agreement = {"max_steps": int(steps.max()), "share_one_step_apart": float(np.mean(steps > 0))}
             cases.append(
                 {
@@ -140,9 +143,7 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 5) -> dict:
         "numpy": np.__version__,
         "cases": cases,
     }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "gl_blend.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_json(Path(out_dir) / "gl_blend.json", result)
     return result
 
 

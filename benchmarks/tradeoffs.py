@@ -42,7 +42,7 @@ from benchmarks._util import time_interleaved
 from benchmarks.tradeoff_metrics import error_metrics
 from blinn_phong.oit import resolve_transparency, wboit_weights
 from blinn_phong.primitives import grid_plane, uv_sphere
-from compositing import composite, premultiply, unpremultiply
+from compositing import composite, composite_stack, premultiply
 from compositing.gl_blend import gl_blend
 
 __all__ = [
@@ -506,14 +506,11 @@ def compositing_pipelines(
     premult64 = np.stack([premultiply(layer) for layer in straight])
     premult32 = premult64.astype(np.float32)
     premult16 = premult64.astype(np.float16)
-    straight8 = _unorm8(straight)
     premult8 = _unorm8(premult64)
 
     def stack(layers: np.ndarray, dtype: type) -> np.ndarray:
-        acc = background.astype(dtype)
-        for layer in layers:
-            acc = composite(layer, acc, "src_over")
-        return acc.astype(np.float64)
+        # composite_stack: one pass per tile, bitwise equal to a loop of composite(layer, acc).
+        return composite_stack([background.astype(dtype), *layers]).astype(np.float64)
 
     def float16_storage() -> np.ndarray:
         # Blending arithmetic in float32, the framebuffer stored as float16 (RGBA16F).
@@ -528,13 +525,13 @@ def compositing_pipelines(
             acc = gl_blend(layer, acc, "ONE", "ONE_MINUS_SRC_ALPHA", target="unorm8")
         return acc.astype(np.float64)
 
+    codes8 = [np.rint(np.clip(x, 0.0, 1.0) * 255.0).astype(np.uint8) for x in (background, *straight)]
+
     def unorm8_straight() -> np.ndarray:
-        # Straight 8-bit layers and an 8-bit straight buffer: premultiply, over, unpremultiply, store.
-        acc = _unorm8(background)
-        for layer in straight8:
-            out = composite(premultiply(layer), premultiply(acc), "src_over")
-            acc = _unorm8(unpremultiply(out))
-        return premultiply(acc.astype(np.float64))
+        # Straight 8-bit layers and an 8-bit straight buffer: premultiply, over, unpremultiply, store
+        # (composite_stack on uint8 layers; the same values as that loop on _unorm8 floats).
+        acc = composite_stack(codes8)
+        return premultiply((acc.astype(np.float32) / np.float32(255.0)).astype(np.float64))
 
     return {
         "float64 premultiplied": lambda: stack(premult64, np.float64),

@@ -232,6 +232,11 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             "ray_traced",
             f"soft shadows asked for, but {why} has no area: hard ray-traced shadows",
         )
+    if method in ("ray_traced", "planar") and not embree_available():
+        method, reason = (
+            "shadow_volume",
+            f"Embree (embreex) is not installed: shadow volumes, exact too, instead of {method} ({reason})",
+        )
     if method in _NEEDS_EMBREE and not embree_available():
         method, reason = (
             "shadow_map",
@@ -547,7 +552,8 @@ def render_effects(
                     ray_scene.append(RayScene(tris))
                 columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
             else:
-                columns.append(light_visibility(c.method, light, tris, world, normal, **c.params))  # type: ignore[arg-type]
+                extra = {"camera": scene.camera} if c.method == "shadow_volume" else {}
+                columns.append(light_visibility(c.method, light, tris, world, normal, **c.params, **extra))  # type: ignore[arg-type]
         visibility = np.stack(columns, axis=1) if columns else None
     seconds["shadows"] = time.perf_counter() - t
     report("shadows", 0.5)

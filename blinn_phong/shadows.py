@@ -416,7 +416,7 @@ def planar_shadow_mask(
 
 
 #: Shadow methods :func:`light_visibility` dispatches (the planner's shadow choices).
-SHADOW_METHODS: tuple[str, ...] = ("none", "planar", "shadow_map", "ray_traced")
+SHADOW_METHODS: tuple[str, ...] = ("none", "planar", "shadow_map", "ray_traced", "shadow_volume")
 
 
 def light_visibility(
@@ -432,6 +432,7 @@ def light_visibility(
     kernel: str = "nearest",
     plane: np.ndarray | tuple[float, ...] | None = None,
     caster_triangles: np.ndarray | None = None,
+    **volume_options: object,
 ) -> np.ndarray:
     """Visibility of points for one light by a named method (a planner choice).
 
@@ -447,11 +448,15 @@ def light_visibility(
         kernel: PCF kernel for ``shadow_map``.
         plane: ``(a, b, c, d)`` receiving plane for ``planar``.
         caster_triangles: casters for ``planar`` (default: every triangle not in the plane).
+        volume_options: for ``shadow_volume``: the keyword arguments of
+            :func:`blinn_phong.shadow_volume.shadow_volume_visibility` (``camera``, ``method``...).
 
     Returns:
         (m,) float64 visibility in [0, 1].
     """
     p = _points("points", points)
+    if volume_options and method != "shadow_volume":
+        raise TypeError(f"light_visibility: {sorted(volume_options)} are for shadow_volume, not {method}")
     if method == "none":
         return np.ones(len(p))
     tris = _triangles("world_triangles", world_triangles)
@@ -462,6 +467,10 @@ def light_visibility(
         if isinstance(light, DirectionalLight):
             return directional_light_visibility(scene, p, normals, -np.asarray(light.direction))
         return point_light_visibility(scene, p, normals, light.position)
+    if method == "shadow_volume":
+        from .shadow_volume import shadow_volume_visibility
+
+        return shadow_volume_visibility(light, tris, p, normals, **volume_options)  # type: ignore[arg-type]
     if method == "shadow_map":
         maps = light_shadow_maps(light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias)
         return shadow_map_visibility(light, maps, p, normals, kernel=kernel)

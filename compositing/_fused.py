@@ -30,7 +30,7 @@ import numpy as np
 
 from .factors import Expr, OperatorSpec
 
-__all__ = ["composite_fused", "factor_source", "kernel_source"]
+__all__ = ["composite_fused", "factor_source", "kernel_source", "run_ranges"]
 
 #: Threads working on one call, the calling thread included (the kernel releases the GIL).
 THREADS = max(1, min(8, os.cpu_count() or 1))
@@ -175,10 +175,19 @@ def composite_fused(
     out = np.empty_like(src)
     t = src.dtype.type
     args = (src.reshape(-1), dst.reshape(-1), out.reshape(-1), t(1.0 - factor), t(factor))
-    n = src.size // 4
-    parts = max(1, min(THREADS * RANGES_PER_THREAD, n // MIN_PIXELS_PER_THREAD))
+    return out, run_ranges(kernel, args, src.size // 4)
+
+
+def run_ranges(kernel, args: tuple, n: int, min_per_range: int = MIN_PIXELS_PER_THREAD) -> bool:
+    """Run ``kernel(*args, lo, hi)`` over ``[0, n)`` split into ranges; True if any call returned True.
+
+    The ranges go to the calling thread and the helper pool, each thread taking the next
+    range until none is left (the kernels release the GIL). Ranges hold at least
+    ``min_per_range`` items; a small ``n`` runs on the calling thread alone.
+    """
+    parts = max(1, min(THREADS * RANGES_PER_THREAD, n // max(1, min_per_range)))
     if parts == 1:
-        return out, bool(kernel(*args, 0, n))
+        return bool(kernel(*args, 0, n))
     bounds = np.linspace(0, n, parts + 1).astype(np.int64).tolist()
     ranges = iter(itertools.pairwise(bounds))
     lock = threading.Lock()
@@ -195,4 +204,4 @@ def composite_fused(
 
     helpers = [_pool().submit(work) for _ in range(min(THREADS, parts) - 1)]
     flagged = work()
-    return out, any([flagged] + [f.result() for f in helpers])
+    return any([flagged] + [f.result() for f in helpers])

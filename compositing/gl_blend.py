@@ -30,6 +30,15 @@ Two framebuffer formats are modelled:
   every factor is ``ZERO`` or ``ONE`` (or the equation is MIN/MAX) there is nothing to round
   and the two agree bit for bit.
 
+With ``target="unorm8"`` the colours may also be ``uint8`` arrays, the codes of an RGBA8
+image (value = code/255); two ``uint8`` inputs give a ``uint8`` result computed on the codes,
+with no float round trip (the dtype rule is written once, in docs/gl_blend.md, "Dtypes").
+
+Factors and equations are held once, as expression trees (:data:`GL_FACTOR_EXPRS`,
+:data:`GL_EQUATION_EXPRS`). The numpy reference (``engine="numpy"``) evaluates them on
+arrays; the compiled blend stage (``engine="numba"``, :mod:`compositing._gl_fused`) is
+generated from them and gives the same values (identical floats, identical 8-bit codes).
+
 Names are the GL enumerants without the ``GL_`` prefix (a leading ``GL_`` is tolerated),
 case-insensitive. Dual-source factors (``SRC1_*``) are not modelled: they need a second
 fragment colour.
@@ -42,11 +51,20 @@ from typing import Final
 
 import numpy as np
 
-from .factors import ALL_OPERATORS
-from .operators import resolve_operator
-from .validate import as_rgba, broadcast_shapes
+from .factors import ALL_OPERATORS, ONE, ZERO, Expr, maximum, minimum
+from .operators import _fused_available, resolve_operator
+from .validate import as_rgba, broadcast_shapes, check_finite
 
-__all__ = ["GL_BLEND_EQUATIONS", "GL_BLEND_FACTORS", "GL_BLEND_TARGETS", "gl_blend", "gl_factors"]
+__all__ = [
+    "GL_BLEND_ENGINES",
+    "GL_BLEND_EQUATIONS",
+    "GL_BLEND_FACTORS",
+    "GL_BLEND_TARGETS",
+    "GL_EQUATION_EXPRS",
+    "GL_FACTOR_EXPRS",
+    "gl_blend",
+    "gl_factors",
+]
 
 #: The 15 blend factors of OpenGL 4.6 §17.3.6.1, table 17.2 (dual-source ones excluded), with
 #: their value as (R, G, B, A) in terms of the source s, destination d and constant colour c.
@@ -79,6 +97,14 @@ GL_BLEND_EQUATIONS: Final[Mapping[str, str]] = {
 
 #: Framebuffer formats :func:`gl_blend` models.
 GL_BLEND_TARGETS: Final[tuple[str, ...]] = ("float32", "unorm8")
+
+#: Engines :func:`gl_blend` accepts: the compiled blend stage (``"numba"``, generated from the
+#: table below) and the numpy reference; ``"auto"`` takes the compiled one when numba is installed.
+GL_BLEND_ENGINES: Final[tuple[str, ...]] = ("auto", "numpy", "numba")
+
+#: ``engine="auto"`` evaluates fewer pixels than this with numpy: a few colours are not worth
+#: the compilation of the generic kernel (1–2 s once per process); both engines agree.
+AUTO_COMPILED_MIN_PIXELS: Final = 64
 
 _UNORM8_MAX: Final = 255.0
 
@@ -118,76 +144,118 @@ def _quantise_unorm8(x: np.ndarray) -> np.ndarray:
     return q
 
 
-def _factor(name: str, src: np.ndarray, dst: np.ndarray, constant: np.ndarray) -> np.ndarray | float:
-    """The RGBA value of one blend factor (table 17.2): an array broadcasting to (..., 4), or 0.0/1.0."""
-    if name == "ZERO":
-        return 0.0
-    if name == "ONE":
-        return 1.0
-    if name == "SRC_COLOR":
-        return src
-    if name == "ONE_MINUS_SRC_COLOR":
-        return 1.0 - src
-    if name == "DST_COLOR":
-        return dst
-    if name == "ONE_MINUS_DST_COLOR":
-        return 1.0 - dst
-    if name == "SRC_ALPHA":
-        return src[..., 3:]
-    if name == "ONE_MINUS_SRC_ALPHA":
-        return 1.0 - src[..., 3:]
-    if name == "DST_ALPHA":
-        return dst[..., 3:]
-    if name == "ONE_MINUS_DST_ALPHA":
-        return 1.0 - dst[..., 3:]
-    if name == "CONSTANT_COLOR":
-        return constant
-    if name == "ONE_MINUS_CONSTANT_COLOR":
-        return 1.0 - constant
-    if name == "CONSTANT_ALPHA":
-        return constant[3:]
-    if name == "ONE_MINUS_CONSTANT_ALPHA":
-        return 1.0 - constant[3:]
-    if name == "SRC_ALPHA_SATURATE":
-        f = np.minimum(src[..., 3:], 1.0 - dst[..., 3:])
-        return np.concatenate([np.broadcast_to(f, (*f.shape[:-1], 3)), np.ones_like(f)], axis=-1)
-    raise AssertionError(f"unhandled blend factor {name}")  # names are validated before
+# --- The factor and equation table as expression trees: the single source of truth that the
+# --- numpy reference below evaluates and the compiled kernels (compositing._gl_fused) are
+# --- generated from. Variables: ``s``, ``d``, ``c`` the component being blended of the source,
+# --- destination and constant colour; ``sa``, ``da``, ``ca`` their alphas. For the alpha
+# --- component ``s`` is ``sa`` and so on.
+
+_S, _D, _C = (Expr("var", value=v) for v in ("s", "d", "c"))
+_SA, _DA, _CA = (Expr("var", value=v) for v in ("sa", "da", "ca"))
+
+#: Table 17.2 as ``name -> (RGB part, alpha part)``, each an expression over s, d, c, sa, da, ca.
+GL_FACTOR_EXPRS: Final[Mapping[str, tuple[Expr, Expr]]] = {
+    "ZERO": (ZERO, ZERO),
+    "ONE": (ONE, ONE),
+    "SRC_COLOR": (_S, _S),
+    "ONE_MINUS_SRC_COLOR": (1.0 - _S, 1.0 - _S),
+    "DST_COLOR": (_D, _D),
+    "ONE_MINUS_DST_COLOR": (1.0 - _D, 1.0 - _D),
+    "SRC_ALPHA": (_SA, _SA),
+    "ONE_MINUS_SRC_ALPHA": (1.0 - _SA, 1.0 - _SA),
+    "DST_ALPHA": (_DA, _DA),
+    "ONE_MINUS_DST_ALPHA": (1.0 - _DA, 1.0 - _DA),
+    "CONSTANT_COLOR": (_C, _C),
+    "ONE_MINUS_CONSTANT_COLOR": (1.0 - _C, 1.0 - _C),
+    "CONSTANT_ALPHA": (_CA, _CA),
+    "ONE_MINUS_CONSTANT_ALPHA": (1.0 - _CA, 1.0 - _CA),
+    "SRC_ALPHA_SATURATE": (minimum(_SA, 1.0 - _DA), ONE),
+}
+
+_SW, _DW = Expr("var", value="sw"), Expr("var", value="dw")
+
+#: Table 17.1 as expressions over ``sw = s·S``, ``dw = d·D`` (the weighted colours) and ``s``, ``d``.
+GL_EQUATION_EXPRS: Final[Mapping[str, Expr]] = {
+    "FUNC_ADD": _SW + _DW,
+    "FUNC_SUBTRACT": _SW - _DW,
+    "FUNC_REVERSE_SUBTRACT": _DW - _SW,
+    "MIN": minimum(_S, _D),
+    "MAX": maximum(_S, _D),
+}
 
 
-def _weighted(colour: np.ndarray, factor: np.ndarray | float) -> np.ndarray | float:
-    """colour·factor, skipping the multiply for the exact factors 0 and 1 (GL guarantees both are exact)."""
-    if isinstance(factor, float):
-        return colour if factor == 1.0 else 0.0
-    return colour * factor
+def uses_factors(equation: str) -> bool:
+    """True when the equation reads the weighted colours (FUNC_*), False for MIN/MAX."""
+    return _uses(GL_EQUATION_EXPRS[equation], ("sw", "dw"))
 
 
-def _equation(
-    name: str, s: np.ndarray, d: np.ndarray, s_factor: np.ndarray | float, d_factor: np.ndarray | float
+def _uses(expr: Expr, names: tuple[str, ...]) -> bool:
+    if expr.op == "var":
+        return expr.value in names
+    return any(_uses(a, names) for a in expr.args)
+
+
+def exact_factor(name: str, part: int) -> float | None:
+    """0.0 or 1.0 when the factor's RGB (``part`` 0) or alpha (1) part is that constant, else None.
+
+    A product with an exact 0 or 1 is not computed (GL guarantees both are exact): ``x·1`` is
+    ``x`` and ``x·0`` is the constant 0, in every back end.
+    """
+    expr = GL_FACTOR_EXPRS[name][part]
+    return float(expr.value) if expr.is_const and float(expr.value) in (0.0, 1.0) else None  # type: ignore[arg-type]
+
+
+def _evaluate(expr: Expr, env: Mapping[str, np.ndarray | float]) -> np.ndarray | float:
+    """An expression of the table on arrays (numpy broadcasting) or Python floats."""
+    if expr.op == "const":
+        return float(expr.value)  # type: ignore[arg-type]
+    if expr.op == "var":
+        return env[str(expr.value)]
+    a, b = (_evaluate(x, env) for x in expr.args)
+    if expr.op == "add":
+        return a + b
+    if expr.op == "sub":
+        return a - b
+    if expr.op == "mul":
+        return a * b
+    if expr.op == "min":
+        return np.minimum(a, b)
+    if expr.op == "max":
+        return np.maximum(a, b)
+    raise AssertionError(f"operation {expr.op!r} is not used by the GL table")
+
+
+def _blend_part(
+    env: dict[str, np.ndarray | float], sf: str, df: str, eq: str, part: int
+) -> np.ndarray | float:
+    """One channel group (RGB: ``part`` 0, alpha: 1) of the blend, evaluated from the table."""
+    if uses_factors(eq):
+        for key, colour, name in (("sw", "s", sf), ("dw", "d", df)):
+            exact = exact_factor(name, part)
+            if exact == 0.0:
+                env[key] = 0.0
+            elif exact == 1.0:
+                env[key] = env[colour]
+            else:
+                env[key] = env[colour] * _evaluate(GL_FACTOR_EXPRS[name][part], env)
+    return _evaluate(GL_EQUATION_EXPRS[eq], env)
+
+
+def blend_reference(
+    s: np.ndarray,
+    d: np.ndarray,
+    c: np.ndarray,
+    rgb_state: tuple[str, str, str],
+    alpha_state: tuple[str, str, str],
+    shape: tuple[int, ...],
 ) -> np.ndarray:
-    """One blend equation (table 17.1), component-wise on arrays of matching channels."""
-    if name == "MIN":
-        return np.minimum(s, d)
-    if name == "MAX":
-        return np.maximum(s, d)
-    sw = _weighted(s, s_factor)
-    dw = _weighted(d, d_factor)
-    shape = np.broadcast_shapes(s.shape, d.shape)
-    # Write into a product we own when it already has the full shape (saves one allocation).
-    if name == "FUNC_ADD":
-        own = next((w for w in (sw, dw) if _is_scratch(w, shape, s, d)), None)
-        out = sw + dw if own is None else np.add(sw, dw, out=own)
-    elif name == "FUNC_SUBTRACT":
-        out = np.subtract(sw, dw, out=sw) if _is_scratch(sw, shape, s, d) else sw - dw
-    else:  # FUNC_REVERSE_SUBTRACT
-        out = np.subtract(dw, sw, out=dw) if _is_scratch(dw, shape, s, d) else dw - sw
-    return out if np.shape(out) == shape else np.broadcast_to(out, shape)
-
-
-def _is_scratch(x: np.ndarray | float, shape: tuple[int, ...], *inputs: np.ndarray) -> bool:
-    """True for a temporary array of the full shape that is none of the inputs (safe to overwrite)."""
-    return (
-        isinstance(x, np.ndarray) and x.shape == shape and x.base is None and all(x is not i for i in inputs)
-    )
+    """The numpy reference: the table evaluated on validated arrays of one float dtype, no rounding."""
+    rgb = {"s": s[..., :3], "d": d[..., :3], "c": c[:3], "sa": s[..., 3:], "da": d[..., 3:], "ca": c[3:]}
+    alpha = {"s": s[..., 3:], "d": d[..., 3:], "c": c[3:], "sa": s[..., 3:], "da": d[..., 3:], "ca": c[3:]}
+    out = np.empty(shape, dtype=s.dtype)
+    out[..., :3] = _blend_part(rgb, *rgb_state, part=0)
+    out[..., 3:] = _blend_part(alpha, *alpha_state, part=1)
+    return out
 
 
 def gl_blend(
@@ -202,11 +270,13 @@ def gl_blend(
     equation_alpha: str | None = None,
     constant: Sequence[float] | np.ndarray = (0, 0, 0, 0),
     target: str = "float32",
+    engine: str = "auto",
 ) -> np.ndarray:
     """Blend ``src`` onto ``dst`` exactly as OpenGL's blend stage does (OpenGL 4.6 §17.3.6).
 
     Args:
-        src: The fragment colour, RGBA in the last axis, shape ``(..., 4)``, float32 or float64.
+        src: The fragment colour, RGBA in the last axis, shape ``(..., 4)``: float32 or float64,
+            or, with ``target="unorm8"``, ``uint8`` codes of an RGBA8 image (value = code/255).
             The blend stage is colour-space agnostic; with this package's convention it is linear,
             premultiplied, row 0 at the top.
         dst: The framebuffer colour, same conventions; broadcasts against ``src``.
@@ -221,16 +291,22 @@ def gl_blend(
         target: ``"float32"`` for a floating-point colour buffer (no clamping anywhere) or ``"unorm8"``
             for a fixed-point RGBA8 buffer (source, destination, constant and result clamped to
             [0, 1] and rounded to the nearest multiple of 1/255, see the module docstring).
+        engine: ``"auto"`` (the compiled blend stage when numba is installed, except for fewer
+            than :data:`AUTO_COMPILED_MIN_PIXELS` pixels), ``"numba"`` or ``"numpy"`` (the
+            reference evaluation of the table). Both give the same values.
 
     Returns:
-        The blended RGBA, shape ``broadcast(src, dst)``, dtype ``result_type(src, dst)``. For
-        ``"unorm8"`` every value is ``k/255`` with integer ``k`` in [0, 255]; ``np.rint(255·out)``
-        gives the bytes a GL RGBA8 framebuffer would hold.
+        The blended RGBA, shape ``broadcast(src, dst)``. dtype (docs/gl_blend.md, "Dtypes"):
+        ``uint8`` when both inputs are ``uint8`` (the codes an RGBA8 framebuffer would hold);
+        otherwise ``result_type`` of the float inputs (a ``uint8`` operand then reads as
+        code/255). For ``"unorm8"`` with float output every value is ``k/255`` with integer
+        ``k`` in [0, 255]; ``np.rint(255·out)`` gives the bytes.
 
     Raises:
-        TypeError: a colour is not a float array, or a name is not a string.
+        TypeError: a colour is not a float array (or a ``uint8`` array with ``target="unorm8"``),
+            or a name is not a string.
         ValueError: the last axis is not 4, the shapes do not broadcast, a value is NaN/Inf,
-            a factor/equation/target name is unknown (the message lists the valid ones), the
+            a factor/equation/target/engine name is unknown (the message lists the valid ones), the
             constant is not four numbers, or a float32/float64 result overflows.
     """
     names = {
@@ -249,81 +325,117 @@ def gl_blend(
     )
     if not isinstance(target, str) or target.lower() not in GL_BLEND_TARGETS:
         raise ValueError(f"target must be one of {', '.join(GL_BLEND_TARGETS)}, got {target!r}")
+    if engine not in GL_BLEND_ENGINES:
+        raise ValueError(f"engine: expected one of {GL_BLEND_ENGINES}, got {engine!r}")
     unorm8 = target.lower() == "unorm8"
 
     # Any finite value is allowed, alpha included: a float framebuffer holds whatever it is given.
-    s = as_rgba(src, "src")
-    d = as_rgba(dst, "dst")
+    s = _as_colour(src, "src", unorm8)
+    d = _as_colour(dst, "dst", unorm8)
     shape = broadcast_shapes(src=s, dst=d)
-    dtype = np.result_type(s, d)
-    s, d = s.astype(dtype, copy=False), d.astype(dtype, copy=False)
-    c = _as_constant(constant).astype(dtype)
+    codes = s.dtype == np.uint8 and d.dtype == np.uint8
+    if codes:
+        dtype = np.dtype(np.float32)  # the reference reads codes as float32 k/255
+    else:
+        dtype = np.result_type(*(x for x in (s, d) if x.dtype != np.uint8))
+    constant_arr = _as_constant(constant)
+    rgb_state, alpha_state = (sf, df, eq), (sfa, dfa, eqa)
+
+    pixels = int(np.prod(shape[:-1]))
+    use_fused = engine == "numba" or (
+        engine == "auto" and pixels >= AUTO_COMPILED_MIN_PIXELS and _fused_available()
+    )
+    if use_fused:
+        return _gl_blend_fused(s, d, constant_arr, rgb_state, alpha_state, shape, dtype, unorm8, codes)
+
+    s, d = (_codes_to_float(x, dtype) if x.dtype == np.uint8 else x.astype(dtype, copy=False) for x in (s, d))
+    check_finite(s, "src")
+    check_finite(d, "dst")
+    c = constant_arr.astype(dtype)
     if unorm8:
         s, d, c = _quantise_unorm8(s), _quantise_unorm8(d), _quantise_unorm8(c)
-
     with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below, not warned
-        out = _blend(s, d, c, (sf, df, eq), (sfa, dfa, eqa))
-    if not (_is_scratch(out, shape, s, d) and out.dtype == dtype):
-        out = np.array(np.broadcast_to(out, shape), dtype=dtype)  # own, writable, right dtype
+        out = blend_reference(s, d, c, rgb_state, alpha_state, shape)
     if unorm8:
-        return _quantise_unorm8(out)
+        out = _quantise_unorm8(out)
+        return np.rint(out * _UNORM8_MAX).astype(np.uint8) if codes else out
+    _check_overflow(out)
+    return out
+
+
+def _as_colour(x: object, name: str, unorm8: bool) -> np.ndarray:
+    """``src``/``dst``: a float RGBA array, or uint8 codes when the target is RGBA8."""
+    if isinstance(x, np.ndarray) and x.dtype == np.uint8:
+        if not unorm8:
+            raise TypeError(
+                f"{name}: uint8 arrays are RGBA8 codes and need target='unorm8'; got dtype uint8 with "
+                "target='float32' (pass float values k/255 for a float framebuffer)"
+            )
+        if x.ndim == 0 or x.shape[-1] != 4:
+            raise ValueError(f"{name}: expected RGBA in the last axis, shape (..., 4); got shape {x.shape}")
+        return x
+    return as_rgba(x, name, check_values=False)
+
+
+def _codes_to_float(x: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """uint8 codes as the float values k/255 they stand for (exactly rounded in ``dtype``)."""
+    out = x.astype(dtype)
+    out /= _UNORM8_MAX
+    return out
+
+
+def _as_kind(x: np.ndarray, kind: np.dtype) -> np.ndarray:
+    """``x`` in dtype ``kind`` (uint8 codes read as k/255 when ``kind`` is a float dtype)."""
+    if x.dtype == kind:
+        return x
+    return _codes_to_float(x, kind) if x.dtype == np.uint8 else x.astype(kind)
+
+
+def _unorm8_codes(x: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Float values as 8-bit codes, quantised in ``dtype`` exactly as :func:`_quantise_unorm8`."""
+    q = np.clip(x.astype(dtype), 0.0, 1.0)
+    q *= _UNORM8_MAX
+    return np.rint(q).astype(np.int32)
+
+
+def _check_overflow(out: np.ndarray) -> None:
     overflow = np.count_nonzero(~np.isfinite(out))
     if overflow:
         raise ValueError(
-            f"the blend overflowed {dtype} in {overflow} value(s); src/dst/constant are too large"
+            f"the blend overflowed {out.dtype} in {overflow} value(s); src/dst/constant are too large"
         )
-    return out
 
 
-def _blend(
+def _gl_blend_fused(
     s: np.ndarray,
     d: np.ndarray,
-    c: np.ndarray,
+    constant: np.ndarray,
     rgb_state: tuple[str, str, str],
     alpha_state: tuple[str, str, str],
+    shape: tuple[int, ...],
+    dtype: np.dtype,
+    unorm8: bool,
+    codes: bool,
 ) -> np.ndarray:
-    """The blend on validated arrays.
+    """The compiled blend stage on same-shape, same-dtype, C-contiguous copies of the inputs."""
+    from ._gl_fused import gl_blend_fused
 
-    With separate state the RGB and alpha parts of each factor are merged into one RGBA factor
-    first, so the products run over whole contiguous pixels; only a different alpha equation
-    needs a second (alpha-only) pass.
-    """
-    sf, df, eq = rgb_state
-    sfa, dfa, eqa = alpha_state
-    s_factor = _factor(sf, s, d, c)
-    if sfa != sf:
-        s_factor = _merge(s_factor, _factor(sfa, s, d, c), s.dtype)
-    d_factor = _factor(df, s, d, c)
-    if dfa != df:
-        d_factor = _merge(d_factor, _factor(dfa, s, d, c), s.dtype)
-    out = _equation(eq, s, d, s_factor, d_factor)
-    if eqa != eq:
-        shape = np.broadcast_shapes(s.shape, d.shape)
-        if not _is_scratch(out, shape, s, d):
-            out = np.array(np.broadcast_to(out, shape))
-        alpha = slice(3, 4)
-        out[..., alpha] = _equation(
-            eqa, s[..., alpha], d[..., alpha], _part(s_factor, alpha), _part(d_factor, alpha)
-        )
+    kind = np.dtype(np.uint8) if codes else dtype
+    s0, d0 = s, d
+    s, d = (np.ascontiguousarray(np.broadcast_to(_as_kind(x, kind), shape)) for x in (s, d))
+    if unorm8:
+        c = _unorm8_codes(constant, dtype)
+        mode = "codes" if codes else "quantise"
+    else:
+        c = constant.astype(dtype)
+        mode = "float"
+    out, flagged = gl_blend_fused(s, d, c, rgb_state, alpha_state, mode)
+    if flagged:  # the pass flags a non-finite value; the exact checks name it
+        check_finite(s0, "src")
+        check_finite(d0, "dst")
+        if not unorm8:
+            _check_overflow(out)
     return out
-
-
-def _part(factor: np.ndarray | float, channels: slice) -> np.ndarray | float:
-    """The RGB or alpha part of a factor; scalars and single-channel (replicated) factors as they are."""
-    if isinstance(factor, float) or factor.shape[-1] == 1:
-        return factor
-    return factor[..., channels]
-
-
-def _merge(rgb: np.ndarray | float, alpha: np.ndarray | float, dtype: np.dtype) -> np.ndarray | float:
-    """One RGBA factor from the RGB part of ``rgb`` and the alpha part of ``alpha``."""
-    if isinstance(rgb, float) and isinstance(alpha, float):
-        return rgb if rgb == alpha else np.array([rgb, rgb, rgb, alpha], dtype=dtype)
-    pixels = np.broadcast_shapes(*(np.shape(f)[:-1] for f in (rgb, alpha) if not isinstance(f, float)))
-    merged = np.empty((*pixels, 4), dtype=dtype)
-    merged[..., :3] = _part(rgb, slice(0, 3))
-    merged[..., 3:] = _part(alpha, slice(3, 4))
-    return merged
 
 
 def gl_factors(op: str) -> tuple[str, str]:

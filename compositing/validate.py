@@ -147,21 +147,28 @@ def broadcast_shapes(**arrays: np.ndarray) -> tuple[int, ...]:
 def check_factor(factor: object, name: str, pixel_shape: tuple[int, ...]) -> float | np.ndarray:
     """Validate a mix factor: a number or a float array broadcastable to ``pixel_shape``, in [0, 1].
 
-    ``pixel_shape`` is the image shape without the RGBA axis. Returns a Python
-    float for a scalar, otherwise the array (float32/float64 kept).
+    ``pixel_shape`` is the image shape without the RGBA axis. An array must broadcast *to*
+    it (the result has exactly that shape); a one-channel image of shape
+    ``(*pixel_shape, 1)`` (as ``alpha[..., 3:]`` gives) is accepted and read without its
+    last axis. Returns a Python float for a scalar, otherwise the array (float32/float64
+    kept, shape broadcastable to ``pixel_shape``).
     """
     if isinstance(factor, bool) or not isinstance(factor, int | float | np.floating | np.ndarray):
         raise TypeError(f"{name}: expected a number or a float array in [0, 1], got {type(factor).__name__}")
     if isinstance(factor, np.ndarray) and factor.ndim > 0:
         if factor.dtype not in FLOAT_DTYPES:
             raise TypeError(f"{name}: expected a float32 or float64 array, got dtype {factor.dtype}")
+        if factor.shape == (*pixel_shape, 1):
+            factor = factor[..., 0]  # one value per pixel, written as a one-channel image
         try:
-            np.broadcast_shapes(factor.shape, pixel_shape)
+            fits = np.broadcast_shapes(factor.shape, pixel_shape) == tuple(pixel_shape)
         except ValueError:
+            fits = False
+        if not fits:
             raise ValueError(
                 f"{name}: expected a shape that broadcasts to the pixel shape {pixel_shape} "
-                f"(the image shape without the RGBA axis); got {factor.shape}"
-            ) from None
+                f"(the image shape without the RGBA axis), or {(*pixel_shape, 1)}; got {factor.shape}"
+            )
         check_finite(factor, name)
         if (factor < 0).any() or (factor > 1).any():
             raise ValueError(

@@ -323,8 +323,11 @@ emit({{"ok": last["ok"], "error": last["error"], "raised": raised}})
         timeout=120,
         check=False,
     )
-    assert done.returncode == 1, done.stdout[-2000:] + done.stderr[-2000:]
+    # Inside the bpy module (an embedding Python) abort_on_error does not end the process: the
+    # script's own try/except sees the failure as RuntimeError (blender -b still exits with 1).
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     assert "Blinn-Phong render failed: ValueError" in done.stderr
+    assert "'raised': \"Error: Blinn-Phong render failed: ValueError" in done.stdout
 
 
 def test_cancel_stops_and_leaves_the_error_pattern(tmp_path: Path) -> None:
@@ -415,5 +418,5 @@ def test_renders_with_only_what_blender_ships(tmp_path: Path) -> None:
         args=(str(REPO / "blend_files" / "shadows.blend"),),
     )
     assert got["ok"] is True, got["error"]
-    assert got["shadows"] == ["shadow_map", "shadow_map"]
+    assert got["shadows"] == ["shadow_volume", "shadow_volume"]
     assert sum("Embree" in r for r in got["reasons"]) == 2

@@ -174,8 +174,8 @@ def test_kay_greenberg_glass_opacity_follows_the_eye_normal(tilt_degrees: float)
     assert got.choices["transparency"] != "zbuffer"
 
 
-def test_without_embree_shadows_fall_back_to_shadow_maps(monkeypatch: pytest.MonkeyPatch) -> None:
-    # Blender's Python has no embreex: ray-traced shadows become shadow maps, with the reason given.
+def test_without_embree_shadows_fall_back_to_shadow_volumes(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Blender's Python has no embreex: ray-traced shadows become shadow volumes, with the reason given.
     import sys
 
     monkeypatch.setitem(sys.modules, "embreex", None)
@@ -188,7 +188,7 @@ def test_without_embree_shadows_fall_back_to_shadow_maps(monkeypatch: pytest.Mon
         ambient=(0, 0, 0),
     )
     got = render_frame(scene, 40, 40, options=EffectOptions(shadows="HARD"))
-    assert got.choices["shadows"] == ["shadow_map"]
+    assert got.choices["shadows"] == ["shadow_volume"]
     assert any("Embree" in reason for reason in got.choices["reasons"])
     rows, cols = np.indices((40, 40))
     x, y = -2 + (cols + 0.5) * 0.1, 2 - (rows + 0.5) * 0.1

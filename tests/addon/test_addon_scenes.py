@@ -105,7 +105,10 @@ def test_transparency_scene_uses_an_exact_method_for_interpenetrating_glass(
 def test_shadows_scene_has_shadows(rendered: tuple[Path, dict]) -> None:
     out, facts = rendered
     choices = facts["shadows"]["choices"]
-    assert set(choices["shadows"]) <= {"ray_traced", "planar", "shadow_map"} and choices["shadows"]
+    assert (
+        set(choices["shadows"]) <= {"ray_traced", "planar", "shadow_map", "shadow_volume"}
+        and choices["shadows"]
+    )
     shadow = np.load(out / "shadows_shadow.npy")[..., 0]
     covered = read_image(out / "shadows.exr")[..., 3] == 1
     # Shadow = mean visibility over the two lights: <= 0.5 where at least one light is blocked.

@@ -506,9 +506,9 @@ def test_engines_agree_on_the_effects_path() -> None:
     np.testing.assert_allclose(numba_image, numpy_image, atol=1e-6)
 
 
-def test_without_embree_shadows_fall_back_to_shadow_maps() -> None:
-    # Blender's own Python has no embreex: blinn_phong imports, and every shadow method that casts
-    # rays (ray_traced, soft, planar's point test) becomes a shadow map, with the reason given.
+def test_without_embree_shadows_fall_back_to_shadow_volumes() -> None:
+    # Blender's own Python has no embreex: blinn_phong imports, and the exact shadow methods that cast
+    # rays (ray_traced, planar's point test) become shadow volumes, exact too, with the reason given.
     import subprocess
     import sys
     from pathlib import Path
@@ -536,9 +536,9 @@ print("blinn_phong.raytrace" in sys.modules, bp.plan(scene).shadows[0].method, r
     # kd·(n·l) = 4 / √(1.75² + 0.05² + 16).
     lit = 4 / math.sqrt(1.75**2 + 0.05**2 + 16)
     lines = run.stdout.split("\n")
-    for line in lines[:3]:
+    for line, expected in zip(lines[:3], ("shadow_volume", "shadow_volume", "shadow_map"), strict=True):
         shadowed, lit_value, method = line.split()
-        assert float(shadowed) == 0.0 and abs(float(lit_value) - lit) < 1e-5 and method == "shadow_map"
+        assert float(shadowed) == 0.0 and abs(float(lit_value) - lit) < 1e-5 and method == expected
     assert lines[3].startswith("False planar")  # Embree never imported; the planner's own choice
     planned = bp.render(point_light_scene(), 8, 8).plan.shadows[0]
     assert planned.method == "planar"  # with Embree the planner's choice stands

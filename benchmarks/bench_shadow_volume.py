@@ -1,0 +1,291 @@
+"""Shadow volumes against shadow maps and Embree ray tracing: time against error, frame cost, crossover.
+
+Three measurements, each a ratio between methods timed interleaved in the same run
+(:func:`benchmarks._util.time_interleaved`, medians):
+
+* ``same_scenes`` — the scene of the shadows chart (:func:`benchmarks.bench_effects._shadow_scene`:
+  two spheres and a box on a ground plane, a directional and a point light): every visible sample
+  classified by shadow volumes (z-fail and z-pass, adjacency rebuilt every call — "cold" — or reused
+  — "warm"), by shadow maps (1024², 2048², nearest, the renderer's default bias) and by Embree. Error
+  is against Embree (exact hard shadows): mean |Δ visibility| and the share of samples that differ.
+* ``frame`` — the frame-pipeline scene (two 65,024-triangle spheres over a ground plane, a
+  directional and a point light, 1920×1080; ``--quick``: 480×270): ``render`` with
+  ``shadows="none"`` (the plain compiled frame), ``"shadow_volume"`` and ``"ray_traced"``; frame
+  times, their ratios to the plain frame, and the shadow stage alone against the plain frame.
+* ``crossover`` — one sphere over a plane under a point light: shadow volumes (cold) against Embree
+  (scene build + rays) as the sphere's triangle count and the number of samples grow; where the
+  ratio crosses 1 is where ray tracing starts to win.
+
+Writes ``shadow_volume.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._util import machine_info, time_interleaved, write_json
+from blinn_phong import shadow_volume as sv
+from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.render import prepare_scene, render
+from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows import light_visibility
+
+__all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
+
+
+def _samples(scene: Scene, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    prepared = prepare_scene(scene)
+    frags = rasterize(prepared.clip, prepared.triangles, width, height)
+    win = resolve_nearest(frags)
+    vis = frags.subset(win[win >= 0])
+    eye = interpolate(vis, prepared.triangles, prepared.eye_position)
+    world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
+    return world, prepared.face_world_normal[vis.triangle]
+
+
+def _cold(fn):
+    def call():
+        sv._TOPOLOGY_CACHE.clear()
+        return fn()
+
+    return call
+
+
+def same_scenes(size: int, repeat: int) -> list[dict]:
+    """Time and error of every method on the shadows chart's scene, per light."""
+    from benchmarks.bench_effects import _shadow_scene
+
+    scene, tris = _shadow_scene()
+    points, normals = _samples(scene, size, size)
+    out = []
+    for light in (DirectionalLight((0.4, 0.25, -1.0)), PointLight((1.5, -1.0, 5.0))):
+        cam = scene.camera
+
+        def volume(method: str, light=light, cam=cam):
+            return lambda: light_visibility(
+                "shadow_volume", light, tris, points, normals, camera=cam, stencil=method
+            )
+
+        methods = {
+            "ray_traced": lambda light=light: light_visibility("ray_traced", light, tris, points, normals),
+            "shadow_volume_zfail_cold": _cold(volume("zfail")),
+            "shadow_volume_zpass_cold": _cold(volume("zpass")),
+            "shadow_volume_zfail_warm": volume("zfail"),
+        }
+        for res in (1024, 2048):
+            methods[f"shadow_map_{res}"] = lambda light=light, res=res: light_visibility(
+                "shadow_map", light, tris, points, normals, resolution=res
+            )
+        times = time_interleaved(methods, repeat=repeat)
+        reference = methods["ray_traced"]()
+        ref_time = times["ray_traced"]["median_s"]
+        for name, fn in methods.items():
+            vis = fn()
+            row = {
+                "light": type(light).__name__,
+                "method": name,
+                "samples": len(points),
+                "median_s": times[name]["median_s"],
+                "ratio_to_embree": times[name]["median_s"] / ref_time,
+                "mean_abs_error": float(np.mean(np.abs(vis - reference))),
+                "differing_share": float(np.mean(vis != reference)),
+            }
+            out.append(row)
+            print(
+                f"same scenes {row['light']:16s} {name:26s} {row['median_s'] * 1e3:8.1f} ms "
+                f"×{row['ratio_to_embree']:.2f} Embree  differing {row['differing_share']:.2e}",
+                flush=True,
+            )
+    return out
+
+
+def _frame_scene(segments: int = 256, rings: int = 128) -> Scene:
+    p, t, n = uv_sphere(segments, rings, 1.0)
+    mat = Material(ambient=(0.7, 0.7, 0.7), diffuse=(0.7, 0.7, 0.7), specular=(0.3, 0.3, 0.3), shininess=30.0)
+    meshes = []
+    for cx in (-1.3, 1.3):
+        transform = np.eye(4)
+        transform[:3, 3] = (cx, 0.0, 1.0)
+        meshes.append(Mesh(p, t, normals=n, transform=transform, material=mat))
+    gp, gt, gn = grid_plane(1, 1, (12.0, 12.0))
+    meshes.append(Mesh(gp, gt, normals=gn, material=mat))
+    camera = Camera.perspective(45.0, 16 / 9, 0.5, 50.0, view=look_at((0, -7, 4), (0, 0, 0.7), (0, 0, 1)))
+    lights = (DirectionalLight((-0.4, -0.3, -1.0)), PointLight((2.0, -1.0, 5.0)))
+    return Scene(tuple(meshes), lights, camera)
+
+
+def frame(width: int, height: int, repeat: int) -> dict:
+    """Frame times with no shadows, shadow volumes and Embree on the two-sphere scene."""
+    scene = _frame_scene()
+    stages: dict[str, dict] = {}
+
+    def run_with(shadows: str, cold: bool):
+        def call():
+            if cold:
+                sv._TOPOLOGY_CACHE.clear()
+            stages[shadows] = render(scene, width, height, shadows=shadows).stats.seconds
+
+        return call
+
+    candidates = {
+        "none": run_with("none", False),
+        "shadow_volume": run_with("shadow_volume", True),
+        "ray_traced": run_with("ray_traced", False),
+    }
+    times = time_interleaved(candidates, repeat=repeat)
+    plain = times["none"]["median_s"]
+    result = {
+        "size": [width, height],
+        "triangles": int(sum(len(m.triangles) for m in scene.meshes)),
+        "frame_median_s": {k: v["median_s"] for k, v in times.items()},
+        "frame_ratio_to_plain": {k: v["median_s"] / plain for k, v in times.items()},
+        "last_stage_seconds": stages,
+        "shadow_stage_ratio_to_plain": {
+            k: stages[k].get("shadows", 0.0) / plain for k in ("shadow_volume", "ray_traced")
+        },
+    }
+    print(f"frame {width}×{height}: {result['frame_ratio_to_plain']}", flush=True)
+    print(f"  shadow stage / plain frame: {result['shadow_stage_ratio_to_plain']}", flush=True)
+    return result
+
+
+def crossover(repeat: int, quick: bool) -> list[dict]:
+    """Shadow volumes (cold) against Embree as triangles and samples grow: one sphere over a plane."""
+    light = PointLight((1.5, -1.0, 5.0))
+    camera = Camera.perspective(45.0, 16 / 9, 0.5, 50.0, view=look_at((0, -6, 4), (0, 0, 0.7), (0, 0, 1)))
+    segment_list = (16, 64, 256) if quick else (16, 32, 64, 128, 256, 512)
+    sizes = ((240, 135), (480, 270)) if quick else ((240, 135), (480, 270), (960, 540))
+    out = []
+    mat = Material()
+    gp, gt, gn = grid_plane(1, 1, (12.0, 12.0))
+    for segments in segment_list:
+        p, t, n = uv_sphere(segments, max(segments // 2, 2), 1.0)
+        transform = np.eye(4)
+        transform[:3, 3] = (0.0, 0.0, 1.2)
+        scene = Scene(
+            (
+                Mesh(p, t, normals=n, transform=transform, material=mat),
+                Mesh(gp, gt, normals=gn, material=mat),
+            ),
+            (light,),
+            camera,
+        )
+        tris = np.concatenate([(p + transform[:3, 3])[t], gp[gt]])
+        for width, height in sizes:
+            points, normals = _samples(scene, width, height)
+            args = (light, tris, points, normals)
+            methods = {
+                "ray_traced": lambda args=args: light_visibility("ray_traced", *args),
+                "shadow_volume": _cold(
+                    lambda args=args: light_visibility("shadow_volume", *args, camera=camera)
+                ),
+            }
+            times = time_interleaved(methods, repeat=repeat)
+            row = {
+                "triangles": len(tris),
+                "size": [width, height],
+                "samples": len(points),
+                "ray_traced_s": times["ray_traced"]["median_s"],
+                "shadow_volume_s": times["shadow_volume"]["median_s"],
+            }
+            row["ratio"] = row["shadow_volume_s"] / row["ray_traced_s"]
+            out.append(row)
+            print(
+                f"crossover {len(tris):7d} tris {width}×{height}: volumes/Embree = {row['ratio']:.2f}",
+                flush=True,
+            )
+    return out
+
+
+def chart(result: dict, path: str | os.PathLike) -> Path:
+    """Two panels: time against error on the shared scene; the volumes/Embree ratio against triangles."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for light, marker in (("DirectionalLight", "o"), ("PointLight", "s")):
+        rows = [r for r in result["same_scenes"] if r["light"] == light]
+        for r in rows:
+            err = max(r["differing_share"], 1e-6)  # exact methods drawn at the floor of the axis
+            left.scatter(
+                r["ratio_to_embree"],
+                err,
+                marker=marker,
+                color="C0" if "volume" in r["method"] else ("C1" if "map" in r["method"] else "C2"),
+            )
+            left.annotate(r["method"].replace("shadow_", ""), (r["ratio_to_embree"], err), fontsize=6)
+    left.set_xscale("log")
+    left.set_yscale("log")
+    left.set_xlabel("time / Embree ray tracing (same run)")
+    left.set_ylabel("share of samples differing from Embree (1e-6 = none)")
+    left.set_title("shadows chart scene: volumes, maps, Embree")
+    sizes = sorted({tuple(r["size"]) for r in result["crossover"]})
+    for size in sizes:
+        rows = [r for r in result["crossover"] if tuple(r["size"]) == size]
+        right.plot(
+            [r["triangles"] for r in rows],
+            [r["ratio"] for r in rows],
+            marker="o",
+            label=f"{size[0]}×{size[1]}",
+        )
+    right.axhline(1.0, color="grey", lw=0.8)
+    right.set_xscale("log")
+    right.set_xlabel("triangles (one sphere over a plane)")
+    right.set_ylabel("shadow volumes / Embree time")
+    right.set_title("crossover: below 1, volumes are faster")
+    right.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, out)  # a failed write leaves the previous chart intact
+    return out
+
+
+def run(out_dir: str | os.PathLike, *, repeat: int = 3, quick: bool = False) -> dict:
+    """Run all three measurements, write ``shadow_volume.json`` into ``out_dir`` and return it."""
+    sv.shadow_volume_visibility(  # compile the kernel outside the timings
+        PointLight((0, 0, 3.0)),
+        np.array([[[0, 0, 1.0], [1, 0, 1.0], [0, 1, 1.0]]]),
+        np.zeros((1, 3)),
+        np.array([[0, 0, 1.0]]),
+    )
+    result = {
+        "benchmark": "shadow_volume",
+        "timing": "medians of interleaved rounds, wall clock, same process",
+        "repeat": repeat,
+        "machine": machine_info(),
+        "same_scenes": same_scenes(128 if quick else 256, repeat),
+        "frame": frame(480, 270, max(1, repeat // 2)) if quick else frame(1920, 1080, max(1, repeat // 2)),
+        "crossover": crossover(repeat, quick),
+    }
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "shadow_volume.json", result)
+    return result
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command-line entry point."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="benchmarks/results", help="directory for shadow_volume.json")
+    parser.add_argument("--repeat", type=int, default=3, help="interleaved rounds per case")
+    parser.add_argument("--quick", action="store_true", help="small sizes")
+    parser.add_argument("--chart", default=None, help="also draw the chart to this PNG path")
+    args = parser.parse_args(argv)
+    result = run(args.out, repeat=args.repeat, quick=args.quick)
+    if args.chart:
+        print(f"chart {chart(result, args.chart)}")
+
+
+if __name__ == "__main__":
+    main()

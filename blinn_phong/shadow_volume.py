@@ -1,0 +1,1204 @@
+"""Shadow volumes: exact hard shadows by counting volume faces per sample (stencil counting).
+
+Crow ("Shadow Algorithms for Computer Graphics", SIGGRAPH '77) bounds the region a caster
+hides from a light by a closed *shadow volume*: the caster's faces that face the light (the
+*light cap*), quads swept from its *silhouette edges* away from the light (the *sides*), and the
+faces that face away, pushed to infinity (the *dark cap*). A point is in shadow when it lies
+inside a volume. Heidmann (1991) counted this per pixel with the stencil buffer; Everitt &
+Kilgard ("Practical and Robust Stenciled Shadow Volumes for Hardware-Accelerated Rendering",
+NVIDIA 2002) made it robust.
+
+Per receiver point ``p`` (a visible sample), with the camera's view and projection:
+
+* **z-pass** (Heidmann): count the volume faces drawn *in front of* ``p`` along the camera ray
+  through ``p`` — +1 for a face seen from its front (entering a volume), −1 from its back. The
+  sum is the number of volumes ``p`` lies in **if the camera is outside every volume and no
+  volume is cut by the near plane**; otherwise the faces the camera is already behind are
+  missing from the count (tests/failures/test_shadow_volume_failures.py measures it).
+* **z-fail** ("Carmack's reverse", Everitt & Kilgard §3): count the faces *behind* ``p`` — +1
+  for back faces, −1 for front faces — out to infinity. Counting from infinity (where every
+  count is 0) instead of from the eye makes it independent of where the camera is; it needs
+  the volumes closed at both ends (light and dark caps) and nothing lost behind a far plane:
+  here nothing is clipped but the near plane, which is what ``GL_DEPTH_CLAMP`` (or Everitt &
+  Kilgard's infinite projection) gives the stencil buffer.
+
+``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). ``stencil="auto"`` uses
+z-pass (no caps to draw) where :func:`zpass_is_safe` proves that no volume reaches the near
+plane, and z-fail elsewhere.
+
+Geometry
+--------
+* **Welding and adjacency.** The input is a world-space triangle soup; vertices with
+  bit-identical coordinates are merged (a mesh's shared vertices transform to identical
+  floats). Triangles that share an edge are neighbours; edge-connected sets are components.
+* **Closed 2-manifold components** (every directed edge ``a→b`` used once and its twin
+  ``b→a`` once) use silhouette extrusion: silhouette edges are the edges between a triangle
+  facing the light and one facing away (facing: sign of the plane equation at the light,
+  ``n·(L − v₀)``, or ``−n·d`` for a directional light). A component enclosing negative volume
+  (inside-out) is flipped so every volume is outward: counts of different volumes then add
+  and never cancel.
+* **Open or non-manifold components** (a ground quad, a mesh with a hole, an edge shared by
+  three faces) fall back to *extruding every triangle*: each triangle, oriented to face the
+  light, is treated as the closed two-sided sliver ``{T, reversed T}`` with its own light cap,
+  three sides and dark cap. The count at a point is then the number of such triangles between
+  it and the light — exact for any triangle soup (what a shadow ray sees), at three side quads
+  per triangle instead of per silhouette edge. Silhouette extrusion of an open mesh would
+  leak: its boundary edges are not silhouettes, so the volume has holes
+  (tests/failures/test_shadow_volume_failures.py). :func:`analyse_topology` reports which
+  components fell back and why.
+* **Extrusion to infinity** in homogeneous coordinates (Everitt & Kilgard §4): a vertex ``v``
+  goes to ``(v − L, 0)`` for a point or spot light at ``L`` and to ``(d, 0)`` for a directional
+  light travelling along ``d`` (then every dark-cap vertex is the same point and the dark cap
+  vanishes; sides are triangles). With a perspective camera these project to finite window
+  positions; with an orthographic one (whose ``w`` would be 0 there) the volume is instead
+  extruded to a finite distance beyond every receiver and caster, which gives the same counts
+  for every receiver point.
+* Spot lights cast the shadows of a point light at their position (the cone limits the light,
+  not the occluders), as :mod:`blinn_phong.raytrace` does.
+
+Counting
+--------
+Volume triangles are transformed to clip space and clipped against the near plane
+``z_c ≥ −w_c`` (as OpenGL clips) and no far plane (as ``GL_DEPTH_CLAMP`` leaves it), plus a
+guard band ``|x_c|, |y_c| ≤ G·w_c`` wider than every receiver, which only keeps window positions
+finite where vertices at infinity graze the eye plane. Each receiver is projected with the same
+matrices. A volume triangle counts at a receiver whose normalised-device ``(x, y)`` lies inside it — edge
+functions evaluated from each edge's canonical (lexicographically first) endpoint, so two
+triangles sharing an edge give exactly opposite values and, with a fixed tie-break
+(perturbation towards +x, then +y), a point on a shared edge belongs to exactly one of them —
+and whose depth, interpolated linearly in screen space (OpenGL 4.6 §14.6.1), is nearer than the
+receiver's (z-pass; ``GL_LESS`` passes) or not nearer (z-fail; the depth test fails). Facing is
+the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid; the
+compiled kernel (numba) processes horizontal bands of that grid in parallel, each band owning its
+receivers (no write races); the numpy engine is the readable reference. Counts are integers and
+both engines evaluate the same floating-point expressions, so they agree exactly.
+
+Self-shadowing without depth invariance: a real stencil pass relies on a surface and its own
+light cap giving bit-identical depths (the cap then fails ``GL_LESS`` and lies "behind"). Here
+receivers are world points, so each is first moved ``offset`` along its normal towards the
+light's side (as the ray tracer's origins are, :func:`blinn_phong.raytrace.point_light_visibility`):
+a face lit by the light moves out of its own volume, a face turned away moves into it.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import Camera, DirectionalLight, PointLight, SpotLight
+
+__all__ = [
+    "STENCIL_METHODS",
+    "Topology",
+    "analyse_topology",
+    "shadow_volume_triangles",
+    "shadow_volume_visibility",
+    "silhouette_edges",
+    "stencil_counts",
+    "zpass_is_safe",
+]
+
+#: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
+STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
+_ENGINES = ("auto", "numba", "numpy")
+_TILE_POINTS = 16  # receivers per screen tile, on average
+_PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
+
+
+# --------------------------------------------------------------------------- input checks
+
+
+def _triangles(name: str, value: object) -> np.ndarray:
+    tris = np.asarray(value)
+    if tris.dtype.kind not in "fiu" or tris.ndim != 3 or tris.shape[1:] != (3, 3):
+        raise ValueError(f"{name}: expected a real array of shape (n, 3, 3), got {tris.dtype} {tris.shape}")
+    if not np.all(np.isfinite(tris)):
+        raise ValueError(f"{name}: expected finite coordinates, got NaN or Inf")
+    return tris.astype(np.float64, copy=False)
+
+
+def _points(name: str, value: object) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
+        raise ValueError(f"{name}: expected a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite coordinates, got NaN or Inf")
+    return arr.astype(np.float64, copy=False)
+
+
+def _light(light: object) -> tuple[np.ndarray, bool]:
+    """(position or direction of travel, is_directional)."""
+    if isinstance(light, DirectionalLight):
+        d = np.asarray(light.direction, dtype=np.float64)
+        return d / np.linalg.norm(d), True
+    if isinstance(light, PointLight | SpotLight):
+        return np.asarray(light.position, dtype=np.float64), False
+    raise TypeError(
+        f"light: expected a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}"
+    )
+
+
+# --------------------------------------------------------------------------- topology
+
+
+@dataclass(frozen=True, eq=False)
+class Topology:
+    """Welded connectivity of a triangle soup and which parts are closed 2-manifolds.
+
+    Attributes:
+        vertices: (V, 3) float64 welded world positions (bit-identical coordinates merged).
+        triangles: (T, 3) int64 vertex indices, one row per input triangle (in input order);
+            triangle orientation is flipped where its component was inside-out.
+        valid: (T,) bool, False for triangles with a repeated vertex (zero area, never drawn).
+        component: (T,) int64 edge-connected component of each triangle (-1 when not valid).
+        closed: (T,) bool, True when the triangle's component is a closed 2-manifold.
+        reasons: one line per open or non-manifold component: why it is extruded per triangle.
+        neighbour: (T, 3) int64, the triangle across edge ``(v_i, v_(i+1))`` of each triangle
+            (its twin's owner), −1 where the edge has no unique twin.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    valid: np.ndarray
+    component: np.ndarray
+    closed: np.ndarray
+    reasons: tuple[str, ...]
+    neighbour: np.ndarray
+
+
+def analyse_topology(world_triangles: np.ndarray) -> Topology:
+    """Weld a triangle soup, build edge adjacency and classify components as closed 2-manifolds.
+
+    A component is closed when each of its directed edges ``a→b`` occurs exactly once and its
+    twin ``b→a`` exactly once (every edge shared by two consistently oriented faces). Closed
+    components with negative signed volume ``Σ v₀·(v₁×v₂)/6`` are flipped to face outwards.
+
+    Args:
+        world_triangles: (n, 3, 3) world-space triangles, counter-clockwise = front.
+
+    Returns:
+        :class:`Topology`.
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    n = len(tris)
+    if n == 0:
+        e = np.zeros(0, np.int64)
+        return Topology(
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            e.astype(bool),
+            e,
+            e.astype(bool),
+            (),
+            np.zeros((0, 3), np.int64),
+        )
+    key = hashlib.blake2b(tris.tobytes(), digest_size=16).digest()
+    if key in _TOPOLOGY_CACHE:
+        return _TOPOLOGY_CACHE[key]
+    topology = _analyse(tris)
+    if len(_TOPOLOGY_CACHE) >= 2:
+        _TOPOLOGY_CACHE.pop(next(iter(_TOPOLOGY_CACHE)))
+    _TOPOLOGY_CACHE[key] = topology
+    return topology
+
+
+#: The last topologies analysed, by a digest of the triangles (a frame asks once per light).
+_TOPOLOGY_CACHE: dict[bytes, Topology] = {}
+
+
+@functools.lru_cache(maxsize=1)
+def _hash_kernels() -> tuple[object, object, object]:
+    """Compiled hash-table welding, edge pairing (linear probing) and union-find: same results as
+    the numpy sorts and pointer jumping."""
+    import numba
+
+    @numba.njit(cache=True)
+    def weld(bits):  # pragma: no cover - compiled
+        m = bits.shape[0]
+        size = 1
+        while size < 2 * m:
+            size *= 2
+        table = np.full(size, -1, np.int64)
+        inverse = np.empty(m, np.int64)
+        first = np.empty(m, np.int64)
+        n_unique = 0
+        for r in range(m):
+            h = np.uint64(0)
+            for c in range(3):
+                z = bits[r, c] ^ h
+                z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+                z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+                h = z ^ (z >> np.uint64(31))
+            slot = np.int64(h & np.uint64(size - 1))
+            while True:
+                u = table[slot]
+                if u < 0:
+                    table[slot] = n_unique
+                    first[n_unique] = r
+                    inverse[r] = n_unique
+                    n_unique += 1
+                    break
+                q = first[u]
+                if bits[q, 0] == bits[r, 0] and bits[q, 1] == bits[r, 1] and bits[q, 2] == bits[r, 2]:
+                    inverse[r] = u
+                    break
+                slot = (slot + 1) & (size - 1)
+        return first[:n_unique].copy(), inverse
+
+    @numba.njit(cache=True)
+    def pair(key, twin):  # pragma: no cover - compiled
+        """Per directed edge: how often it occurs, how often its twin occurs, the twin's first index."""
+        m = key.shape[0]
+        size = 1
+        while size < 2 * m:
+            size *= 2
+        table = np.full(size, -1, np.int64)
+        count = np.zeros(m, np.int64)  # indexed by the first occurrence
+        first_of = np.empty(m, np.int64)
+        for e in range(m):
+            z = np.uint64(key[e])
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            while True:
+                f = table[slot]
+                if f < 0:
+                    table[slot] = e
+                    first_of[e] = e
+                    count[e] = 1
+                    break
+                if key[f] == key[e]:
+                    first_of[e] = f
+                    count[f] += 1
+                    break
+                slot = (slot + 1) & (size - 1)
+        own = np.empty(m, np.int64)
+        twin_count = np.zeros(m, np.int64)
+        twin_first = np.full(m, -1, np.int64)
+        for e in range(m):
+            own[e] = count[first_of[e]]
+            z = np.uint64(twin[e])
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            while True:
+                f = table[slot]
+                if f < 0:
+                    break
+                if key[f] == twin[e]:
+                    twin_count[e] = count[f]
+                    twin_first[e] = f
+                    break
+                slot = (slot + 1) & (size - 1)
+        return own, twin_count, twin_first
+
+    @numba.njit(cache=True)
+    def union_find(n, rows, cols):  # pragma: no cover - compiled
+        parent = np.arange(n)
+        for e in range(rows.shape[0]):
+            a = rows[e]
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            b = cols[e]
+            while parent[b] != b:
+                parent[b] = parent[parent[b]]
+                b = parent[b]
+            if a < b:
+                parent[b] = a
+            elif b < a:
+                parent[a] = b
+        for i in range(n):  # roots are the smallest index of their set; parents point lower
+            parent[i] = parent[parent[i]]
+        return parent
+
+    return weld, pair, union_find
+
+
+def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Connected components of n nodes joined by edges (rows[i], cols[i]): each node's label is
+    the smallest node index of its component (the same on both engines)."""
+    from .fast import numba_available
+
+    if numba_available():
+        return _hash_kernels()[2](n, rows.astype(np.int64), cols.astype(np.int64))
+    parent = np.arange(n)
+    while True:  # hook larger roots under smaller ones, then jump pointers until flat
+        pu, pv = parent[rows], parent[cols]
+        lo, hi = np.minimum(pu, pv), np.maximum(pu, pv)
+        moving = lo != hi
+        if not moving.any():
+            return parent
+        np.minimum.at(parent, hi[moving], lo[moving])
+        while True:
+            grand = parent[parent]
+            if np.array_equal(grand, parent):
+                break
+            parent = grand
+
+
+def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Merge bit-identical rows of (m, 3) float64: (unique rows, index of each input row)."""
+    flat = np.ascontiguousarray(flat + 0.0)  # -0.0 and 0.0 weld together
+    bits = flat.view(np.uint64).reshape(-1, 3)
+    from .fast import numba_available
+
+    if numba_available():
+        representative, inverse = _hash_kernels()[0](bits)
+        return flat[representative], inverse
+
+    def mix(z: np.ndarray) -> np.ndarray:  # splitmix64's finaliser (wrapping uint64 arithmetic)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return z ^ (z >> np.uint64(31))
+
+    digest = mix(mix(mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
+    order = np.argsort(digest, kind="stable")  # radix sort for integers
+    ordered = digest[order]
+    first = np.r_[True, ordered[1:] != ordered[:-1]]
+    group = np.cumsum(first) - 1
+    representative = order[first]
+    if not np.array_equal(bits[order], bits[representative[group]]):  # a collision: sort exactly
+        order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0]))
+        rows = bits[order]
+        first = np.r_[True, np.any(rows[1:] != rows[:-1], axis=1)]
+        group = np.cumsum(first) - 1
+        representative = order[first]
+    inverse = np.empty(len(flat), np.int64)
+    inverse[order] = group
+    return flat[representative], inverse
+
+
+def _analyse(tris: np.ndarray) -> Topology:
+    n = len(tris)
+    vertices, inverse = _weld(tris.reshape(-1, 3))
+    faces = inverse.reshape(n, 3).astype(np.int64)
+    valid = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    idx = np.flatnonzero(valid)
+    nv = len(vertices)
+    # directed edges a→b of the valid triangles
+    a = faces[idx][:, [0, 1, 2]].ravel()
+    b = faces[idx][:, [1, 2, 0]].ravel()
+    owner = np.repeat(idx, 3)
+    key = a * nv + b
+    twin = b * nv + a
+    from .fast import numba_available
+
+    if numba_available():
+        own_count, twin_count, twin_first = _hash_kernels()[1](key, twin)
+        has_twin = twin_first >= 0
+        twin_at = np.maximum(twin_first, 0)
+    else:
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+        uniq = sorted_key[starts]
+        counts = np.diff(np.r_[starts, len(sorted_key)])
+        run = np.empty(len(key), np.int64)
+        run[order] = np.cumsum(np.r_[True, sorted_key[1:] != sorted_key[:-1]]) - 1
+        own_count = counts[run]
+        tpos = np.clip(np.searchsorted(uniq, twin), 0, max(len(uniq) - 1, 0))
+        has_twin = uniq[tpos] == twin
+        twin_count = np.where(has_twin, counts[tpos], 0)
+        twin_at = order[starts[tpos]]  # the first occurrence of the twin (where it exists)
+    bad_edge = (own_count != 1) | (twin_count != 1)
+    # components: triangles joined through an edge and its twin
+    labels = _components(n, owner[has_twin], owner[twin_at[has_twin]])
+    component = np.full(n, -1, np.int64)
+    # relabel valid triangles' components densely
+    _, dense = np.unique(labels[idx], return_inverse=True)
+    component[idx] = dense
+    n_comp = int(dense.max()) + 1 if len(idx) else 0
+    comp_bad = np.zeros(n_comp, bool)
+    np.logical_or.at(comp_bad, component[owner], bad_edge)
+    closed = np.zeros(n, bool)
+    closed[idx] = ~comp_bad[component[idx]]
+    reasons = []
+    for c in np.flatnonzero(comp_bad):
+        sel = component[owner] == c
+        n_tri = int(np.count_nonzero(component == c))
+        boundary = int(np.count_nonzero(sel & (twin_count == 0)))
+        shared = int(np.count_nonzero(sel & ((own_count > 1) | (twin_count > 1))))
+        what = []
+        if boundary:
+            what.append(f"{boundary} boundary edges (open)")
+        if shared:
+            what.append(f"{shared} edges shared by more than two faces or inconsistently oriented")
+        reasons.append(
+            f"component of {n_tri} triangles: {', '.join(what)}; every triangle extruded on its own"
+        )
+    # outward orientation of closed components
+    v = vertices[faces]
+    signed = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0
+    comp_volume = np.zeros(n_comp)
+    np.add.at(comp_volume, component[idx], signed[idx])
+    flip = np.zeros(n, bool)
+    flip[idx] = closed[idx] & (comp_volume[component[idx]] < 0)
+    faces = faces.copy()
+    faces[flip] = faces[flip][:, ::-1]
+    neighbour = np.full((n, 3), -1, np.int64)
+    unique_twin = has_twin & (own_count == 1) & (twin_count == 1)
+    twin_owner = np.where(unique_twin, owner[twin_at], -1)
+    neighbour[idx] = twin_owner.reshape(-1, 3)
+    # a reversed face (v2, v1, v0) has the edges of (v0, v1, v2) in the order 1, 0, 2
+    neighbour[flip] = neighbour[flip][:, [1, 0, 2]]
+    return Topology(vertices, faces, valid, component, closed, tuple(reasons), neighbour)
+
+
+def _facing(topology: Topology, light_vec: np.ndarray, directional: bool) -> np.ndarray:
+    """(T,) float64 plane-side value: > 0 when the triangle's front faces the light."""
+    v = topology.vertices[topology.triangles]
+    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    if directional:
+        return -(normal @ light_vec)
+    return np.einsum("ij,ij->i", normal, light_vec - v[:, 0])
+
+
+def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | SpotLight) -> np.ndarray:
+    """Directed silhouette edges of the closed components for one light.
+
+    An edge is a silhouette edge when one of its two faces faces the light (``n·(L − v₀) > 0``,
+    or ``−n·d > 0`` for a directional light) and the other does not. It is returned as
+    ``(a, b)`` in the order it has in the face that faces the light.
+
+    Args:
+        topology: from :func:`analyse_topology`.
+        light: the light.
+
+    Returns:
+        (E, 2) int64 vertex indices into ``topology.vertices``.
+    """
+    light_vec, directional = _light(light)
+    return _silhouette(topology, _facing(topology, light_vec, directional) > 0)
+
+
+def _silhouette(topology: Topology, lit: np.ndarray) -> np.ndarray:
+    sel = np.flatnonzero(topology.closed & lit)
+    f = topology.triangles[sel]
+    nb = topology.neighbour[sel]
+    edges = []
+    for i in range(3):
+        other = nb[:, i]
+        is_sil = (other >= 0) & ~lit[np.maximum(other, 0)]  # a boundary edge (no twin) is no silhouette
+        edges.append(np.stack([f[is_sil, i], f[is_sil, (i + 1) % 3]], axis=1))
+    return np.concatenate(edges)
+
+
+def _to_infinity(
+    points: np.ndarray, light_vec: np.ndarray, directional: bool, extent: float | None
+) -> np.ndarray:
+    """(n, 4) homogeneous images of points pushed away from the light (to infinity, or ``extent`` away)."""
+    if directional:
+        d = np.broadcast_to(light_vec, points.shape)
+    else:
+        d = points - light_vec
+    if extent is None:
+        return np.c_[d, np.zeros(len(points))]
+    length = np.linalg.norm(d, axis=1, keepdims=True)
+    return np.c_[points + d / np.maximum(length, 1e-300) * extent, np.ones(len(points))]
+
+
+def shadow_volume_triangles(
+    world_triangles: np.ndarray | Topology,
+    light: DirectionalLight | PointLight | SpotLight,
+    *,
+    caps: bool = True,
+    extent: float | None = None,
+    force_silhouette: bool = False,
+) -> np.ndarray:
+    """The shadow volumes of every caster for one light, as outward-facing homogeneous triangles.
+
+    Closed components: light cap (faces facing the light), a quad per silhouette edge, dark cap
+    (the other faces, pushed away). Open/non-manifold components: every triangle extruded on its
+    own (see the module docstring). Quads are split into two triangles.
+
+    Args:
+        world_triangles: (n, 3, 3) world-space triangles, or a :class:`Topology` of them.
+        light: the light.
+        caps: include light and dark caps (z-fail needs them; z-pass does not draw them).
+        extent: None — extrude to infinity (w = 0); else the world distance of the far end.
+        force_silhouette: treat open components as if closed too (silhouette extrusion only):
+            wrong for open meshes, kept to measure their leak.
+
+    Returns:
+        (m, 3, 4) float64 homogeneous world-space triangles, counter-clockwise seen from
+        outside the volume.
+    """
+    topo = world_triangles if isinstance(world_triangles, Topology) else analyse_topology(world_triangles)
+    if force_silhouette:
+        topo = Topology(
+            topo.vertices,
+            topo.triangles,
+            topo.valid,
+            topo.component,
+            topo.valid.copy(),
+            topo.reasons,
+            topo.neighbour,
+        )
+    light_vec, directional = _light(light)
+    verts = topo.vertices
+    facing = _facing(topo, light_vec, directional)
+    lit = facing > 0
+    hv = np.c_[verts, np.ones(len(verts))]
+    far = _to_infinity(verts, light_vec, directional, extent)
+    parts = []
+    # closed components: silhouette extrusion
+    closed = topo.closed
+    sil = _silhouette(topo, lit) if closed.any() else np.zeros((0, 2), np.int64)
+    a, b = sil[:, 0], sil[:, 1]
+    # side quad (a, b, b∞, a∞): outward for an edge a→b of a face that faces the light
+    parts.append(np.stack([hv[b], hv[a], far[a]], axis=1))
+    parts.append(np.stack([hv[b], far[a], far[b]], axis=1))
+    if caps:
+        light_cap = topo.triangles[closed & lit]
+        dark_cap = topo.triangles[closed & ~lit]
+        parts.append(hv[light_cap])
+        parts.append(far[dark_cap])
+    # open components: every triangle its own two-sided sliver, oriented to face the light
+    single = topo.valid & ~closed & (facing != 0)
+    f = topo.triangles[single]
+    f = np.where((facing[single] > 0)[:, None], f, f[:, ::-1])
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        ea, eb = f[:, i], f[:, j]
+        parts.append(np.stack([hv[eb], hv[ea], far[ea]], axis=1))
+        parts.append(np.stack([hv[eb], far[ea], far[eb]], axis=1))
+    if caps:
+        parts.append(hv[f])
+        parts.append(far[f[:, ::-1]])
+    return np.concatenate(parts).reshape(-1, 3, 4)
+
+
+# --------------------------------------------------------------------------- counting
+
+
+def _clip_plane(clip: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """Clip (S, 3, 4) clip-space triangles to ``plane · v ≥ 0``, keeping winding. New vertices are
+    interpolated from the lexicographically first endpoint, so an edge shared by two triangles is
+    cut at bit-identical points."""
+    dist = clip @ plane
+    inside = dist >= 0
+    n_in = inside.sum(axis=1)
+    out = [clip[n_in == 3]]
+
+    def cut(p: np.ndarray, q: np.ndarray, dp: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        swap = np.zeros(len(p), bool)
+        undecided = np.ones(len(p), bool)
+        for c in range(4):
+            lt, gt = q[:, c] < p[:, c], q[:, c] > p[:, c]
+            swap |= undecided & lt
+            undecided &= ~(lt | gt)
+        p2, q2 = np.where(swap[:, None], q, p), np.where(swap[:, None], p, q)
+        d2p, d2q = np.where(swap, dq, dp), np.where(swap, dp, dq)
+        t = (d2p / (d2p - d2q))[:, None]
+        return p2 + t * (q2 - p2)
+
+    for lone_inside, count in ((True, 1), (False, 2)):
+        sel = np.flatnonzero(n_in == count)
+        if len(sel) == 0:
+            continue
+        odd = np.argmax(inside[sel] == lone_inside, axis=1)
+        order = (odd[:, None] + np.arange(3)[None, :]) % 3
+        v = np.take_along_axis(clip[sel], order[:, :, None], axis=1)
+        d = np.take_along_axis(dist[sel], order, axis=1)
+        ab = cut(v[:, 0], v[:, 1], d[:, 0], d[:, 1])
+        ac = cut(v[:, 0], v[:, 2], d[:, 0], d[:, 2])
+        if lone_inside:
+            out.append(np.stack([v[:, 0], ab, ac], axis=1))
+        else:
+            out.append(np.stack([ab, v[:, 1], v[:, 2]], axis=1))
+            out.append(np.stack([ab, v[:, 2], ac], axis=1))
+    return np.concatenate(out)
+
+
+def _clip(clip: np.ndarray, guard: float) -> np.ndarray:
+    """Clip to the near plane ``z ≥ −w`` (as OpenGL does) and to a guard band ``|x|, |y| ≤ guard·w``
+    lying beyond every receiver (it only keeps window positions finite: vertices at infinity that
+    graze the eye plane would otherwise land at infinity on the screen)."""
+    planes = np.array(
+        [(0, 0, 1, 1), (-1, 0, 0, guard), (1, 0, 0, guard), (0, -1, 0, guard), (0, 1, 0, guard)], np.float64
+    )
+    inside = ((clip @ planes.T) >= 0).all(axis=(1, 2))  # most faces need no clipping at all
+    cut = clip[~inside]
+    for plane in planes:
+        cut = _clip_plane(cut, plane)
+    return np.concatenate([clip[inside], cut])
+
+
+@dataclass(frozen=True, eq=False)
+class _Setup:
+    """Per volume triangle (after near clipping): canonical edges, depth plane, facing, bounding box."""
+
+    ex: np.ndarray  # (S, 3) canonical edge start x
+    ey: np.ndarray
+    edx: np.ndarray  # (S, 3) canonical edge vector
+    edy: np.ndarray
+    esign: np.ndarray  # (S, 3) +1/-1: interior where esign·E > 0
+    etie: np.ndarray  # (S, 3) bool: a point with E == 0 is inside (perturbation rule)
+    z0: np.ndarray  # (S,) depth plane z = z0 + gx·(x − x0) + gy·(y − y0)
+    x0: np.ndarray
+    y0: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    front: np.ndarray  # (S,) int64 +1 counter-clockwise (front), −1 clockwise
+    cx0: np.ndarray  # (S,) grid cell bounding box (inclusive), empty when cx0 > cx1
+    cx1: np.ndarray
+    cy0: np.ndarray
+    cy1: np.ndarray
+    bx0: np.ndarray  # (S,) window bounding box, slightly widened
+    bx1: np.ndarray
+    by0: np.ndarray
+    by1: np.ndarray
+
+
+def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], guard: float) -> _Setup:
+    xmin, ymin, cw, ch, nx, ny = grid
+    sub = _clip(clip, guard)
+    w = sub[:, :, 3]
+    ok = (w > 0).all(axis=1)
+    sub = sub[ok]
+    w = sub[:, :, 3]
+    x = sub[:, :, 0] / w
+    y = sub[:, :, 1] / w
+    z = sub[:, :, 2] / w
+    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
+    keep = (area != 0) & np.isfinite(area)
+    x, y, z, area = x[keep], y[keep], z[keep], area[keep]
+    s = len(area)
+    ex, ey, edx, edy, esign = (np.empty((s, 3)) for _ in range(5))
+    for i, (p, q) in enumerate(((0, 1), (1, 2), (2, 0))):
+        canonical = (x[:, p] < x[:, q]) | ((x[:, p] == x[:, q]) & (y[:, p] < y[:, q]))
+        sx = np.where(canonical, x[:, p], x[:, q])
+        sy = np.where(canonical, y[:, p], y[:, q])
+        tx = np.where(canonical, x[:, q], x[:, p])
+        ty = np.where(canonical, y[:, q], y[:, p])
+        ex[:, i], ey[:, i], edx[:, i], edy[:, i] = sx, sy, tx - sx, ty - sy
+        # counter-clockwise triangle (area > 0): interior left of p→q, where E_pq > 0
+        esign[:, i] = np.sign(area) * np.where(canonical, 1.0, -1.0)
+    # tie-break: treat a point on an edge as moved by (ε, ε²): inside when d/dx (then d/dy) of esign·E > 0
+    ddx = -edy * esign
+    ddy = edx * esign
+    etie = (ddx > 0) | ((ddx == 0) & (ddy > 0))
+    det = area
+    gx = ((z[:, 1] - z[:, 0]) * (y[:, 2] - y[:, 0]) - (z[:, 2] - z[:, 0]) * (y[:, 1] - y[:, 0])) / det
+    gy = ((x[:, 1] - x[:, 0]) * (z[:, 2] - z[:, 0]) - (x[:, 2] - x[:, 0]) * (z[:, 1] - z[:, 0])) / det
+    with np.errstate(invalid="ignore", over="ignore"):
+        cx0 = np.floor((x.min(axis=1) - xmin) / cw)
+        cx1 = np.floor((x.max(axis=1) - xmin) / cw)
+        cy0 = np.floor((y.min(axis=1) - ymin) / ch)
+        cy1 = np.floor((y.max(axis=1) - ymin) / ch)
+    cx0 = np.clip(cx0, 0, nx).astype(np.int64)
+    cx1 = np.clip(cx1, -1, nx - 1).astype(np.int64)
+    cy0 = np.clip(cy0, 0, ny).astype(np.int64)
+    cy1 = np.clip(cy1, -1, ny - 1).astype(np.int64)
+    front = np.where(area > 0, 1, -1).astype(np.int64)
+    # bounding boxes widened past rounding (a pre-test only: the edge functions decide)
+    pad_x = 1e-9 * (np.abs(x).max(axis=1) + 1.0)
+    pad_y = 1e-9 * (np.abs(y).max(axis=1) + 1.0)
+    return _Setup(
+        ex,
+        ey,
+        edx,
+        edy,
+        esign,
+        etie,
+        z[:, 0].copy(),
+        x[:, 0].copy(),
+        y[:, 0].copy(),
+        gx,
+        gy,
+        front,
+        cx0,
+        cx1,
+        cy0,
+        cy1,
+        x.min(axis=1) - pad_x,
+        x.max(axis=1) + pad_x,
+        y.min(axis=1) - pad_y,
+        y.max(axis=1) + pad_y,
+    )
+
+
+def _grid(
+    px: np.ndarray, py: np.ndarray
+) -> tuple[tuple[float, float, float, float, int, int], np.ndarray, np.ndarray]:
+    """A screen grid over the receivers (about two per cell): (grid, cell_start, order)."""
+    m = len(px)
+    xmin, xmax = float(px.min()), float(px.max())
+    ymin, ymax = float(py.min()), float(py.max())
+    spanx, spany = max(xmax - xmin, 1e-12), max(ymax - ymin, 1e-12)
+    cells = max(1, m // _TILE_POINTS)
+    nx = int(min(4096, max(1, round(math.sqrt(cells * spanx / spany)))))
+    ny = int(min(4096, max(1, round(cells / nx))))
+    cw, ch = spanx / nx * (1 + 1e-9), spany / ny * (1 + 1e-9)
+    cx = np.clip(((px - xmin) / cw).astype(np.int64), 0, nx - 1)
+    cy = np.clip(((py - ymin) / ch).astype(np.int64), 0, ny - 1)
+    cell = cy * nx + cx
+    order = np.argsort(cell, kind="stable")
+    cell_start = np.searchsorted(cell[order], np.arange(nx * ny + 1))
+    return (xmin, ymin, cw, ch, nx, ny), cell_start.astype(np.int64), order.astype(np.int64)
+
+
+def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool) -> np.ndarray:
+    counts = np.zeros(len(px), np.int64)
+    for t in range(len(st.front)):
+        if st.cx0[t] > st.cx1[t] or st.cy0[t] > st.cy1[t]:
+            continue
+        rows = np.arange(st.cy0[t], st.cy1[t] + 1)
+        starts = cell_start[rows * nx + st.cx0[t]]
+        stops = cell_start[rows * nx + st.cx1[t] + 1]
+        lengths = stops - starts
+        if lengths.sum() == 0:
+            continue
+        cand = order[
+            np.repeat(starts - np.cumsum(np.r_[0, lengths[:-1]]), lengths) + np.arange(lengths.sum())
+        ]
+        x, y = px[cand], py[cand]
+        inside = np.ones(len(cand), bool)
+        for i in range(3):
+            e = st.edx[t, i] * (y - st.ey[t, i]) - st.edy[t, i] * (x - st.ex[t, i])
+            se = st.esign[t, i] * e
+            inside &= (se > 0) | ((e == 0) & st.etie[t, i])
+        depth = st.z0[t] + (st.gx[t] * (x - st.x0[t]) + st.gy[t] * (y - st.y0[t]))
+        nearer = depth < pz[cand]
+        if zfail:
+            hit = inside & ~nearer
+            counts[cand[hit]] -= st.front[t]
+        else:
+            hit = inside & nearer
+            counts[cand[hit]] += st.front[t]
+    return counts
+
+
+@functools.lru_cache(maxsize=2)
+def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=parallel, cache=True, fastmath=False)
+    def count(
+        n_bands,
+        ny,
+        nx,
+        xmin,
+        ymin,
+        cw,
+        ch,
+        cx0,
+        cx1,
+        cy0,
+        cy1,
+        ex,
+        ey,
+        edx,
+        edy,
+        esign,
+        etie,
+        z0,
+        x0,
+        y0,
+        gx,
+        gy,
+        front,
+        bx0,
+        bx1,
+        by0,
+        by1,
+        px,
+        py,
+        pz,
+        cell_start,
+        zfail,
+    ):  # pragma: no cover - compiled
+        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c)
+        n_cells = nx * ny
+        counts = np.zeros(px.shape[0], np.int64)
+        whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        for cell in range(n_cells):
+            for k in range(cell_start[cell], cell_start[cell + 1]):
+                zlo[cell] = min(zlo[cell], pz[k])
+                zhi[cell] = max(zhi[cell], pz[k])
+        band_h = (ny + n_bands - 1) // n_bands
+        for band in numba.prange(n_bands):
+            r0 = band * band_h
+            r1 = min(ny, r0 + band_h) - 1
+            for t in range(front.shape[0]):
+                lo = max(cy0[t], r0)
+                hi = min(cy1[t], r1)
+                if lo > hi or cx0[t] > cx1[t]:
+                    continue
+                for row in range(lo, hi + 1):
+                    # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
+                    sy0 = ymin + row * ch - 1e-9 * ch
+                    sy1 = ymin + (row + 1) * ch + 1e-9 * ch
+                    span_lo = np.inf
+                    span_hi = -np.inf
+                    for i in range(3):
+                        if edy[t, i] == 0.0:
+                            if sy0 <= ey[t, i] <= sy1:
+                                span_lo = min(span_lo, ex[t, i])
+                                span_hi = max(span_hi, ex[t, i] + edx[t, i])
+                            continue
+                        ta = (sy0 - ey[t, i]) / edy[t, i]
+                        tb = (sy1 - ey[t, i]) / edy[t, i]
+                        t_lo = max(min(ta, tb), 0.0)
+                        t_hi = min(max(ta, tb), 1.0)
+                        if t_lo > t_hi:
+                            continue
+                        xa = ex[t, i] + t_lo * edx[t, i]
+                        xb = ex[t, i] + t_hi * edx[t, i]
+                        span_lo = min(span_lo, xa, xb)
+                        span_hi = max(span_hi, xa, xb)
+                    if span_lo > span_hi:
+                        continue
+                    pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
+                    c_lo = max(cx0[t], int(np.floor((span_lo - pad - xmin) / cw)))
+                    c_hi = min(cx1[t], int(np.floor((span_hi + pad - xmin) / cw)))
+                    for col in range(c_lo, c_hi + 1):
+                        cell = row * nx + col
+                        s0 = cell_start[cell]
+                        s1 = cell_start[cell + 1]
+                        if s0 == s1:
+                            continue
+                        # the tile's rectangle, widened past rounding of the binning
+                        ax = xmin + col * cw - 1e-9 * cw
+                        bx = xmin + (col + 1) * cw + 1e-9 * cw
+                        ay = ymin + row * ch - 1e-9 * ch
+                        by = ymin + (row + 1) * ch + 1e-9 * ch
+                        # tile against the triangle: outside one edge, or inside all three
+                        outside = False
+                        inside_all = True
+                        for i in range(3):
+                            lo_e = np.inf
+                            hi_e = -np.inf
+                            mag = 0.0
+                            for corner in range(4):
+                                xc = ax if corner % 2 == 0 else bx
+                                yc = ay if corner < 2 else by
+                                u = edx[t, i] * (yc - ey[t, i])
+                                v = edy[t, i] * (xc - ex[t, i])
+                                e = esign[t, i] * (u - v)
+                                lo_e = min(lo_e, e)
+                                hi_e = max(hi_e, e)
+                                mag = max(mag, abs(u) + abs(v))
+                            margin = 1e-12 * mag + 1e-300
+                            if hi_e < -margin:
+                                outside = True
+                                break
+                            if lo_e <= margin:
+                                inside_all = False
+                        if outside:
+                            continue
+                        # the face's depth plane over the tile
+                        lo_z = np.inf
+                        hi_z = -np.inf
+                        mag = 0.0
+                        for corner in range(4):
+                            xc = ax if corner % 2 == 0 else bx
+                            yc = ay if corner < 2 else by
+                            u = gx[t] * (xc - x0[t])
+                            v = gy[t] * (yc - y0[t])
+                            d = z0[t] + (u + v)
+                            lo_z = min(lo_z, d)
+                            hi_z = max(hi_z, d)
+                            mag = max(mag, abs(z0[t]) + abs(u) + abs(v))
+                        margin = 1e-12 * mag + 1e-300
+                        all_nearer = hi_z < zlo[cell] - margin
+                        none_nearer = lo_z > zhi[cell] + margin
+                        if zfail:
+                            if all_nearer:
+                                continue
+                            if inside_all and none_nearer:
+                                whole[cell] -= front[t]
+                                continue
+                        else:
+                            if none_nearer:
+                                continue
+                            if inside_all and all_nearer:
+                                whole[cell] += front[t]
+                                continue
+                        for k in range(s0, s1):
+                            p = k
+                            x = px[p]
+                            y = py[p]
+                            if x < bx0[t] or x > bx1[t] or y < by0[t] or y > by1[t]:
+                                continue
+                            ok = True
+                            for i in range(3):
+                                e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
+                                se = esign[t, i] * e
+                                if not (se > 0 or (e == 0 and etie[t, i])):
+                                    ok = False
+                                    break
+                            if not ok:
+                                continue
+                            depth = z0[t] + (gx[t] * (x - x0[t]) + gy[t] * (y - y0[t]))
+                            if zfail:
+                                if not (depth < pz[p]):
+                                    counts[p] -= front[t]
+                            elif depth < pz[p]:
+                                counts[p] += front[t]
+            for row in range(r0, r1 + 1):
+                for cell in range(row * nx, (row + 1) * nx):
+                    for k in range(cell_start[cell], cell_start[cell + 1]):
+                        counts[k] += whole[cell]
+        return counts
+
+    return count
+
+
+def _use_numba(engine: str) -> bool:
+    if engine not in _ENGINES:
+        raise ValueError(f"engine: expected one of {_ENGINES}, got {engine!r}")
+    if engine == "numpy":
+        return False
+    from .fast import numba_available
+
+    if engine == "numba" and not numba_available():
+        raise ValueError("engine: 'numba' was asked for but numba cannot be imported")
+    return numba_available()
+
+
+def stencil_counts(
+    volume_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+    points: np.ndarray,
+    *,
+    stencil: str = "zfail",
+    engine: str = "auto",
+) -> np.ndarray:
+    """Per receiver, the stencil count of the shadow-volume faces along its camera ray.
+
+    Args:
+        volume_triangles: (m, 3, 4) homogeneous world-space volume triangles, outward
+            (counter-clockwise seen from outside), e.g. from :func:`shadow_volume_triangles`.
+        view: 4×4 world → eye matrix of the camera.
+        projection: 4×4 eye → clip matrix (OpenGL conventions); only the near plane clips.
+        points: (n, 3) world-space receivers; each must lie in front of the camera (clip w > 0).
+        stencil: ``"zfail"`` (faces behind the receiver: +1 back, −1 front) or ``"zpass"``
+            (faces in front of it: +1 front, −1 back).
+        engine: ``"numba"``, ``"numpy"`` (the reference) or ``"auto"``.
+
+    Returns:
+        (n,) int64 counts; 0 means outside every volume (lit) when the method is valid.
+    """
+    if stencil not in STENCIL_METHODS:
+        raise ValueError(f"stencil: expected one of {STENCIL_METHODS}, got {stencil!r}")
+    vol = np.asarray(volume_triangles, dtype=np.float64)
+    if vol.ndim != 3 or vol.shape[1:] != (3, 4) or not np.all(np.isfinite(vol)):
+        raise ValueError(f"volume_triangles: expected finite (m, 3, 4), got shape {vol.shape}")
+    p = _points("points", points)
+    vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    if vp.shape != (4, 4) or not np.all(np.isfinite(vp)):
+        raise ValueError(f"view/projection: expected finite 4×4 matrices, got product shape {vp.shape}")
+    numba_path = _use_numba(engine)
+    if len(p) == 0:
+        return np.zeros(0, np.int64)
+    pc = p @ vp[:, :3].T + vp[:, 3]
+    if not np.all(pc[:, 3] > 0):
+        bad = int(np.count_nonzero(pc[:, 3] <= 0))
+        raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
+    px, py, pz = pc[:, 0] / pc[:, 3], pc[:, 1] / pc[:, 3], pc[:, 2] / pc[:, 3]
+    grid, cell_start, order = _grid(px, py)
+    clip = vol @ vp.T
+    guard = 2.0 * max(float(np.abs(px).max()), float(np.abs(py).max()), 1.0) + 1.0
+    st = _setup(clip, grid, guard)
+    zfail = stencil == "zfail"
+    nx, ny = grid[4], grid[5]
+    if not numba_path:
+        return _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+    # small jobs run serially: a parallel region costs more than it saves on a busy machine
+    parallel = len(px) >= _PARALLEL_RECEIVERS
+    n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1))) if parallel else 1
+    sorted_counts = _kernel(parallel)(
+        n_bands,
+        ny,
+        nx,
+        grid[0],
+        grid[1],
+        grid[2],
+        grid[3],
+        st.cx0,
+        st.cx1,
+        st.cy0,
+        st.cy1,
+        st.ex,
+        st.ey,
+        st.edx,
+        st.edy,
+        st.esign,
+        st.etie,
+        st.z0,
+        st.x0,
+        st.y0,
+        st.gx,
+        st.gy,
+        st.front,
+        st.bx0,
+        st.bx1,
+        st.by0,
+        st.by1,
+        px[order],
+        py[order],
+        pz[order],
+        cell_start,
+        zfail,
+    )
+    counts = np.empty(len(px), np.int64)
+    counts[order] = sorted_counts
+    return counts
+
+
+def zpass_is_safe(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+) -> bool:
+    """True when no shadow volume can reach the camera's near plane, so z-pass counts exactly.
+
+    A point q of the near-plane rectangle is in shadow only if the segment from q to the light
+    (for a directional light: the ray towards it) meets a caster, i.e. only if a caster meets
+    the convex hull of the rectangle and the light. z-pass is short by exactly the number of
+    volumes containing q (see the module docstring), so it is exact when every caster lies
+    wholly outside one of that hull's face planes. The test is conservative: a triangle not
+    separated by a face plane counts as meeting the hull.
+
+    Args:
+        light: the light.
+        world_triangles: (n, 3, 3) the casters, world space.
+        view: 4×4 world → eye matrix.
+        projection: 4×4 eye → clip matrix; must be a perspective (or orthographic) projection
+            whose near plane is ``z_clip = −w_clip``.
+
+    Returns:
+        bool.
+    """
+    tris = _triangles("world_triangles", world_triangles)
+    light_vec, directional = _light(light)
+    inv = np.linalg.inv(np.asarray(projection, float) @ np.asarray(view, float))
+    ndc = np.array([[-1, -1, -1, 1], [1, -1, -1, 1], [1, 1, -1, 1], [-1, 1, -1, 1]], float)
+    corners = ndc @ inv.T
+    if not np.all(np.abs(corners[:, 3]) > 1e-300):
+        return False
+    corners = corners[:, :3] / corners[:, 3:4]
+    normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+    planes = [(normal, float(normal @ corners[0]))]
+    if directional:
+        toward = -light_vec
+        inside = corners.mean(axis=0) + toward  # a point inside the (infinite) prism
+        if abs(float(normal @ toward)) < 1e-12 * np.linalg.norm(normal):
+            return False
+        for i in range(4):
+            n = np.cross(corners[(i + 1) % 4] - corners[i], toward)
+            planes.append((n, float(n @ corners[i])))
+    else:
+        apex = light_vec
+        if abs(float(normal @ apex) - planes[0][1]) < 1e-9 * (
+            np.linalg.norm(normal) * (1 + np.abs(apex).max())
+        ):
+            return False  # the light lies on the near plane
+        inside = (corners.sum(axis=0) + apex) / 5.0
+        for i in range(4):
+            n = np.cross(corners[(i + 1) % 4] - corners[i], apex - corners[i])
+            planes.append((n, float(n @ corners[i])))
+    separated = np.zeros(len(tris), bool)
+    scale = 1.0 + float(np.abs(tris).max(initial=0.0))
+    for n, d in planes:
+        if n @ inside < d:  # orient every plane with the hull on its positive side
+            n, d = -n, -d
+        margin = 1e-9 * float(np.linalg.norm(n)) * scale
+        todo = ~separated
+        separated[todo] = np.all(tris[todo] @ n < d - margin, axis=1)
+    return bool(np.all(separated))
+
+
+def _default_camera(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A perspective view that sees every receiver (for z-fail, whose count needs no particular eye)."""
+    from .scene import look_at, perspective_matrix
+
+    pts = np.concatenate([points, tris.reshape(-1, 3)]) if len(tris) else points
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    centre = (lo + hi) / 2
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+    direction = np.array([0.2672612419124244, 0.5345224838248488, 0.8017837257372732])  # (1, 2, 3)/√14
+    eye = centre + direction * 4 * radius
+    up = np.array([0.0, 0.0, 1.0]) if abs(direction[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    view = look_at(eye, centre, up)
+    proj = perspective_matrix(2 * math.degrees(math.asin(0.5)) + 1, 1.0, radius, 10 * radius)
+    return view, proj
+
+
+def shadow_volume_visibility(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    *,
+    camera: Camera | None = None,
+    stencil: str = "auto",
+    offset: float = 1e-4,
+    engine: str = "auto",
+) -> np.ndarray:
+    """Hard-shadow visibility of receivers for one light by shadow volumes (1 = lit, 0 = shadowed).
+
+    Same meaning and shape as :func:`blinn_phong.shadows.light_visibility`.
+
+    Args:
+        light: the light (a spot light shadows as a point light at its position).
+        world_triangles: (n, 3, 3) every caster (and receiver) triangle, world space.
+        points: (m, 3) world-space receiver points (the visible samples).
+        normals: (m, 3) their normals (need not be unit); each point moves ``offset`` along its
+            normal towards the light's side before it is counted.
+        camera: the camera whose samples the points are; None — a view that sees every point
+            (fine for z-fail; z-pass is only valid for a camera outside every volume).
+        stencil: ``"auto"`` (z-pass where :func:`zpass_is_safe` proves it exact — it draws no
+            caps —, else z-fail), ``"zfail"`` (robust) or ``"zpass"`` (valid only while the
+            camera is outside every volume and the near plane cuts none).
+        offset: world units, ≥ 0.
+        engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
+
+    Returns:
+        (m,) float64 in {0, 1}.
+    """
+    p = _points("points", points)
+    n = _points("normals", normals)
+    if n.shape != p.shape:
+        raise ValueError(f"normals: expected the shape of points {p.shape}, got {n.shape}")
+    if not (isinstance(offset, int | float) and math.isfinite(offset) and offset >= 0):
+        raise ValueError(f"offset: expected a finite number >= 0, got {offset!r}")
+    if camera is not None and not isinstance(camera, Camera):
+        raise TypeError(f"camera: expected a blinn_phong Camera or None, got {type(camera).__name__}")
+    tris = _triangles("world_triangles", world_triangles)
+    if len(p) == 0 or len(tris) == 0:
+        return np.ones(len(p))
+    light_vec, directional = _light(light)
+    to_light = np.broadcast_to(-light_vec, p.shape) if directional else light_vec - p
+    length = np.sqrt(np.einsum("ij,ij->i", n, n))
+    side = np.sign(np.einsum("ij,ij->i", n, to_light))
+    side[side == 0] = 1.0
+    q = p + n * (side * offset / np.maximum(length, 1e-300))[:, None]
+    if camera is None:
+        view, proj = _default_camera(q, tris)
+    else:
+        view, proj = camera.view, camera.projection
+    orthographic = np.allclose(proj[3], [0.0, 0.0, 0.0, 1.0])
+    extent = None
+    if orthographic:  # w would be 0 at infinity: extrude past every receiver and caster instead
+        pts = np.concatenate([q, tris.reshape(-1, 3)])
+        span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+        reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
+        extent = 4.0 * (span + reach) + 1.0
+    if stencil not in (*STENCIL_METHODS, "auto"):
+        raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
+    if stencil == "auto":
+        stencil = "zpass" if zpass_is_safe(light, tris, view, proj) else "zfail"
+    volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)
+    counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
+    return (counts == 0).astype(np.float64)
