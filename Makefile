@@ -9,9 +9,13 @@ VENV42 := .venv-blender42
 LOCK42 := requirements/blender42.lock
 VENV45 := .venv-blender45
 LOCK45 := requirements/blender45.lock
+# Blender 5.2 LTS embeds Python 3.13 and numpy 2 (bpy 5.2.3 on the package index).
+PYTHON313 ?= python3.13
+VENV52 := .venv-blender52
+LOCK52 := requirements/blender52.lock
 OUT ?= out
 
-.PHONY: extension scenes setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 clean
+.PHONY: extension extension-wheels test-extension scenes setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 test-blender52 bench-preview clean
 
 $(VENV)/.synced: $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -52,6 +56,21 @@ test-blender: setup
 extension: setup
 	$(PY) tools/build_extension.py --out dist
 
+# The self-contained extension: numba, llvmlite, embreex, colour-science (and their dependencies)
+# bundled as wheels for Python 3.11 and 3.13, one zip per platform (Blender's --split-platforms).
+# Wheels are downloaded by pip into ~/.cache/blinn-phong-render/wheels, never into the checkout.
+PLATFORMS ?= linux-x64
+extension-wheels: setup
+	$(PY) tools/build_extension.py --wheels $(foreach p,$(PLATFORMS),--platform $(p)) --out dist
+
+# The built zip installed into a bpy-only environment (cached in ~/.cache/blinn-phong-render).
+test-extension: setup
+	PYTHON313=$(PYTHON313) $(PY) -m pytest -q tests/addon/test_addon_installed.py
+
+# Material preview time at 128×128, compiled kernels against numpy.
+bench-preview: setup
+	$(PY) -m benchmarks.bench_preview --out $(OUT)/bench
+
 # Rebuild the sample .blend files (saved by Blender 4.2 so that 4.2, 4.5 and 5.0 open them).
 scenes: $(VENV42)/.synced
 	$(VENV42)/bin/python blend_files/make_scenes.py
@@ -76,5 +95,16 @@ $(VENV45)/.synced: $(LOCK45)
 test-blender45: $(VENV45)/.synced
 	$(VENV45)/bin/python -m pytest -q -m blender
 
+$(VENV52)/.synced: $(LOCK52)
+	test -x $(VENV52)/bin/python || $(PYTHON313) -m venv $(VENV52)
+	$(VENV52)/bin/python -m pip install --quiet uv==0.13.8
+	$(VENV52)/bin/uv pip sync --quiet --python $(VENV52)/bin/python $(LOCK52)
+	touch $@
+
+# Blender 5.2 LTS (Python 3.13, numpy 2): the Blender tests, then the core tests on numpy 2.
+test-blender52: $(VENV52)/.synced
+	$(VENV52)/bin/python -m pytest -q -m blender
+	$(VENV52)/bin/python -m pytest -q -m "not blender" tests/blinn_phong tests/compositing tests/effects
+
 clean:
-	rm -rf $(VENV) $(VENV42) $(VENV45) $(OUT) .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(VENV42) $(VENV45) $(VENV52) $(OUT) .pytest_cache .ruff_cache

@@ -43,6 +43,7 @@ SIGTERM: workers are stopped, the report records what finished and ``interrupted
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -54,7 +55,7 @@ import threading
 import time
 import traceback
 import uuid
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -216,39 +217,32 @@ def _background_image(spec: str, height: int, width: int) -> Any:
 # --------------------------------------------------------------------------- atomic files
 
 
-class atomic_target:  # noqa: N801 (used like a function: ``with atomic_target(path) as tmp``)
+@contextlib.contextmanager
+def atomic_target(target: str | os.PathLike) -> Iterator[Path]:
     """Context manager: a temporary path in the target's directory, renamed over it on success.
 
-    The temporary name keeps the extension (writers choose the format by it). On an exception the
-    temporary file is removed and the target is left as it was.
+    :func:`compositing._atomic.atomic_path` (the project's one atomic writer) plus two things a
+    render job needs: the directory is created, and a writer that silently wrote nothing (an empty
+    temporary file) is an error rather than an empty output. The temporary name keeps the
+    extension (writers choose the format by it). On an exception the temporary file is removed
+    and the target is left as it was.
     """
+    from compositing._atomic import atomic_path
 
-    def __init__(self, target: str | os.PathLike) -> None:
-        self.target = Path(target)
-        self.tmp = self.target.with_name(
-            f".{self.target.stem}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{self.target.suffix}"
-        )
-
-    def __enter__(self) -> Path:
-        self.target.parent.mkdir(parents=True, exist_ok=True)
-        return self.tmp
-
-    def __exit__(self, kind: Any, value: Any, tb: Any) -> None:
-        if kind is None and self.tmp.exists():
-            os.replace(self.tmp, self.target)
-            return
-        try:
-            self.tmp.unlink()
-        except FileNotFoundError:
-            pass
-        if kind is None:
-            raise OSError(f"nothing was written to the temporary file {self.tmp} for {self.target}")
+    path = Path(target)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        yield Path(tmp)
+        if os.path.getsize(tmp) == 0:
+            raise OSError(f"nothing was written to the temporary file {tmp} for {path}")
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory and a rename."""
-    with atomic_target(path) as tmp:
-        tmp.write_text(text)
+    """Write ``text`` (UTF-8) to ``path`` atomically, creating the directory (see :func:`atomic_target`)."""
+    from compositing._atomic import write_text_atomic as write
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    write(path, text)
 
 
 # --------------------------------------------------------------------------- one task
@@ -1216,7 +1210,8 @@ def _cleanup_temporaries(tasks: Iterable[Task]) -> None:
     for task in tasks:
         for target in task.outputs():
             target_path = Path(target)
-            for stale in target_path.parent.glob(f".{target_path.stem}.tmp-*{target_path.suffix}"):
+            # atomic_target's temporaries: ``.<name>.<random>.part<ext>`` (compositing._atomic)
+            for stale in target_path.parent.glob(f".{target_path.name}.*.part{target_path.suffix}"):
                 try:
                     stale.unlink()
                 except OSError:

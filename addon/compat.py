@@ -21,7 +21,9 @@ File Output                ``base_path``, ``layer_slots``      ``directory``, ``
 
 Sources: Blender 5.0 Python API change log (https://docs.blender.org/api/5.0/change_log.html),
 ``source/blender/nodes/composite/nodes/node_composite_alpha_over.cc`` and the PyPI ``bpy``
-wheels 4.2.23 and 5.0.1, where each row was checked.
+wheels 4.2.23 and 5.0.1, where each row was checked. Blender 5.2 LTS (``bpy`` 5.2.3, Python 3.13,
+numpy 2) behaves like 5.0 in every row: the Blender tests pass on it unchanged
+(``make test-blender52``), so no 5.1/5.2 entry is needed here.
 """
 
 from __future__ import annotations

@@ -167,9 +167,9 @@ def main(argv: list[str] | None = None) -> int:
     job_path = Path(args[0])
     report = run_job(json.loads(job_path.read_text()))
     report_path = job_path.with_suffix(".report.json")
-    tmp = report_path.with_name(f".{report_path.name}.tmp")
-    tmp.write_text(json.dumps(report, indent=1))
-    tmp.replace(report_path)  # the reader never sees a half-written report
+    from compositing._atomic import write_json_atomic
+
+    write_json_atomic(report_path, report, indent=1)  # the reader never sees a half-written report
     return 0
 
 

@@ -39,11 +39,14 @@ from blinn_phong.scene import (
 )
 
 from . import compat, mapping
+from .options import RenderOptions
 
 __all__ = [
     "ConvertedScene",
     "RenderOptions",
     "camera_from_object",
+    "camera_parameters",
+    "clamp_to_socket_range",
     "derived_light_values",
     "light_from_object",
     "light_radius",
@@ -51,27 +54,9 @@ __all__ = [
     "mesh_arrays",
     "principled_inputs",
     "scene_from_depsgraph",
+    "viewport_camera",
     "world_ambient",
 ]
-
-
-@dataclass(frozen=True)
-class RenderOptions:
-    """Render settings read from ``Scene.blinn_phong`` (see ``addon/properties.py``)."""
-
-    shading: str = "phong"
-    samples: int = 4
-    tolerance: float = 0.0
-    transparency: str = "AUTO"
-    peel_layers: int = 8
-    shadows: str = "AUTO"
-    shadow_samples: int = 16
-    shadow_bias: float = 1e-3
-    fog: str = "NONE"
-    fog_color: tuple[float, float, float] = (0.5, 0.5, 0.5)
-    fog_density: float = 0.1
-    fog_start: float = 1.0
-    fog_end: float = 50.0
 
 
 @dataclass
@@ -90,6 +75,8 @@ class ConvertedScene:
             shading override, already applied to ``Mesh.shading``).
         light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
             for soft shadows.
+        casts_shadows: per entry of ``scene.lights``, Blender's Light › Cast Shadow
+            (``Light.use_shadow``).
         background: the world colour the frame is composited over (``src_over``) when
             *Film → Transparent* is off, as Blender's own engines show the world behind the
             objects; None when it is on (coverage alpha is kept).
@@ -106,6 +93,7 @@ class ConvertedScene:
     notes: list[str] = field(default_factory=list)
     light_radii: list[float] = field(default_factory=list)
     background: tuple[float, float, float] | None = None
+    casts_shadows: list[bool] = field(default_factory=list)
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -201,8 +189,34 @@ def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, ob
         if socket.is_linked:
             notes.append(f"{material.name}: '{name}' is linked; its unlinked value is used")
         value = socket.default_value
-        values[key] = tuple(value[:3]) if key.endswith("color") else float(value)
+        if key.endswith("color"):
+            values[key] = tuple(float(v) for v in value[:3])
+        else:
+            values[key] = clamp_to_socket_range(socket, float(value), material.name, notes)
     return values, notes
+
+
+def clamp_to_socket_range(
+    socket: bpy.types.NodeSocket, value: float, material: str, notes: list[str]
+) -> float:
+    """``value`` limited to the range the socket declares (``hard_min``/``hard_max`` of its
+    ``default_value``), with a note naming the material when it was outside.
+
+    Blender stores values outside a socket's declared range when they are set from Python
+    (Roughness 1.2, Alpha 1.5); its sockets' declared ranges are the inputs the Principled BSDF is
+    defined for, so such values are rendered as the nearest end of the range, and said so.
+    IOR declares no range (any float): it is checked by ``mapping.blinn_phong_from_principled``.
+    """
+    prop = socket.bl_rna.properties["default_value"]
+    low, high = float(getattr(prop, "hard_min", -math.inf)), float(getattr(prop, "hard_max", math.inf))
+    if math.isfinite(value) and not low <= value <= high:
+        clamped = min(max(value, low), high)
+        notes.append(
+            f"{material}: '{socket.name}' {value:g} is outside Blender's range [{low:g}, {high:g}]; "
+            f"rendered as {clamped:g}"
+        )
+        return clamped
+    return value
 
 
 def material_from_blender(
@@ -379,57 +393,103 @@ def camera_from_object(camera_object: bpy.types.Object, render: bpy.types.Render
     return Camera(view_matrix(np.array(camera_object.matrix_world)), projection, kind)
 
 
+def camera_parameters(camera_data: bpy.types.Camera) -> dict[str, object]:
+    """The keyword arguments of ``mapping.camera_projection`` that describe a Blender camera."""
+    if camera_data.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera.type: panoramic cameras are not supported, got {camera_data.type!r}")
+    return {
+        "kind": camera_data.type,
+        "lens_mm": camera_data.lens,
+        "sensor_width_mm": camera_data.sensor_width,
+        "sensor_height_mm": camera_data.sensor_height,
+        "sensor_fit": camera_data.sensor_fit,
+        "ortho_scale": camera_data.ortho_scale,
+        "shift_x": camera_data.shift_x,
+        "shift_y": camera_data.shift_y,
+        "clip_start": camera_data.clip_start,
+        "clip_end": camera_data.clip_end,
+    }
+
+
+def viewport_camera(
+    space: bpy.types.SpaceView3D, region: bpy.types.Region, region_data: bpy.types.RegionView3D
+) -> Camera:
+    """The camera of a 3D view (``context.space_data``, ``context.region``, ``context.region_data``):
+    its view matrix and ``mapping.viewport_projection`` (perspective, orthographic, camera view)."""
+    camera = None
+    if region_data.view_perspective == "CAMERA":
+        camera = camera_parameters(space.camera.data)
+    projection, kind = mapping.viewport_projection(
+        view_perspective=region_data.view_perspective,
+        region_width=int(region.width),
+        region_height=int(region.height),
+        lens_mm=space.lens,
+        clip_start=space.clip_start,
+        clip_end=space.clip_end,
+        view_distance=region_data.view_distance,
+        camera=camera,
+        camera_zoom=region_data.view_camera_zoom,
+        camera_offset=tuple(region_data.view_camera_offset),
+    )
+    return Camera(np.array(region_data.view_matrix, dtype=np.float64), projection, kind)
+
+
 # --------------------------------------------------------------------------- scene
 
 
 def render_options(settings: object | None) -> RenderOptions:
     """Render options from ``Scene.blinn_phong`` (defaults when the property group is missing)."""
-    if settings is None:
-        return RenderOptions()
-    return RenderOptions(
-        shading=settings.shading.lower(),
-        samples=settings.samples_per_axis**2,
-        tolerance=float(settings.tolerance),
-        transparency=settings.transparency,
-        peel_layers=settings.peel_layers,
-        shadows=settings.shadows,
-        shadow_samples=settings.shadow_samples,
-        shadow_bias=settings.shadow_bias,
-        fog=settings.fog,
-        fog_color=tuple(settings.fog_color),
-        fog_density=settings.fog_density,
-        fog_start=settings.fog_start,
-        fog_end=settings.fog_end,
-    )
+    return RenderOptions.from_settings(settings)
 
 
-def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
+def scene_from_depsgraph(
+    depsgraph: bpy.types.Depsgraph,
+    view: tuple[Camera, int, int] | None = None,
+    geometry_cache: dict[str, tuple] | None = None,
+) -> ConvertedScene:
     """Convert the evaluated scene of ``depsgraph`` (meshes, lights, camera, world, settings).
 
+    Args:
+        depsgraph: the evaluated depsgraph (render or viewport).
+        view: for the 3D viewport, ``(camera, width, height)`` replacing the scene camera and the
+            render resolution (``viewport_camera``); the render border does not apply.
+        geometry_cache: object name -> object-space triangle arrays, kept between calls by the
+            viewport (``engine.ViewportState``) so that only objects whose geometry changed are read
+            again; a fresh dict per call when None.
+
     Raises:
-        ValueError: the scene has no camera, or the camera is panoramic.
+        ValueError: the scene has no camera (and no ``view``), or the camera is panoramic.
     """
     bl_scene = depsgraph.scene
     render = bl_scene.render
-    if bl_scene.camera is None:
-        raise ValueError("scene.camera: the scene has no camera to render from")
     settings = getattr(bl_scene, "blinn_phong", None)
     options = render_options(settings)
-    camera_object = bl_scene.camera.evaluated_get(depsgraph)
-    camera = camera_from_object(camera_object, render)
-    width, height = mapping.render_size(
-        render.resolution_x, render.resolution_y, render.resolution_percentage
-    )
-    region = (0, 0, width, height)
-    if render.use_border:
-        region = mapping.border_rectangle(
-            render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y, width, height
+    if view is not None:
+        camera, width, height = view
+        region = (0, 0, width, height)
+    else:
+        if bl_scene.camera is None:
+            raise ValueError("scene.camera: the scene has no camera to render from")
+        camera_object = bl_scene.camera.evaluated_get(depsgraph)
+        camera = camera_from_object(camera_object, render)
+        width, height = mapping.render_size(
+            render.resolution_x, render.resolution_y, render.resolution_percentage
         )
-        if region[2] <= region[0] or region[3] <= region[1]:
-            raise ValueError(f"render border: the border covers no pixel ({region})")
-        camera = Camera(
-            camera.view, mapping.crop_projection(camera.projection, width, height, region), camera.kind
-        )
+        region = (0, 0, width, height)
+        if render.use_border:
+            region = mapping.border_rectangle(
+                render.border_min_x,
+                render.border_max_x,
+                render.border_min_y,
+                render.border_max_y,
+                width,
+                height,
+            )
+            if region[2] <= region[0] or region[3] <= region[1]:
+                raise ValueError(f"render border: the border covers no pixel ({region})")
+            camera = Camera(
+                camera.view, mapping.crop_projection(camera.projection, width, height, region), camera.kind
+            )
 
     meshes: list[Mesh] = []
     names: list[str] = []
@@ -437,7 +497,11 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
     notes: list[str] = []
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
     light_radii: list[float] = []
-    geometry_cache: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list]] = {}
+    casts_shadows: list[bool] = []
+    no_shadow_objects: list[str] = []
+    shadow_objects = 0
+    if geometry_cache is None:
+        geometry_cache = {}
 
     for instance in depsgraph.object_instances:
         obj = instance.object
@@ -445,6 +509,8 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
             light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
+            # Light > Cast Shadow off, or Object > Visibility > Ray Visibility > Shadow off on the lamp
+            casts_shadows.append(bool(getattr(obj.data, "use_shadow", True)))
             continue
         if obj.type not in ("MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"):
             continue
@@ -478,34 +544,61 @@ def scene_from_depsgraph(depsgraph: bpy.types.Depsgraph) -> ConvertedScene:
             # A mirroring transform (negative scale) turns counter-clockwise faces clockwise on
             # screen; Blender keeps them front-facing, so the winding is reversed here.
             triangles = triangles[:, ::-1]
+        object_meshes: list[tuple[Mesh, str, dict[str, object]]] = []
+        failed = None
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
-            material, extra, material_notes = material_from_blender(blender_material)
+            material_name = blender_material.name if blender_material else "(none)"
+            try:
+                material, extra, material_notes = material_from_blender(blender_material)
+            except (ValueError, TypeError) as error:
+                failed = (
+                    f"object '{obj.name}', material '{material_name}': {error}; the object is not rendered"
+                )
+                break
             notes.extend(n for n in material_notes if n not in notes)
             used = triangles[material_index == slot_index]
-            meshes.append(
-                Mesh(
-                    positions=positions,
-                    triangles=used,
-                    normals=normals,
-                    transform=matrix,
-                    material=material,
-                    shading=extra.pop("shading"),
-                )
+            mesh = Mesh(
+                positions=positions,
+                triangles=used,
+                normals=normals,
+                transform=matrix,
+                material=material,
+                shading=extra.pop("shading"),
             )
-            names.append(f"{obj.name}/{blender_material.name if blender_material else '(none)'}")
+            object_meshes.append((mesh, f"{obj.name}/{material_name}", extra))
+        if failed is not None:
+            notes.append(failed)
+            continue
+        if getattr(obj, "visible_shadow", True):
+            shadow_objects += 1
+        else:
+            no_shadow_objects.append(obj.name)
+        for mesh, name, extra in object_meshes:
+            meshes.append(mesh)
+            names.append(name)
             extras.append(extra)
 
+    if no_shadow_objects and shadow_objects == 0:
+        # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow.
+        casts_shadows = [False] * len(casts_shadows)
+    elif no_shadow_objects:
+        notes.append(
+            "Ray Visibility > Shadow is off on "
+            + ", ".join(f"'{n}'" for n in no_shadow_objects)
+            + " but on for other objects: this engine cannot exclude single objects from shadow casting, "
+            "so they still cast shadows"
+        )
     ambient = world_ambient(bl_scene.world)
     light_model = LightModel(
-        specular="phong" if settings is not None and settings.specular_model == "PHONG" else "blinn",
+        specular="phong" if options.specular_model == "PHONG" else "blinn",
         local_viewer=camera.kind == "perspective",
-        two_sided=bool(settings.two_sided) if settings is not None else True,
+        two_sided=options.two_sided,
     )
     scene = Scene(
         meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
     )
     background = None if render.film_transparent else ambient
     return ConvertedScene(
-        scene, width, height, region, options, names, extras, notes, light_radii, background
+        scene, width, height, region, options, names, extras, notes, light_radii, background, casts_shadows
     )

@@ -26,6 +26,7 @@ with code 1 so render farms see the failure. Inside the ``bpy`` module (an embed
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import time
@@ -37,19 +38,24 @@ import numpy as np
 
 from compositing import composite
 
-from . import convert, mapping, pipeline
+from . import convert, mapping, options, pipeline
 
 __all__ = [
     "ENGINE_ID",
+    "LAST_PREVIEW",
     "LAST_RENDER",
+    "PREVIEW_OPTIONS",
+    "PREVIEW_TIMES",
     "BlinnPhongRenderEngine",
     "RenderCancelled",
+    "ViewportState",
     "classes",
     "error_pattern",
     "register",
     "render_converted",
     "unregister",
     "user_cancelled",
+    "viewport_frame",
 ]
 
 ENGINE_ID = "BLINN_PHONG"
@@ -63,8 +69,20 @@ LIGHT_PASSES: tuple[tuple[str, str], ...] = (
 
 LAST_RENDER: dict[str, Any] = {}
 """Status of the most recent render in this process: ``ok``, ``error``, ``seconds``, ``notes``,
-``choices`` (what was rendered how, and why), ``size``. Read by the Render panel and the batch
-runner."""
+``choices`` (what was rendered how, and why: including ``engine``, the kernels that ran, and
+``embree``), ``stats`` (seconds per stage, ``compile`` apart), ``status`` (the status line), ``size``.
+Read by the Render panel and the batch runner."""
+
+
+PREVIEW_OPTIONS = options.RenderOptions(samples_per_axis=2, shadows="NONE", transparency="AUTO")
+"""Settings of material/world previews: 2×2 anti-aliasing, no shadows (the preview's floor and
+backdrop would only add shadow cost to a thumbnail), the planner's transparency."""
+
+LAST_PREVIEW: dict[str, Any] = {}
+"""Status of the most recent preview render: ``ok``, ``error``, ``seconds``, ``size``, ``stats``."""
+
+PREVIEW_TIMES: list[tuple[int, int, float]] = []
+"""``(width, height, seconds)`` of the latest preview renders in this process (at most 64)."""
 
 
 class RenderCancelled(Exception):
@@ -94,32 +112,24 @@ def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
 
 
 def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> pipeline.FrameResult:
-    """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``)."""
-    o = converted.options
-    options = pipeline.EffectOptions(
-        transparency=o.transparency,
-        peel_layers=o.peel_layers,
-        shadows=o.shadows,
-        shadow_samples=o.shadow_samples,
-        shadow_bias=o.shadow_bias,
-        light_radii=tuple(converted.light_radii),
-        fog=o.fog,
-        fog_color=o.fog_color,
-        fog_density=o.fog_density,
-        fog_start=o.fog_start,
-        fog_end=o.fog_end,
-        tolerance=o.tolerance,
-    )
+    """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``).
+
+    The compiled kernels are loaded (compiled, or read from numba's cache) before the frame and
+    that time is reported separately as ``result.seconds["compile"]``.
+    """
     width, height = converted.region_size
+    compile_seconds = pipeline.warm_kernels(converted.options.engine)
     result = pipeline.render_frame(
         converted.scene,
         width,
         height,
-        shading=o.shading,
-        samples=o.samples,
-        options=options,
+        converted.options,
+        light_radii=tuple(converted.light_radii),
+        casts_shadows=tuple(converted.casts_shadows),
         progress=progress,
     )
+    if compile_seconds:
+        result.seconds["compile"] = compile_seconds
     result.choices["region"] = list(converted.region)
     if converted.background is not None:
         # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
@@ -129,15 +139,76 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
     return result
 
 
+VIEWPORT_REDUCTION = 4
+"""The viewport's first frame after a change is rendered at 1/4 of the region per axis."""
+
+
+class ViewportState:
+    """What the viewport keeps between redraws: object-space geometry per object name.
+
+    ``apply_updates(depsgraph.updates)`` (from ``view_update``) drops the geometry of the objects
+    whose geometry changed (``DepsgraphUpdate.is_updated_geometry``: edits, modifiers); a moved
+    object keeps its arrays (transforms are read on every conversion, as are materials, lights and
+    the world, which cost little).
+    """
+
+    def __init__(self) -> None:
+        self.geometry: dict[str, tuple] = {}
+
+    def apply_updates(self, updates: Any) -> list[str]:
+        """Forget the geometry of updated objects (and of every object using an updated mesh);
+        return the names forgotten."""
+        dropped: list[str] = []
+        for update in updates:
+            if not update.is_updated_geometry:
+                continue
+            changed = update.id
+            if isinstance(changed, bpy.types.Object):
+                names = [changed.name]
+            else:  # a Mesh, Curve, ... data-block: every cached object that uses it
+                names = [
+                    name
+                    for name in self.geometry
+                    if (obj := bpy.data.objects.get(name)) is not None and obj.data == changed.original
+                ]
+            for name in names:
+                if self.geometry.pop(name, None) is not None:
+                    dropped.append(name)
+        return dropped
+
+
+def viewport_frame(
+    depsgraph: bpy.types.Depsgraph,
+    camera: Any,
+    region_width: int,
+    region_height: int,
+    reduction: int = 1,
+    state: ViewportState | None = None,
+) -> tuple[np.ndarray, int, int]:
+    """The pixels handed to ``gpu`` for the 3D view: ``(flat float32 RGBA, width, height)``.
+
+    Renders the depsgraph's scene from ``camera`` (``convert.viewport_camera``) at
+    ``mapping.viewport_size(region, reduction)`` with the scene's settings (1 sample per pixel at
+    reduced resolution), premultiplied linear RGBA, bottom row first (OpenGL texture order).
+    """
+    width, height = mapping.viewport_size(int(region_width), int(region_height), reduction)
+    cache = state.geometry if state is not None else None
+    converted = convert.scene_from_depsgraph(depsgraph, view=(camera, width, height), geometry_cache=cache)
+    if reduction > 1:
+        converted.options = dataclasses.replace(converted.options, samples_per_axis=1)
+    result = render_converted(converted)
+    return np.ascontiguousarray(result.rgba[::-1], dtype=np.float32).ravel(), width, height
+
+
 class BlinnPhongRenderEngine(bpy.types.RenderEngine):
     """Local Blinn-Phong shading with OpenGL conventions (``blinn_phong`` package)."""
 
     bl_idname = ENGINE_ID
     bl_label = "Blinn-Phong"
-    bl_use_preview = False
+    bl_use_preview = True  # material and world previews are rendered by this engine
     bl_use_postprocess = True
     bl_use_shading_nodes_custom = False
-    bl_use_eevee_viewport = True  # Material Preview in the 3D viewport uses EEVEE
+    bl_use_eevee_viewport = True  # the 3D viewport's Material Preview mode uses EEVEE
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         # Blender 4.4+ passes arguments to RenderEngine.__init__; 4.2 passes none. Forward both.
@@ -154,7 +225,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Shadow", 1, "X", "VALUE")
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
-        """Render one view layer of ``depsgraph`` into a render result."""
+        """Render one view layer of ``depsgraph`` into a render result (or a material preview)."""
+        if self.is_preview:
+            self._render_preview(depsgraph)
+            return
         scene = depsgraph.scene
         render_settings = scene.render
         full_w, full_h = mapping.render_size(
@@ -187,30 +261,127 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         except Exception as error:
             self._fail(scene, full_w, full_h, error, started, layer)
             return
+        notes = [*result.choices.get("warnings", []), *converted.notes]
         LAST_RENDER.update(
             {
                 "ok": True,
                 "seconds": time.perf_counter() - started,
                 "choices": result.choices,
-                "notes": converted.notes,
+                "notes": notes,
                 "size": [full_w, full_h],
                 "stats": result.seconds,
                 "triangles": result.triangles,
             }
         )
-        self.update_stats("", f"Blinn-Phong: done in {LAST_RENDER['seconds']:.2f} s")
-        for note in converted.notes:
+        LAST_RENDER["status"] = pipeline.status_line(result.choices, LAST_RENDER["seconds"], result.seconds)
+        self.update_stats("", LAST_RENDER["status"])
+        for warning in result.choices.get("warnings", []):
+            print(f"Blinn-Phong: warning: {warning}", file=sys.stderr, flush=True)
+        for note in notes:
             self.report({"WARNING"}, note)
+
+    def _render_preview(self, depsgraph: bpy.types.Depsgraph) -> None:
+        """A material/world preview (``bl_use_preview``): Blender's preview scene, rendered with
+        :data:`PREVIEW_OPTIONS`; recorded in :data:`LAST_PREVIEW`, never in :data:`LAST_RENDER`.
+
+        A failure fills the preview with the error pattern and is recorded; it never ends the
+        process (previews are not frames a render farm waits for).
+        """
+        started = time.perf_counter()
+        layer = depsgraph.view_layer.name
+        render_settings = depsgraph.scene.render
+        full_w, full_h = mapping.render_size(
+            render_settings.resolution_x, render_settings.resolution_y, render_settings.resolution_percentage
+        )
+        try:
+            converted = convert.scene_from_depsgraph(depsgraph)
+            converted.options = PREVIEW_OPTIONS
+            converted_at = time.perf_counter()
+            result = render_converted(converted)
+            rendered_at = time.perf_counter()
+            self._write(converted, result, layer, combined_only=True)
+        except Exception as error:
+            LAST_PREVIEW.update({"ok": False, "error": f"{type(error).__name__}: {error}"})
+            self._write_error_pattern(full_w, full_h, layer)
+            return
+        LAST_PREVIEW.clear()
+        LAST_PREVIEW.update(
+            {
+                "ok": True,
+                "size": [full_w, full_h],
+                "seconds": time.perf_counter() - started,
+                "stats": {
+                    **result.seconds,
+                    "convert": converted_at - started,
+                    "render": rendered_at - converted_at,
+                    "write": time.perf_counter() - rendered_at,
+                },
+                "choices": result.choices,
+                "triangles": result.triangles,
+            }
+        )
+        PREVIEW_TIMES.append((full_w, full_h, LAST_PREVIEW["seconds"]))
+        del PREVIEW_TIMES[:-64]
+
+    # ----------------------------------------------------------------- viewport (Rendered shading)
+
+    def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """The scene changed (or the viewport opened): the next ``view_draw`` renders it again,
+        reading again only the geometry of objects the depsgraph reports as changed
+        (:class:`ViewportState`)."""
+        if not hasattr(self, "_view_state"):
+            self._view_state = ViewportState()
+        self._view_state.apply_updates(depsgraph.updates)
+        self._view_frames = {}
+        self._view_scene_dirty = True
+
+    def view_draw(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """Draw the viewport frame: first at 1/:data:`VIEWPORT_REDUCTION` of the region, then full.
+
+        The frame is rendered by :func:`viewport_frame` (testable without a display) and drawn through
+        Blender's ``gpu`` module with the display colour management (``bind_display_space_shader``),
+        as Blender's own engines do. The bpy module cannot draw (no GPU context in background mode).
+        """
+        import gpu
+        from gpu_extras.presets import draw_texture_2d
+
+        region = context.region
+        camera = convert.viewport_camera(context.space_data, region, context.region_data)
+        key = (camera.view.tobytes(), camera.projection.tobytes(), region.width, region.height)
+        frames = getattr(self, "_view_frames", {})
+        if getattr(self, "_view_key", None) != key or getattr(self, "_view_scene_dirty", True):
+            frames = {}  # the view or the scene changed: start again at reduced resolution
+        reduction = 1 if VIEWPORT_REDUCTION in frames else VIEWPORT_REDUCTION
+        if reduction not in frames:
+            state = getattr(self, "_view_state", None)
+            frames[reduction] = viewport_frame(
+                depsgraph, camera, region.width, region.height, reduction, state
+            )
+        self._view_frames, self._view_key, self._view_scene_dirty = frames, key, False
+        pixels, width, height = frames[reduction]
+        texture = gpu.types.GPUTexture(
+            (width, height), format="RGBA16F", data=gpu.types.Buffer("FLOAT", pixels.size, pixels)
+        )
+        gpu.state.blend_set("ALPHA_PREMULT")
+        self.bind_display_space_shader(depsgraph.scene)
+        draw_texture_2d(texture, (0, 0), region.width, region.height)
+        self.unbind_display_space_shader()
+        gpu.state.blend_set("NONE")
+        if reduction != 1:
+            self.tag_redraw()  # the full-resolution frame follows in the next draw
 
     # ----------------------------------------------------------------- result
 
-    def _write(self, converted: convert.ConvertedScene, result: Any, layer: str) -> None:
+    def _write(
+        self, converted: convert.ConvertedScene, result: Any, layer: str, combined_only: bool = False
+    ) -> None:
         x0, y0, x1, y1 = converted.region
         width, height = x1 - x0, y1 - y0
-        self.add_pass("Depth", 1, "Z")
-        for name, _key in LIGHT_PASSES:
-            self.add_pass(name, 3, "RGB")
-        self.add_pass("Shadow", 1, "X")
+        if not combined_only:  # previews show Combined only: no extra passes to fill
+            self.add_pass("Depth", 1, "Z")
+            for name, _key in LIGHT_PASSES:
+                self.add_pass(name, 3, "RGB")
+            self.add_pass("Shadow", 1, "X")
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
         render_result = self.begin_result(0, 0, converted.width, converted.height, layer=layer)
         try:
@@ -220,11 +391,13 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 raise RuntimeError(
                     f"render result is {got[0]}×{got[1]} but the converted region is {width}×{height}"
                 )
-            depth = mapping.window_depth_to_distance(result.depth, converted.scene.camera.projection)
-            buffers = {"Combined": result.rgba, "Depth": depth[..., None]}
-            for name, key in LIGHT_PASSES:
-                buffers[name] = result.passes[key]
-            buffers["Shadow"] = result.passes["shadow"]
+            buffers = {"Combined": result.rgba}
+            if not combined_only:
+                depth = mapping.window_depth_to_distance(result.depth, converted.scene.camera.projection)
+                buffers["Depth"] = depth[..., None]
+                for name, key in LIGHT_PASSES:
+                    buffers[name] = result.passes[key]
+                buffers["Shadow"] = result.passes["shadow"]
             for name, image in buffers.items():
                 render_pass = result_layer.passes.get(name)
                 if render_pass is None:

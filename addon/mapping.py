@@ -43,6 +43,9 @@ __all__ = [
     "spot_mean_blender",
     "spot_mean_gl",
     "sun_light_intensity",
+    "view3d_zoom_factor",
+    "viewport_projection",
+    "viewport_size",
     "window_depth_to_distance",
 ]
 
@@ -163,6 +166,9 @@ def camera_projection(
     clip_end: float = 100.0,
     pixel_aspect_x: float = 1.0,
     pixel_aspect_y: float = 1.0,
+    zoom: float = 1.0,
+    offset_x: float = 0.0,
+    offset_y: float = 0.0,
 ) -> np.ndarray:
     """Blender's camera projection matrix (eye → clip, OpenGL convention) for a ``width × height`` frame.
 
@@ -189,6 +195,14 @@ def camera_projection(
         clip_end: far clip distance, > clip_start.
         pixel_aspect_x: ``RenderSettings.pixel_aspect_x``, > 0.
         pixel_aspect_y: ``RenderSettings.pixel_aspect_y``, > 0.
+        zoom: ``CameraParams.zoom``: the view plane is scaled by it (1 for renders; the 3D view
+            uses 2 outside camera view and ``1 / zoom factor`` in camera view), > 0.
+        offset_x: ``CameraParams.offsetx``: the view plane moves by ``offset · width`` pixels
+            (0 for renders; the 3D view's camera-view pan).
+        offset_y: ``CameraParams.offsety``, by ``offset · height`` pixels.
+
+    For ``ORTHO`` the clip range may start behind the eye (the 3D view's orthographic views clip
+    at ``±clip_end/2``): only ``clip_start < clip_end`` is required.
 
     Returns:
         (4, 4) float64 projection matrix.
@@ -207,8 +221,10 @@ def camera_projection(
     sensor_h = _finite(sensor_height_mm, "sensor_height_mm", low=0.0, low_open=True)
     scale = _finite(ortho_scale, "ortho_scale", low=0.0, low_open=True)
     sx, sy = _finite(shift_x, "shift_x"), _finite(shift_y, "shift_y")
-    near = _finite(clip_start, "clip_start", low=0.0, low_open=True)
+    near = _finite(clip_start, "clip_start", low=0.0 if kind == "PERSP" else None, low_open=True)
     far = _finite(clip_end, "clip_end", low=near, low_open=True)
+    zoom = _finite(zoom, "zoom", low=0.0, low_open=True)
+    ox, oy = _finite(offset_x, "offset_x"), _finite(offset_y, "offset_y")
     aspx = _finite(pixel_aspect_x, "pixel_aspect_x", low=0.0, low_open=True)
     aspy = _finite(pixel_aspect_y, "pixel_aspect_y", low=0.0, low_open=True)
 
@@ -218,14 +234,127 @@ def camera_projection(
         fit, sensor = sensor_fit, (sensor_w if sensor_fit == "HORIZONTAL" else sensor_h)
     ycor = aspy / aspx
     viewfac = float(width) if fit == "HORIZONTAL" else ycor * height
-    pixsize = (sensor * near / lens if kind == "PERSP" else scale) / viewfac
+    pixsize = (sensor * near / lens if kind == "PERSP" else scale) / viewfac * zoom
 
-    dx, dy = sx * viewfac, sy * viewfac
+    dx, dy = sx * viewfac + width * ox, sy * viewfac + height * oy
     xmin, xmax = (-0.5 * width + dx) * pixsize, (0.5 * width + dx) * pixsize
     ymin, ymax = (-0.5 * ycor * height + dy) * pixsize, (0.5 * ycor * height + dy) * pixsize
     if kind == "PERSP":
         return frustum_matrix(xmin, xmax, ymin, ymax, near, far)
     return orthographic_matrix(xmin, xmax, ymin, ymax, near, far)
+
+
+# --------------------------------------------------------------------------- 3D viewport
+
+VIEWPORT_SENSOR_MM = 36.0
+"""Sensor width of the 3D view's own (non-camera) projection: ``DEFAULT_SENSOR_WIDTH``."""
+
+VIEWPORT_ZOOM = 2.0
+"""``CAMERA_PARAM_ZOOM_INIT_PERSP``: the 3D view's perspective and orthographic views see twice the
+sensor (``BKE_camera_params_from_view3d``)."""
+
+
+def view3d_zoom_factor(camera_zoom: float) -> float:
+    """Scale of the camera frame in camera view: ``(√2 + camzoom/50)² / 4``
+    (``BKE_screen_view3d_zoom_to_fac``; ``RegionView3D.view_camera_zoom``); 1 at
+    ``camzoom = 50 (2 − √2) ≈ 29.29``, where the camera frame fills the region's fitted axis."""
+    z = _finite(camera_zoom, "camera_zoom")
+    return (math.sqrt(2.0) + z / 50.0) ** 2 / 4.0
+
+
+def viewport_projection(
+    *,
+    view_perspective: Literal["PERSP", "ORTHO", "CAMERA"],
+    region_width: int,
+    region_height: int,
+    lens_mm: float = 50.0,
+    clip_start: float = 0.01,
+    clip_end: float = 1000.0,
+    view_distance: float = 10.0,
+    camera: dict[str, object] | None = None,
+    camera_zoom: float = 0.0,
+    camera_offset: tuple[float, float] = (0.0, 0.0),
+) -> tuple[np.ndarray, str]:
+    """The projection matrix of a 3D view (``RegionView3D.window_matrix``) and the camera kind.
+
+    Follows ``BKE_camera_params_from_view3d`` then ``BKE_camera_params_compute_viewplane`` with the
+    region size and square pixels (``source/blender/blenkernel/intern/camera.cc``):
+
+    * ``PERSP`` (a free perspective view): the view's ``lens`` on a 36 mm sensor, zoom 2, the
+      view's clip range;
+    * ``ORTHO``: ``ortho_scale = view_distance · 36 / lens``, zoom 2, clip range
+      ``[−clip_end/2, clip_end/2]``;
+    * ``CAMERA`` (looking through the scene camera): the camera's own parameters; with
+      ``f = view3d_zoom_factor(camera_zoom)`` the shift is multiplied by ``f``, the view plane
+      moves by ``offset = 2 · camera_offset · f`` and the zoom is ``1/f``.
+
+    Args:
+        view_perspective: ``RegionView3D.view_perspective``.
+        region_width: the 3D view region's width in pixels (``Region.width``).
+        region_height: its height.
+        lens_mm: ``SpaceView3D.lens`` (PERSP, ORTHO).
+        clip_start: ``SpaceView3D.clip_start`` (PERSP, ORTHO).
+        clip_end: ``SpaceView3D.clip_end`` (PERSP, ORTHO).
+        view_distance: ``RegionView3D.view_distance`` (ORTHO).
+        camera: for CAMERA, the keyword arguments of :func:`camera_projection` that describe the
+            camera (``kind``, ``lens_mm``, ``sensor_width_mm``, ``sensor_height_mm``, ``sensor_fit``,
+            ``ortho_scale``, ``shift_x``, ``shift_y``, ``clip_start``, ``clip_end``).
+        camera_zoom: ``RegionView3D.view_camera_zoom`` (CAMERA).
+        camera_offset: ``RegionView3D.view_camera_offset`` (CAMERA).
+
+    Returns:
+        ``(projection, kind)``: the (4, 4) eye → clip matrix and ``"perspective"`` or
+        ``"orthographic"`` (the ``blinn_phong.scene.Camera`` kind).
+    """
+    size = {"width": region_width, "height": region_height}
+    if view_perspective == "PERSP":
+        projection = camera_projection(
+            kind="PERSP",
+            **size,
+            lens_mm=lens_mm,
+            sensor_width_mm=VIEWPORT_SENSOR_MM,
+            clip_start=clip_start,
+            clip_end=clip_end,
+            zoom=VIEWPORT_ZOOM,
+        )
+        return projection, "perspective"
+    if view_perspective == "ORTHO":
+        lens = _finite(lens_mm, "lens_mm", low=0.0, low_open=True)
+        half = 0.5 * _finite(clip_end, "clip_end", low=0.0, low_open=True)
+        distance = _finite(view_distance, "view_distance", low=0.0, low_open=True)
+        projection = camera_projection(
+            kind="ORTHO",
+            **size,
+            ortho_scale=distance * VIEWPORT_SENSOR_MM / lens,
+            clip_start=-half,
+            clip_end=half,
+            zoom=VIEWPORT_ZOOM,
+        )
+        return projection, "orthographic"
+    if view_perspective != "CAMERA":
+        raise ValueError(f"view_perspective: expected 'PERSP', 'ORTHO' or 'CAMERA', got {view_perspective!r}")
+    if camera is None:
+        raise ValueError("camera: the CAMERA view needs the scene camera's parameters, got None")
+    factor = view3d_zoom_factor(camera_zoom)
+    params = dict(camera)
+    params["shift_x"] = float(params.get("shift_x", 0.0)) * factor
+    params["shift_y"] = float(params.get("shift_y", 0.0)) * factor
+    ox, oy = (_finite(v, "camera_offset") for v in camera_offset)
+    projection = camera_projection(
+        **params, **size, zoom=1.0 / factor, offset_x=2.0 * ox * factor, offset_y=2.0 * oy * factor
+    )
+    return projection, "perspective" if params.get("kind", "PERSP") == "PERSP" else "orthographic"
+
+
+def viewport_size(region_width: int, region_height: int, reduction: int = 1) -> tuple[int, int]:
+    """Pixel size of a viewport frame rendered at ``1/reduction`` of the region (at least 1×1);
+    the projection is the region's (the frame is stretched over it when drawn)."""
+    if isinstance(reduction, bool) or not isinstance(reduction, int) or reduction < 1:
+        raise ValueError(f"reduction: expected an integer >= 1, got {reduction!r}")
+    for name, v in (("region_width", region_width), ("region_height", region_height)):
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise ValueError(f"{name}: expected an integer >= 1 (pixels), got {v!r}")
+    return max(1, int(region_width) // reduction), max(1, int(region_height) // reduction)
 
 
 def crop_projection(
@@ -405,7 +534,9 @@ def blinn_phong_from_principled(
     * ``diffuse = ambient = base_color · (1 − metallic)`` (metals have no diffuse lobe);
     * ``F0 = mix(2 · specular_ior_level · ((ior − 1)/(ior + 1))², base_color, metallic)``: the Fresnel
       reflectance at normal incidence, where Specular IOR Level 0.5 leaves the IOR's value unchanged
-      (Blender manual, Principled BSDF);
+      (Blender manual, Principled BSDF). ``ior`` is the relative index (inside / outside) and may be
+      below 1 (an air bubble in water, 1/1.33 ≈ 0.75): normal-incidence reflectance is symmetric,
+      ``F0(n) = F0(1/n)`` (Fresnel equations at θ = 0), so any ``ior > 0`` is accepted;
     * ``shininess`` = :func:`roughness_to_shininess`;
     * ``specular = F0 · (s + 8) / 8``: the energy-normalised Blinn-Phong lobe ``(s + 8)/(8π) · (n·h)^s``
       (Akenine-Möller et al., Real-Time Rendering 3rd ed., eq. 7.49) with the π absorbed by the light
@@ -422,7 +553,7 @@ def blinn_phong_from_principled(
         if arr.shape != (3,) or not np.isfinite(arr).all() or (arr < 0).any():
             raise ValueError(f"{name}: expected 3 finite non-negative linear RGB values, got {arr.tolist()}")
     m = _finite(metallic, "metallic", low=0.0, high=1.0)
-    n = _finite(ior, "ior", low=1.0)
+    n = _finite(ior, "ior", low=0.0, low_open=True)
     level = _finite(specular_ior_level, "specular_ior_level", low=0.0)
     strength = _finite(emission_strength, "emission_strength", low=0.0)
     a = _finite(alpha, "alpha", low=0.0, high=1.0)

@@ -17,10 +17,10 @@ from bpy.props import (
     EnumProperty,
     FloatProperty,
     FloatVectorProperty,
-    IntProperty,
     PointerProperty,
 )
 
+from . import options
 from .mapping import MAX_SHININESS
 
 __all__ = [
@@ -32,109 +32,22 @@ __all__ = [
     "unregister",
 ]
 
-SHADING_ITEMS = (
-    ("FLAT", "Flat", "One colour per triangle, lit at its provoking vertex with the face normal"),
-    ("GOURAUD", "Gouraud", "Lighting at the vertices, colours interpolated (OpenGL fixed function)"),
-    ("PHONG", "Phong", "Normals interpolated, lighting per pixel"),
-)
-
-TRANSPARENCY_ITEMS = (
-    ("AUTO", "Auto", "Let the planner pick a method for the scene and explain why"),
-    ("OPAQUE", "Opaque", "Ignore opacity: every surface is opaque"),
-    ("SORTED", "Sorted", "Draw transparent triangles back to front and blend (order-dependent)"),
-    ("A_BUFFER", "A-Buffer", "Keep every fragment per pixel, sort and composite them exactly"),
-    ("DEPTH_PEELING", "Depth Peeling", "Peel layers front to back (exact up to the layer count)"),
-    ("WEIGHTED", "Weighted Blended", "Weighted blended order-independent transparency (approximate)"),
-)
-
-SHADOW_ITEMS = (
-    ("AUTO", "Auto", "Let the planner pick a method for the scene and explain why"),
-    ("NONE", "None", "No shadows"),
-    ("HARD", "Hard", "Ray-traced hard shadows from point, spot and sun lights"),
-    ("SOFT", "Soft", "Ray-traced soft shadows sampling the light's radius"),
-    ("VOLUME", "Shadow Volumes", "Exact hard shadows by stencil counting (z-fail), no ray tracer needed"),
-)
-
-FOG_ITEMS = (
-    ("NONE", "None", "No fog"),
-    ("LINEAR", "Linear", "OpenGL GL_LINEAR fog between start and end"),
-    ("EXP", "Exponential", "OpenGL GL_EXP fog, exp(-density·z)"),
-    ("EXP2", "Exponential Squared", "OpenGL GL_EXP2 fog, exp(-(density·z)²)"),
-)
+SHADING_ITEMS = options.SHADING_ITEMS
 
 
-class BLINN_PHONG_RenderSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blender naming rule)
-    """Render settings of the Blinn-Phong engine (``Scene.blinn_phong``)."""
-
-    shading: EnumProperty(
-        name="Shading",
-        items=(
-            ("AUTO", "Auto", "The planner's choice per mesh: flat where it is exact, else Phong"),
-            *SHADING_ITEMS,
-        ),
-        default="PHONG",
-        description="Shading frequency for materials that do not override it",
-    )
-    tolerance: FloatProperty(
-        name="Tolerance",
-        min=0.0,
-        soft_max=64.0,
-        default=0.0,
-        precision=1,
-        description="Error the planner may accept to choose a faster method, in 8-bit steps "
-        "(1/255; max for transparency, mean for shadows; 0: exact only)",
-    )
-    samples_per_axis: IntProperty(
-        name="Anti-Aliasing", min=1, max=8, default=2, description="k×k ordered-grid samples per pixel"
-    )
-    specular_model: EnumProperty(
-        name="Specular",
-        items=(
-            ("BLINN", "Blinn (half vector)", "(n·h)^s, the OpenGL equation"),
-            ("PHONG", "Phong (reflection)", "(r·v)^s"),
-        ),
-        default="BLINN",
-    )
-    two_sided: BoolProperty(
-        name="Two-Sided Lighting", default=True, description="Light back faces with the flipped normal"
-    )
-    transparency: EnumProperty(name="Transparency", items=TRANSPARENCY_ITEMS, default="AUTO")
-    peel_layers: IntProperty(name="Layers", min=1, max=64, default=8, description="Depth-peeling layers")
-    shadows: EnumProperty(name="Shadows", items=SHADOW_ITEMS, default="AUTO")
-    shadow_samples: IntProperty(
-        name="Shadow Samples",
-        min=1,
-        max=256,
-        default=16,
-        description="Rays per pixel toward a light for soft shadows",
-    )
-    shadow_bias: FloatProperty(
-        name="Bias",
-        min=0.0,
-        max=1.0,
-        default=1e-3,
-        precision=5,
-        description="Ray origin offset along the normal, in scene units",
-    )
-    fog: EnumProperty(name="Fog", items=FOG_ITEMS, default="NONE")
-    fog_color: FloatVectorProperty(
-        name="Fog Colour", subtype="COLOR", size=3, min=0.0, default=(0.5, 0.5, 0.5)
-    )
-    fog_density: FloatProperty(name="Density", min=0.0, default=0.1)
-    fog_start: FloatProperty(name="Start", min=0.0, default=1.0, unit="LENGTH")
-    fog_end: FloatProperty(name="End", min=0.0, default=50.0, unit="LENGTH")
-    abort_on_error: BoolProperty(
-        name="Exit on Error in Background",
-        default=True,
-        description="In background mode (blender -b), end the process with exit code 1 when a render "
-        "fails, so render farms and scripts see the failure",
-    )
-    verify_background: PointerProperty(
+def _render_settings_class() -> type:
+    """``Scene.blinn_phong``: one Blender property per field of ``options.RenderOptions`` (labels,
+    limits and defaults come from there), plus the Verify operator's inputs."""
+    annotations: dict[str, object] = {}
+    for name, _default, _spec in options.settings():
+        kind, kwargs = options.blender_property_arguments(name)
+        annotations[name] = getattr(bpy.props, kind)(**kwargs)
+    annotations["verify_background"] = PointerProperty(
         name="Background",
         type=bpy.types.Image,
         description="Image of the render's size to composite the last render over (Verify Against Blender)",
     )
-    verify_operator: EnumProperty(
+    annotations["verify_operator"] = EnumProperty(
         name="Operator",
         items=(
             ("src_over", "Over", "Alpha Over, mode Over: Porter-Duff src-over"),
@@ -143,6 +56,18 @@ class BLINN_PHONG_RenderSettings(bpy.types.PropertyGroup):  # noqa: N801 (Blende
         ),
         default="src_over",
     )
+    return type(
+        "BLINN_PHONG_RenderSettings",
+        (bpy.types.PropertyGroup,),
+        {
+            "__annotations__": annotations,
+            "__doc__": "Render settings of the Blinn-Phong engine (``Scene.blinn_phong``).",
+            "__module__": __name__,
+        },
+    )
+
+
+BLINN_PHONG_RenderSettings = _render_settings_class()
 
 
 MATERIAL_SOURCE_ITEMS = (

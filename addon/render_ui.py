@@ -1,7 +1,8 @@
 """Properties-editor panels and operators of the Blinn-Phong engine.
 
 Panels show only while the engine is active (``COMPAT_ENGINES`` + ``poll`` on ``context.engine``,
-as Cycles' ``ui.py`` does): render settings and the last render's choices in the Render tab, the
+as Cycles' ``ui.py`` does): render settings (panels generated from ``addon/options.py``; Film ›
+Transparent; the pipeline settings in a closed sub-panel) and the last render's choices in the Render tab, the
 Blinn-Phong coefficients in the Material tab, falloff in the Light tab. Blender's own engine-agnostic
 panels (format, output, camera, light basics, ...) get the engine id added to their
 ``COMPAT_ENGINES`` on register and removed on unregister.
@@ -9,7 +10,7 @@ panels (format, output, camera, light basics, ...) get the engine id added to th
 
 import bpy
 
-from . import convert, engine
+from . import convert, engine, options
 
 __all__ = [
     "BLINN_PHONG_OT_copy_derived_light",
@@ -18,7 +19,9 @@ __all__ = [
     "BLINN_PHONG_PT_material",
     "BLINN_PHONG_PT_render",
     "BLINN_PHONG_PT_render_effects",
+    "BLINN_PHONG_PT_render_film",
     "BLINN_PHONG_PT_render_last",
+    "BLINN_PHONG_PT_render_pipeline",
     "classes",
     "register",
     "unregister",
@@ -66,51 +69,54 @@ class _EnginePanel:
         return context.engine in cls.COMPAT_ENGINES
 
 
-class BLINN_PHONG_PT_render(_EnginePanel, bpy.types.Panel):  # noqa: N801 (Blender naming rule)
-    """Shading frequency, anti-aliasing and lighting model"""
-
-    bl_label = "Blinn-Phong"
-    bl_context = "render"
-
-    def draw(self, context: bpy.types.Context) -> None:
-        settings = context.scene.blinn_phong
-        layout = self.layout
-        layout.use_property_split = True
-        layout.prop(settings, "shading")
-        layout.prop(settings, "samples_per_axis")
-        layout.prop(settings, "specular_model")
-        layout.prop(settings, "two_sided")
-        layout.prop(settings, "abort_on_error")
+def _draw_settings(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup, panel: str) -> None:
+    """Draw the settings of ``panel`` (``options.PANELS``) that apply to the current values."""
+    current = options.RenderOptions.from_settings(settings)
+    for name in options.visible_fields(panel, current):
+        layout.prop(settings, name)
 
 
-class BLINN_PHONG_PT_render_effects(_EnginePanel, bpy.types.Panel):  # noqa: N801
-    """Transparency, shadows and fog ("Auto" lets the planner decide)"""
+def _settings_panel(key: str, idname: str, doc: str, **extra: object) -> type:
+    """A Render-tab panel drawing the settings whose ``Setting.panel`` is ``key``."""
 
-    bl_label = "Transparency, Shadows, Fog"
+    def draw(self: bpy.types.Panel, context: bpy.types.Context) -> None:
+        self.layout.use_property_split = True
+        _draw_settings(self.layout, context.scene.blinn_phong, key)
+
+    attributes = {"bl_label": options.PANELS[key], "bl_context": "render", "draw": draw, "__doc__": doc}
+    attributes.update(extra)
+    return type(idname, (_EnginePanel, bpy.types.Panel), attributes)
+
+
+BLINN_PHONG_PT_render = _settings_panel(
+    "main", "BLINN_PHONG_PT_render", "Shading frequency, anti-aliasing and lighting model"
+)
+BLINN_PHONG_PT_render_effects = _settings_panel(
+    "effects",
+    "BLINN_PHONG_PT_render_effects",
+    'Transparency, shadows and fog ("Auto" lets the planner decide)',
+    bl_parent_id="BLINN_PHONG_PT_render",
+)
+BLINN_PHONG_PT_render_pipeline = _settings_panel(
+    "pipeline",
+    "BLINN_PHONG_PT_render_pipeline",
+    "Kernels and what a failed render does in background mode (render farms, scripts)",
+    bl_parent_id="BLINN_PHONG_PT_render",
+    bl_options={"DEFAULT_CLOSED"},
+)
+
+
+class BLINN_PHONG_PT_render_film(_EnginePanel, bpy.types.Panel):  # noqa: N801
+    """Film › Transparent: alpha from coverage, or the world colour behind the objects"""
+
+    bl_label = "Film"
     bl_context = "render"
     bl_parent_id = "BLINN_PHONG_PT_render"
 
     def draw(self, context: bpy.types.Context) -> None:
-        settings = context.scene.blinn_phong
         layout = self.layout
         layout.use_property_split = True
-        layout.prop(settings, "tolerance")
-        layout.prop(settings, "transparency")
-        if settings.transparency == "DEPTH_PEELING":
-            layout.prop(settings, "peel_layers")
-        layout.prop(settings, "shadows")
-        if settings.shadows == "SOFT":
-            layout.prop(settings, "shadow_samples")
-        if settings.shadows in ("HARD", "SOFT"):
-            layout.prop(settings, "shadow_bias")
-        layout.prop(settings, "fog")
-        if settings.fog != "NONE":
-            layout.prop(settings, "fog_color")
-            if settings.fog == "LINEAR":
-                layout.prop(settings, "fog_start")
-                layout.prop(settings, "fog_end")
-            else:
-                layout.prop(settings, "fog_density")
+        layout.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
 class BLINN_PHONG_PT_render_last(_EnginePanel, bpy.types.Panel):  # noqa: N801
@@ -132,6 +138,8 @@ class BLINN_PHONG_PT_render_last(_EnginePanel, bpy.types.Panel):  # noqa: N801
         choices = last.get("choices", {})
         col = layout.column(align=True)
         col.label(text=f"{last.get('seconds', 0.0):.2f} s, {last.get('triangles', 0)} triangles", icon="TIME")
+        for part in str(last.get("status", "")).split(" | ")[1:]:
+            col.label(text=part, icon="SETTINGS")
         col.label(text=f"Shading: {choices.get('shading')}, {choices.get('samples')} samples per pixel")
         for reason in choices.get("reasons", []):
             col.label(text=reason, icon="INFO")
@@ -257,7 +265,9 @@ classes = (
     BLINN_PHONG_OT_copy_derived_material,
     BLINN_PHONG_OT_copy_derived_light,
     BLINN_PHONG_PT_render,
+    BLINN_PHONG_PT_render_film,
     BLINN_PHONG_PT_render_effects,
+    BLINN_PHONG_PT_render_pipeline,
     BLINN_PHONG_PT_render_last,
     BLINN_PHONG_PT_material,
     BLINN_PHONG_PT_light,

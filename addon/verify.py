@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the name OpenImageIO's own docs use)
 
+from compositing._atomic import atomic_path
 from compositing.factors import ALL_OPERATORS, OPERATORS
 from compositing.validate import as_rgba, check_alpha_range, check_factor
 
@@ -552,12 +553,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         for name in ("blender", "ours", "difference"):
             target = out / f"{name}.exr"
-            tmp = target.with_name(f".{name}.tmp-{os.getpid()}.exr")
-            try:
+            with atomic_path(target) as tmp:  # a failed write keeps the previous image
                 write_exr(tmp, getattr(results[0], name))
-                os.replace(tmp, target)
-            finally:
-                tmp.unlink(missing_ok=True)
             print(f"wrote {target}")
     print(f"worst max abs error {worst:.3e} (tolerance {args.tolerance:g})")
     return 0 if worst <= args.tolerance else 1

@@ -211,6 +211,8 @@ class BLINN_PHONG_OT_verify_composite(bpy.types.Operator):  # noqa: N801 (Blende
         if settings.verify_background is None:
             self.report({"ERROR"}, "Choose a background image first")
             return {"CANCELLED"}
+        from compositing._atomic import write_bytes_atomic
+
         LAST_VERIFY.clear()
         try:
             with tempfile.TemporaryDirectory(prefix="blinn-phong-verify-") as tmp:
@@ -219,7 +221,7 @@ class BLINN_PHONG_OT_verify_composite(bpy.types.Operator):  # noqa: N801 (Blende
                 keep.mkdir(parents=True, exist_ok=True)
                 for key, path in list(outcome["files"].items()):
                     target = keep / Path(path).name
-                    target.write_bytes(Path(path).read_bytes())
+                    write_bytes_atomic(target, Path(path).read_bytes())  # old copies survive a failure
                     outcome["files"][key] = str(target)
         except (ValueError, RuntimeError, OSError) as error:
             LAST_VERIFY.update({"error": str(error)})

@@ -29,7 +29,15 @@ from pathlib import Path
 
 from benchmarks._util import machine_info, write_json
 
-MODULES = ("compositing_vs_oiio", "gl_blend", "effects", "renderer", "blender_compositor", "shadow_volume")
+MODULES = (
+    "compositing_vs_oiio",
+    "gl_blend",
+    "effects",
+    "renderer",
+    "blender_compositor",
+    "shadow_volume",
+    "shadows_mesa",
+)
 
 
 def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[], object]:
@@ -52,6 +60,12 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_renderer
 
         return lambda: write_json(out / "renderer.json", bench_renderer.run(repeat=repeat))
+    if name == "shadows_mesa":
+        from benchmarks import bench_shadows_mesa
+
+        return lambda: write_json(
+            out / "shadows_mesa.json", bench_shadows_mesa.run(repeat=repeat, quick=quick)
+        )
     if name == "blender_compositor":
         from benchmarks import bench_blender_compositor
 

@@ -8,15 +8,17 @@ the same call.
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import statistics
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
-__all__ = ["machine_info", "markdown_table", "time_interleaved", "write_json"]
+from compositing._atomic import atomic_path, write_json_atomic
+
+__all__ = ["machine_info", "markdown_table", "save_figure", "time_interleaved", "write_json"]
 
 
 def time_interleaved(
@@ -62,6 +64,20 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
 
 
 def write_json(path: Path, data: object) -> None:
-    """Write ``data`` as indented JSON, creating the directory."""
+    """Write ``data`` as indented JSON, creating the directory; atomic (a failed write keeps the old file)."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=1) + "\n")
+    write_json_atomic(path, data, indent=1)
+
+
+def save_figure(fig: Any, path: str | os.PathLike, **savefig_kwargs: Any) -> Path:
+    """``fig.savefig(path, **savefig_kwargs)`` atomically, creating the directory; returns the path.
+
+    Matplotlib picks the format from the extension, which the temporary file keeps
+    (see :func:`compositing._atomic.atomic_path`); a failed save leaves the old chart intact.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(target) as tmp:
+        fig.savefig(tmp, **savefig_kwargs)
+    return target

@@ -21,7 +21,6 @@ Writes ``blender_compositor.json`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from addon.verify import ALPHA_OVER_OPERATORS, run_compositor_job, sample_images, write_exr
+from benchmarks._util import write_json
 from compositing import OPERATORS, composite
 
 __all__ = ["main", "run"]
@@ -137,9 +137,7 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 5, python: str | None = Non
         },
         "rows": rows,
     }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "blender_compositor.json").write_text(json.dumps(result, indent=1))
+    write_json(Path(out_dir) / "blender_compositor.json", result)
     return result
 
 

@@ -23,7 +23,6 @@ Writes ``effects.json`` to ``--out``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -51,6 +50,7 @@ from blinn_phong.raytrace import (
 from blinn_phong.render import prepare_scene, shade_fragments
 from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import light_shadow_maps, planar_shadow_mask, shadow_map_visibility
+from compositing._atomic import write_json_atomic
 
 __all__ = ["main", "run"]
 
@@ -87,6 +87,11 @@ def _camera() -> Camera:
 
 
 def transparency_cases(size: int, repeat: int) -> list[dict]:
+    """Every transparency resolve on six translucent spheres at ``size``² pixels, best of ``repeat``.
+
+    Each row: the method, its seconds, the time ratio to the A-buffer (the exact reference,
+    every fragment sorted by depth) and its error against it (linear premultiplied RGBA).
+    """
     rng = np.random.default_rng(3)
     meshes = [_ground(-1.2, 4.0)]
     for _ in range(6):
@@ -196,6 +201,12 @@ def _shadow_scene() -> tuple[Scene, np.ndarray]:
 
 
 def shadow_cases(size: int, repeat: int) -> list[dict]:
+    """Every shadow method on one scene at ``size``² pixels, best of ``repeat``.
+
+    Hard shadows are compared with Embree ray casting (visibility 0/1 per pixel), soft ones
+    with a 16×16 stratified reference at the same points; rows give seconds, the time ratio
+    to the reference and the mismatch share / mean absolute error.
+    """
     scene, tris = _shadow_scene()
     prepared = prepare_scene(scene)
     frags = rasterize(prepared.clip, prepared.triangles, size, size)
@@ -328,7 +339,7 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 3, size: int = 256) -> dict
     }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "effects.json").write_text(json.dumps(result, indent=2) + "\n")
+    write_json_atomic(out / "effects.json", result, indent=2)
     return result
 
 

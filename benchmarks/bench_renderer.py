@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._util import machine_info, markdown_table, write_json
+from benchmarks._util import machine_info, markdown_table, save_figure, write_json
 
 __all__ = ["main", "run"]
 
@@ -218,8 +218,7 @@ def _charts(results: dict[str, object], directory: Path) -> None:
         ax.legend()
     fig.suptitle("blinn_phong.render, phong shading, 4 lights")
     fig.tight_layout()
-    directory.mkdir(parents=True, exist_ok=True)
-    fig.savefig(directory / "renderer_scaling.png", dpi=100)
+    save_figure(fig, directory / "renderer_scaling.png", dpi=100)
     plt.close(fig)
 
 

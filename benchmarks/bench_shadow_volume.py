@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._util import machine_info, time_interleaved, write_json
+from benchmarks._util import machine_info, save_figure, time_interleaved, write_json
 from blinn_phong import shadow_volume as sv
 from blinn_phong.primitives import grid_plane, uv_sphere
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
@@ -242,12 +242,8 @@ def chart(result: dict, path: str | os.PathLike) -> Path:
     right.set_title("crossover: below 1, volumes are faster")
     right.legend(fontsize=8)
     fig.tight_layout()
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    out = save_figure(fig, path, dpi=110)  # a failed write leaves the previous chart intact
     plt.close(fig)
-    os.replace(tmp, out)  # a failed write leaves the previous chart intact
     return out
 
 

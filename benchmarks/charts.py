@@ -20,6 +20,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from benchmarks._util import save_figure
+
 __all__ = ["EXACT_FLOOR", "draw_all", "pareto_front", "tradeoff_chart"]
 
 #: Where an error of exactly 0 is drawn on the log-scale error axes (8-bit steps).
@@ -114,8 +116,7 @@ def tradeoff_chart(
     axes[0].legend(fontsize=7, loc="best")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
+    save_figure(fig, path, dpi=DPI)
     plt.close(fig)
     return path
 
@@ -231,7 +232,7 @@ def _transparency(data: dict, out: Path) -> list[Path]:
     axes[0][0].legend(fontsize=6)
     fig.suptitle("Transparency error as layers and opacity grow (reference: A-buffer)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out / "transparency_growth.png", dpi=DPI)
+    save_figure(fig, out / "transparency_growth.png", dpi=DPI)
     plt.close(fig)
     paths.append(out / "transparency_growth.png")
     return paths
@@ -274,7 +275,7 @@ def _scaling(data: dict, out: Path) -> list[Path]:
         ax.legend(fontsize=7)
     fig.suptitle("Scaling (labels: our time as a multiple of Mesa's, same run)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(out / "scaling.png", dpi=DPI)
+    save_figure(fig, out / "scaling.png", dpi=DPI)
     plt.close(fig)
     return [out / "scaling.png"]
 
@@ -396,8 +397,7 @@ def peers_chart(results: dict[str, dict], results_dir: Path | None, out_dir: Pat
     ax.grid(True, axis="x", which="both", alpha=0.25)
     fig.suptitle("Peers doing the same work: time ratio and our error (8-bit steps)", fontsize=10)
     fig.tight_layout()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_dir / "peers.png", dpi=DPI)
+    save_figure(fig, out_dir / "peers.png", dpi=DPI)
     plt.close(fig)
     return [out_dir / "peers.png"]
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
 from blinn_phong.planner import MapGeometry
+from compositing._atomic import write_json_atomic
 
 __all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save"]
 
@@ -189,7 +190,7 @@ def fit(tradeoffs: dict) -> dict:
 
 def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
     """Write the models as JSON (default: ``blinn_phong/calibration.json``, shipped with the package)."""
-    path.write_text(json.dumps(models, indent=1) + "\n")
+    write_json_atomic(path, models, indent=1)
     return path
 
 

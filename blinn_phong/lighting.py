@@ -184,7 +184,7 @@ def _points_and_normals(points: object, normals: object) -> tuple[np.ndarray, np
     if len(bad):
         raise ValueError(
             f"normals: expected unit vectors (length 1 ± {UNIT_NORMAL_TOLERANCE:g}) or zero vectors; "
-            f"got {len(bad)} of {len(n)} with other lengths (row {bad[0]}: length {length[bad[0]]!r})"
+            f"got {len(bad)} of {len(n)} with other lengths (row {bad[0]}: length {float(length[bad[0]])!r})"
         )
     return p, n
 

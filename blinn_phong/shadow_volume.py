@@ -1176,9 +1176,12 @@ def shadow_volume_visibility(
     if camera is not None and not isinstance(camera, Camera):
         raise TypeError(f"camera: expected a blinn_phong Camera or None, got {type(camera).__name__}")
     tris = _triangles("world_triangles", world_triangles)
+    light_vec, directional = _light(light)
+    if stencil not in (*STENCIL_METHODS, "auto"):
+        raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
+    _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
         return np.ones(len(p))
-    light_vec, directional = _light(light)
     to_light = np.broadcast_to(-light_vec, p.shape) if directional else light_vec - p
     length = np.sqrt(np.einsum("ij,ij->i", n, n))
     side = np.sign(np.einsum("ij,ij->i", n, to_light))
@@ -1195,8 +1198,6 @@ def shadow_volume_visibility(
         span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
-    if stencil not in (*STENCIL_METHODS, "auto"):
-        raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
     if stencil == "auto":
         stencil = "zpass" if zpass_is_safe(light, tris, view, proj) else "zfail"
     volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)

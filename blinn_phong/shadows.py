@@ -28,6 +28,12 @@ the homogeneous light ``l`` (w = 0 directional, w = 1 positional). Cheap, exact 
 one plane, and only there: no shadows on other receivers, and casters on the far side of
 the plane or behind the light still cast.
 
+Engines: every shadow-map function takes ``engine``: ``numpy`` runs the code in this module
+(the readable reference), ``numba`` the compiled twins of :mod:`blinn_phong.shadow_kernels`
+(same formulas; depths within 1e-12, visibilities within 1e-9), ``auto`` (the default) the
+compiled ones when numba imports. :func:`light_visibility` also accepts per-triangle RGB
+transmittances, for coloured shadows of transparent casters (ray traced).
+
 Image conventions: shadow maps are (height, width) arrays of window depth in [0, 1],
 row 0 at the top (as :func:`~blinn_phong.raster.rasterize` returns them), 1 where no
 caster was drawn.
@@ -35,6 +41,8 @@ caster was drawn.
 
 from __future__ import annotations
 
+import contextvars
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,20 +51,49 @@ from .raster import rasterize
 from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographic_matrix, perspective_matrix
 
 __all__ = [
+    "ENGINES",
     "PCF_KERNELS",
     "SHADOW_METHODS",
+    "ShadowLookup",
     "ShadowMap",
+    "light_cameras",
     "light_shadow_maps",
     "light_visibility",
     "planar_shadow_mask",
     "planar_shadow_matrix",
     "render_shadow_map",
+    "shadow_lookup",
     "shadow_map_visibility",
     "shadow_visibility",
 ]
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
 PCF_KERNELS: tuple[str, ...] = ("nearest", "bilinear", "box3", "box5", "box7")
+#: ``engine`` values: the numpy reference, the compiled twins of
+#: :mod:`blinn_phong.shadow_kernels`, or ``auto`` (compiled when numba imports).
+ENGINES: tuple[str, ...] = ("auto", "numpy", "numba")
+
+
+@functools.lru_cache(maxsize=1)
+def _numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def _compiled(engine: str) -> bool:
+    """True when ``engine`` selects the compiled kernels; raises for an unknown engine."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    if engine == "numpy":
+        return False
+    if _numba_available():
+        return True
+    if engine == "numba":
+        raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    return False
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,8 +114,14 @@ class ShadowMap:
         return self.depth.shape  # type: ignore[return-value]
 
 
+#: ids of float64 arrays already checked by the light_visibility call running in this context
+_CHECKED: contextvars.ContextVar[frozenset[int]] = contextvars.ContextVar("checked", default=frozenset())
+
+
 def _triangles(name: str, value: np.ndarray) -> np.ndarray:
     tris = np.asarray(value)
+    if id(tris) in _CHECKED.get():
+        return tris
     if tris.dtype.kind not in "fiu" or tris.ndim != 3 or tris.shape[1:] != (3, 3):
         raise ValueError(f"{name} must be a real array of shape (n, 3, 3), got {tris.dtype} {tris.shape}")
     if not np.all(np.isfinite(tris)):
@@ -88,6 +131,8 @@ def _triangles(name: str, value: np.ndarray) -> np.ndarray:
 
 def _points(name: str, value: np.ndarray) -> np.ndarray:
     arr = np.asarray(value)
+    if id(arr) in _CHECKED.get():
+        return arr
     if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name} must be a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -107,6 +152,7 @@ def render_shadow_map(
     *,
     constant_bias: float = 0.0,
     slope_bias: float = 0.0,
+    engine: str = "auto",
 ) -> ShadowMap:
     """Render a light-space depth map of world-space triangles (both faces, nearest depth).
 
@@ -117,6 +163,9 @@ def render_shadow_map(
         resolution: map size in texels (square), ≥ 1.
         constant_bias: window-depth units added to every caster fragment (≥ 0).
         slope_bias: multiple of the triangle's depth slope per texel added (≥ 0).
+        engine: ``numpy`` (the reference: :func:`~blinn_phong.raster.rasterize` and a
+            scatter-min), ``numba`` (:func:`blinn_phong.shadow_kernels.depth_map_compiled`,
+            same formulas, depths within 1e-12) or ``auto`` (numba when it imports).
 
     Returns:
         :class:`ShadowMap` with the biased nearest depth per texel (1 where empty).
@@ -128,6 +177,11 @@ def render_shadow_map(
         raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
     res = int(resolution)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    if _compiled(engine):
+        from .shadow_kernels import depth_map_compiled
+
+        depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
+        return ShadowMap(depth_map, np.asarray(view, float), np.asarray(projection, float))
     clip = _homogeneous(tris.reshape(-1, 3)) @ vp.T
     index = np.arange(len(clip)).reshape(-1, 3)
     frags = rasterize(clip, index, res, res)
@@ -167,6 +221,7 @@ def shadow_visibility(
     *,
     normal_offset: float = 0.0,
     kernel: str = "nearest",
+    engine: str = "auto",
 ) -> np.ndarray:
     """Fraction of the depth comparisons that find each point lit (1 = lit, 0 = shadowed).
 
@@ -179,6 +234,8 @@ def shadow_visibility(
         normal_offset: world units each point moves along its unit normal (towards the
             side facing the light) before projection.
         kernel: one of :data:`PCF_KERNELS`.
+        engine: ``numpy`` (this function's reference code), ``numba``
+            (:func:`blinn_phong.shadow_kernels.lookup_compiled`) or ``auto``.
 
     Returns:
         (n,) float64 visibility in [0, 1].
@@ -186,12 +243,28 @@ def shadow_visibility(
     p = _points("points", points)
     if kernel not in PCF_KERNELS:
         raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    n = None
     if normal_offset != 0.0:
         if normals is None:
             raise ValueError("normals are required when normal_offset != 0")
         n = _points("normals", normals)
         if n.shape != p.shape:
             raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+    if _compiled(engine):
+        from .shadow_kernels import lookup_compiled
+
+        vp = shadow_map.projection @ shadow_map.view
+        return lookup_compiled(
+            shadow_map.depth[None],
+            vp[None],
+            shadow_map.view[None],
+            p,
+            n,
+            light_position=None,
+            normal_offset=float(normal_offset),
+            kernel=kernel,
+        )
+    if n is not None:
         n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         # face the normal towards the light: the side whose light-eye z is larger (nearer the light)
         towards = (n @ shadow_map.view[:3, :3].T)[:, 2]
@@ -230,8 +303,13 @@ def shadow_visibility(
 
 
 def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
-    pts = world_triangles.reshape(-1, 3)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    if _numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
+        from .shadow_kernels import corner_bounds  # the same minimum and maximum, in one pass
+
+        lo, hi = corner_bounds(world_triangles)
+    else:
+        pts = world_triangles.reshape(-1, 3)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
     centre = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-9)
     return centre, radius
@@ -259,6 +337,7 @@ def light_shadow_maps(
     *,
     constant_bias: float = 0.0,
     slope_bias: float = 0.0,
+    engine: str = "auto",
 ) -> list[ShadowMap]:
     """The shadow map(s) of one light over the given casters.
 
@@ -272,38 +351,80 @@ def light_shadow_maps(
         resolution: texels per map side.
         constant_bias: see :func:`render_shadow_map`.
         slope_bias: see :func:`render_shadow_map`.
+        engine: see :func:`render_shadow_map`.
 
     Returns:
         A list with one :class:`ShadowMap` (directional, spot) or six (point).
     """
     tris = _triangles("world_triangles", world_triangles)
+    cameras = light_cameras(light, tris)
+    if (
+        len(cameras) == 6
+        and _compiled(engine)
+        and isinstance(resolution, int | np.integer)
+        and resolution >= 1
+    ):
+        if constant_bias < 0 or slope_bias < 0:
+            raise ValueError(
+                f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
+            )
+        from .shadow_kernels import cube_maps_compiled
+
+        # the six faces in one (6, R, R) block, rendered one face per thread; the look-up
+        # then reads the block without a copy
+        res = int(resolution)
+        cube = np.empty((6, res, res))
+        vps = np.stack([proj @ view for view, proj in cameras])
+        cube_maps_compiled(tris, vps, float(constant_bias), float(slope_bias), cube)
+        return [ShadowMap(cube[face], view, proj) for face, (view, proj) in enumerate(cameras)]
+    kw = {"constant_bias": constant_bias, "slope_bias": slope_bias, "engine": engine}
+    return [render_shadow_map(tris, view, proj, resolution, **kw) for view, proj in cameras]
+
+
+def light_cameras(
+    light: DirectionalLight | PointLight | SpotLight, world_triangles: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The light camera(s) of :func:`light_shadow_maps`: ``[(view, projection), ...]`` (4×4 each).
+
+    Directional: an orthographic camera looking along the light over the casters' bounding
+    sphere (centre ``c``, radius ``r``; eye at ``c − 2r·d``, depth range [0.5r, 3.5r]).
+    Spot (cut-off ≤ 80°): a perspective camera at the light along its axis, field of view
+    twice the cut-off. Point (or wider spot): six 90° cube faces in the order of
+    ``_CUBE_FACES`` (+x, −x, +y, −y, +z, −z; OpenGL 4.6 §8.13 table 8.19). Perspective
+    cameras span ``near = 10⁻³·far`` to ``far`` = distance to the farthest bounding-sphere point.
+
+    Args:
+        light: a light of the scene model.
+        world_triangles: (n, 3, 3) world-space casters.
+
+    Returns:
+        One (view, projection) pair, or six for a cube.
+    """
+    tris = _triangles("world_triangles", world_triangles)
     centre, radius = _bounds(tris)
-    kw = {"constant_bias": constant_bias, "slope_bias": slope_bias}
     if isinstance(light, DirectionalLight):
         d = np.asarray(light.direction, dtype=np.float64)
         eye = centre - d * 2 * radius
         view = look_at(eye, centre, _up_for(d))
         proj = orthographic_matrix(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5)
-        return [render_shadow_map(tris, view, proj, resolution, **kw)]
+        return [(view, proj)]
+    if not isinstance(light, PointLight | SpotLight):
+        raise TypeError(
+            f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}"
+        )
     pos = np.asarray(light.position, dtype=np.float64)
     far = float(np.linalg.norm(centre - pos)) + radius
     near = max(far * 1e-3, 1e-6)
     if isinstance(light, SpotLight) and light.cutoff <= 80.0:
         d = np.asarray(light.direction, dtype=np.float64)
-        view = look_at(pos, pos + d, _up_for(d))
-        proj = perspective_matrix(2 * light.cutoff, 1.0, near, far)
-        return [render_shadow_map(tris, view, proj, resolution, **kw)]
-    if isinstance(light, PointLight | SpotLight):
-        maps = []
-        for axis, sign, up in _CUBE_FACES:
-            d = np.zeros(3)
-            d[axis] = sign
-            view = look_at(pos, pos + d, up)
-            maps.append(
-                render_shadow_map(tris, view, perspective_matrix(90.0, 1.0, near, far), resolution, **kw)
-            )
-        return maps
-    raise TypeError(f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}")
+        return [(look_at(pos, pos + d, _up_for(d)), perspective_matrix(2 * light.cutoff, 1.0, near, far))]
+    proj = perspective_matrix(90.0, 1.0, near, far)
+    cameras = []
+    for axis, sign, up in _CUBE_FACES:
+        d = np.zeros(3)
+        d[axis] = sign
+        cameras.append((look_at(pos, pos + d, up), proj))
+    return cameras
 
 
 def shadow_map_visibility(
@@ -314,6 +435,7 @@ def shadow_map_visibility(
     *,
     normal_offset: float = 0.0,
     kernel: str = "nearest",
+    engine: str = "auto",
 ) -> np.ndarray:
     """Visibility of points for one light from its maps (:func:`light_shadow_maps`).
 
@@ -327,15 +449,46 @@ def shadow_map_visibility(
         normals: (n, 3) normals, for ``normal_offset``.
         normal_offset: see :func:`shadow_visibility`.
         kernel: see :func:`shadow_visibility`.
+        engine: see :func:`shadow_visibility`.
 
     Returns:
         (n,) float64 visibility in [0, 1].
     """
     p = _points("points", points)
     if len(maps) == 1:
-        return shadow_visibility(maps[0], p, normals, normal_offset=normal_offset, kernel=kernel)
+        return shadow_visibility(
+            maps[0], p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
+        )
     if len(maps) != 6 or isinstance(light, DirectionalLight):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
+    if _compiled(engine):
+        if kernel not in PCF_KERNELS:
+            raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+        n = None
+        if normal_offset != 0.0:
+            if normals is None:
+                raise ValueError("normals are required when normal_offset != 0")
+            n = _points("normals", normals)
+            if n.shape != p.shape:
+                raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+        from .shadow_kernels import lookup_compiled
+
+        base = maps[0].depth.base
+        same_block = (
+            isinstance(base, np.ndarray)
+            and base.shape == (6, *maps[0].depth.shape)
+            and all(m.depth.base is base and np.shares_memory(m.depth, base[f]) for f, m in enumerate(maps))
+        )
+        return lookup_compiled(
+            base if same_block else np.stack([m.depth for m in maps]),
+            np.stack([m.projection @ m.view for m in maps]),
+            np.stack([m.view for m in maps]),
+            p,
+            n,
+            light_position=np.asarray(light.position, dtype=np.float64),
+            normal_offset=float(normal_offset),
+            kernel=kernel,
+        )
     rel = p - np.asarray(light.position, dtype=np.float64)
     axis = np.argmax(np.abs(rel), axis=1)
     sign = np.sign(rel[np.arange(len(p)), axis])
@@ -344,8 +497,84 @@ def shadow_map_visibility(
         sel = (axis == ax) & (sign == sg)
         if np.any(sel):
             nrm = None if normals is None else np.asarray(normals)[sel]
-            vis[sel] = shadow_visibility(maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel)
+            vis[sel] = shadow_visibility(
+                maps[face], p[sel], nrm, normal_offset=normal_offset, kernel=kernel, engine="numpy"
+            )
     return vis
+
+
+@dataclass(frozen=True, eq=False)
+class ShadowLookup:
+    """The arrays :func:`blinn_phong.shadow_kernels.visibility_at` reads, for one light's maps.
+
+    A compiled shading kernel looks shadows up per fragment with
+    ``visibility_at(px, py, pz, nx, ny, nz, *lookup.arguments())`` (world point, normal),
+    getting exactly :func:`shadow_map_visibility`'s value.
+
+    ``depth``: (F, R, R) maps; ``view_projection``: (F, 4, 4); ``view_z``: (F, 3) row 2 of
+    each view matrix; ``face_mode``: 1 for a cube (F = 6) else 0; ``light_position``: (3,);
+    ``normal_offset``: world units; ``kernel``: 0 nearest, 1 bilinear, k for a k×k box.
+    """
+
+    depth: np.ndarray
+    view_projection: np.ndarray
+    view_z: np.ndarray
+    face_mode: int
+    light_position: np.ndarray
+    normal_offset: float
+    kernel: int
+
+    def arguments(self) -> tuple[object, ...]:
+        """The trailing arguments of ``visibility_at``, in order."""
+        return (
+            self.depth, self.view_projection, self.view_z, self.face_mode, self.light_position,
+            self.normal_offset, self.kernel,
+        )  # fmt: skip
+
+
+def shadow_lookup(
+    light: DirectionalLight | PointLight | SpotLight,
+    maps: list[ShadowMap],
+    *,
+    normal_offset: float = 0.0,
+    kernel: str = "nearest",
+) -> ShadowLookup:
+    """Pack one light's maps (:func:`light_shadow_maps`) for look-ups inside a compiled kernel.
+
+    Args:
+        light: the light the maps were made for.
+        maps: its one map, or six cube faces.
+        normal_offset: see :func:`shadow_visibility`.
+        kernel: one of :data:`PCF_KERNELS`.
+
+    Returns:
+        :class:`ShadowLookup` (contiguous float64 arrays; the cube's faces without a copy when
+        :func:`light_shadow_maps` rendered them into one block).
+    """
+    if kernel not in PCF_KERNELS:
+        raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    if len(maps) not in (1, 6) or (len(maps) == 6 and isinstance(light, DirectionalLight)):
+        raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
+    from .shadow_kernels import KERNEL_CODES
+
+    base = maps[0].depth.base
+    same_block = (
+        len(maps) == 6
+        and isinstance(base, np.ndarray)
+        and base.shape == (6, *maps[0].depth.shape)
+        and all(m.depth.base is base and np.shares_memory(m.depth, base[f]) for f, m in enumerate(maps))
+    )
+    depth = base if same_block else np.stack([m.depth for m in maps])
+    position = getattr(light, "position", (0.0, 0.0, 0.0)) if len(maps) == 6 else (0.0, 0.0, 0.0)
+    return ShadowLookup(
+        np.ascontiguousarray(depth, dtype=np.float64),
+        np.ascontiguousarray(np.stack([m.projection @ m.view for m in maps])),
+        np.ascontiguousarray(np.stack([m.view[2, :3] for m in maps])),
+        1 if len(maps) == 6 else 0,
+        np.asarray(position, dtype=np.float64),
+        float(normal_offset),
+        KERNEL_CODES[kernel],
+    )
 
 
 def planar_shadow_matrix(
@@ -432,6 +661,9 @@ def light_visibility(
     kernel: str = "nearest",
     plane: np.ndarray | tuple[float, ...] | None = None,
     caster_triangles: np.ndarray | None = None,
+    normal_offset: float = 0.0,
+    engine: str = "auto",
+    transmittance: np.ndarray | None = None,
     **volume_options: object,
 ) -> np.ndarray:
     """Visibility of points for one light by a named method (a planner choice).
@@ -448,32 +680,88 @@ def light_visibility(
         kernel: PCF kernel for ``shadow_map``.
         plane: ``(a, b, c, d)`` receiving plane for ``planar``.
         caster_triangles: casters for ``planar`` (default: every triangle not in the plane).
+        normal_offset: receiver offset along the normal for ``shadow_map`` (world units).
+        engine: ``shadow_map`` maps and look-ups by the numpy reference (``numpy``), the
+            compiled kernels (``numba``) or ``auto``; see :func:`render_shadow_map`.
+        transmittance: optional (n, 3) per-triangle RGB transmittance in [0, 1] (1 − α for
+            partial occlusion, the per-channel transmittance for absorption, 0 for opaque):
+            transparent casters then cast coloured shadows
+            (:func:`blinn_phong.raytrace.transmitted_light`) and the result is (m, 3).
+            Only ``none`` and ``ray_traced`` accept it.
         volume_options: for ``shadow_volume``: the keyword arguments of
             :func:`blinn_phong.shadow_volume.shadow_volume_visibility` (``camera``, ``method``...).
 
     Returns:
-        (m,) float64 visibility in [0, 1].
+        (m,) float64 visibility in [0, 1]; (m, 3) per channel when ``transmittance`` is given.
     """
     p = _points("points", points)
     if volume_options and method != "shadow_volume":
         raise TypeError(f"light_visibility: {sorted(volume_options)} are for shadow_volume, not {method}")
+    if transmittance is not None:
+        if method == "none":
+            return np.ones((len(p), 3))
+        if method != "ray_traced":
+            raise ValueError(
+                f"transmittance: coloured shadows are ray traced; method {method!r} casts full "
+                "shadows only (use 'ray_traced' or pass transmittance=None)"
+            )
+        from .raytrace import cached_ray_scene, transmitted_light
+
+        tris = _triangles("world_triangles", world_triangles)
+        scene = cached_ray_scene(tris)
+        if isinstance(light, DirectionalLight):
+            return transmitted_light(scene, p, normals, -np.asarray(light.direction), transmittance)
+        return transmitted_light(scene, p, normals, light.position, transmittance, positional=True)
     if method == "none":
         return np.ones(len(p))
     tris = _triangles("world_triangles", world_triangles)
-    if method == "ray_traced":
-        from .raytrace import RayScene, directional_light_visibility, point_light_visibility
+    # p and tris are checked: the functions called below need not check them again
+    token = _CHECKED.set(frozenset((id(p), id(tris))))
+    try:
+        return _light_visibility_checked(
+            method, light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, plane,
+            caster_triangles, normal_offset, engine, volume_options,
+        )  # fmt: skip
+    finally:
+        _CHECKED.reset(token)
 
-        scene = RayScene(tris)
+
+def _light_visibility_checked(
+    method: str,
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    p: np.ndarray,
+    normals: np.ndarray,
+    resolution: int,
+    constant_bias: float,
+    slope_bias: float,
+    kernel: str,
+    plane: np.ndarray | tuple[float, ...] | None,
+    caster_triangles: np.ndarray | None,
+    normal_offset: float,
+    engine: str,
+    volume_options: dict[str, object],
+) -> np.ndarray:
+    if method == "ray_traced":
+        from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
+
+        scene = cached_ray_scene(tris)  # one BVH for every light of a frame
         if isinstance(light, DirectionalLight):
-            return directional_light_visibility(scene, p, normals, -np.asarray(light.direction))
-        return point_light_visibility(scene, p, normals, light.position)
+            return directional_light_visibility(
+                scene, p, normals, -np.asarray(light.direction), engine=engine
+            )
+        return point_light_visibility(scene, p, normals, light.position, engine=engine)
     if method == "shadow_volume":
         from .shadow_volume import shadow_volume_visibility
 
         return shadow_volume_visibility(light, tris, p, normals, **volume_options)  # type: ignore[arg-type]
     if method == "shadow_map":
-        maps = light_shadow_maps(light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias)
-        return shadow_map_visibility(light, maps, p, normals, kernel=kernel)
+        maps = light_shadow_maps(
+            light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias, engine=engine
+        )
+        return shadow_map_visibility(
+            light, maps, p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
+        )
     if method == "planar":
         if plane is None:
             raise ValueError("planar shadows need the receiving plane (a, b, c, d)")

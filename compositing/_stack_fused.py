@@ -273,5 +273,8 @@ def stack_fused(layers: list[np.ndarray], kind: str, threshold: float = 1.0) -> 
     t = np.float32 if kind == "straight8" else first.dtype.type
     args = (addrs, len(layers), npix, out.reshape(-1), t(threshold), used)
     suspicious = run_ranges(kernel, args, tiles, min_per_range=2)
-    read = int(used.max())
+    if tiles:
+        read = int(used.max())
+    else:  # an empty image: what the numpy engine reports (its loop does not look at pixels)
+        read = len(layers) if kind == "straight8" else 1
     return out, read, suspicious

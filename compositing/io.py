@@ -14,7 +14,8 @@ colour-science's (IEC 61966-2-1:1999, ``colour.models.eotf_sRGB`` and
 * Channels are chosen by name, never guessed from their count. Alpha is the
   file's declared alpha channel (OpenImageIO's ``spec.alpha_channel``) or a
   channel named ``A``/``alpha``; without one alpha is 1 (opaque), not 0. Colour is
-  the channels named ``R``, ``G``, ``B`` (or ``layer.R`` ...); failing that, a single remaining channel
+  the channels named ``R``, ``G``, ``B`` of one layer (``layer.R`` ...: the alpha channel's layer first, then
+  file order, so layers are never mixed); failing that, a single remaining channel
   is grey and two or more fill R, G (and B) in file order, B = 0 when only two.
   Whenever channels are ignored or not named R, G, B (an ``R,G,B,Z`` EXR, a
   ``U,V`` file) :func:`read_image` warns (``UserWarning``) saying which channels
@@ -112,10 +113,24 @@ def _channel_map(names: tuple[str, ...], declared_alpha: int, path: str) -> Chan
         named = [i for i, n in enumerate(lower) if n in ("a", "alpha")]
         alpha = named[0] if named else None
     rest = [i for i in range(c) if i != alpha]
-    by_name = {n: i for i, n in enumerate(lower) if i != alpha}
+    # R, G, B of one layer ("Combined.R" ... or unprefixed): alpha's layer first, then file order,
+    # so a multilayer EXR never mixes one layer's colour with another layer's alpha.
+    layers = [n.rsplit(".", 1)[0] if "." in n else "" for n in names]
+    order = ([layers[alpha]] if alpha is not None else []) + layers
+    rgb_layer = next(
+        (
+            layer
+            for layer in order
+            if all(any(layers[i] == layer and lower[i] == k for i in rest) for k in ("r", "g", "b"))
+        ),
+        None,
+    )
     guessed = False
-    if all(k in by_name for k in ("r", "g", "b")):
+    if rgb_layer is not None:
+        by_name = {lower[i]: i for i in reversed(rest) if layers[i] == rgb_layer}  # first wins
         rgb = (by_name["r"], by_name["g"], by_name["b"])
+        if not 0 <= declared_alpha < c and ("a" in by_name or "alpha" in by_name):
+            alpha = by_name.get("a", by_name.get("alpha"))  # the colour layer's own alpha
     elif len(rest) == 1:
         rgb = (rest[0],) * 3
         guessed = lower[rest[0]] not in ("y", "l", "grey", "gray", "luminance", "i")

@@ -174,7 +174,7 @@ def composite_stack_front_to_back(
     arrays, shape, straight8 = _arrays(layers)
     if straight8:
         return _straight8_numpy(arrays, shape), len(layers)
-    acc = np.array(_layer(layers, len(layers) - 1), copy=True)
+    acc = np.array(np.broadcast_to(_layer(layers, len(layers) - 1), shape), copy=True)
     used = 1
     for i in range(len(layers) - 2, -1, -1):
         if bool((acc[..., 3] >= opaque_threshold).all()):

@@ -136,6 +136,29 @@ def test_atomic_target_keeps_the_old_file_when_the_write_fails(tmp_path: Path) -
     assert target.read_bytes() == b"new frame" and _files(tmp_path) == ["frame.exr"]
 
 
+def test_a_killed_attempts_temporary_is_cleaned_up_and_the_output_kept(tmp_path: Path) -> None:
+    from addon.batch import Task, _cleanup_temporaries
+
+    task = Task(blend="scene.blend", frame=1, out_dir=str(tmp_path), output=str(tmp_path / "scene_0001.exr"))
+    Path(task.output).write_bytes(b"finished frame")
+    other = tmp_path / "other.exr"
+    other.write_bytes(b"another output")
+    with pytest.raises(RuntimeError), atomic_target(task.output) as tmp:
+        left = tmp  # the temporary name the writer got
+        raise RuntimeError("worker killed")
+    left.write_bytes(b"half a frame")  # a killed worker (SIGKILL) leaves it behind
+    _cleanup_temporaries([task])
+    assert _files(tmp_path) == ["other.exr", "scene_0001.exr"]
+    assert Path(task.output).read_bytes() == b"finished frame"
+
+
+def test_atomic_target_refuses_a_writer_that_wrote_nothing(tmp_path: Path) -> None:
+    target = tmp_path / "out" / "frame.exr"
+    with pytest.raises(OSError, match="nothing was written"), atomic_target(target):
+        pass  # a writer that reported success but produced no bytes
+    assert _files(tmp_path / "out") == []  # the directory was created; no empty frame left
+
+
 @pytest.mark.parametrize(
     ("args", "flag", "accepts"),
     [

@@ -10,6 +10,9 @@ import pytest
 from addon import mapping
 from blinn_phong.scene import perspective_matrix
 
+# numpy 2 renamed trapz to trapezoid (numpy 1.26, for Blender 4.2–5.0, has only trapz).
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz
+
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
     t = np.clip(x, 0.0, 1.0)
@@ -18,7 +21,7 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
 
 def _mean_over(t: np.ndarray, f: np.ndarray) -> float:
     """Mean of samples f(t) on a uniform grid t (trapezoid rule)."""
-    return float(np.trapz(f, t) / (t[-1] - t[0]))
+    return float(_trapezoid(f, t) / (t[-1] - t[0]))
 
 
 # --------------------------------------------------------------------------- sizes and border
@@ -139,7 +142,7 @@ def test_lambertian_emitter_intensity_integrates_to_its_power() -> None:
     power = 75.0
     i0 = mapping.area_light_intensity(power) * math.pi  # radiant intensity along the normal (W/sr)
     theta = np.linspace(0.0, math.pi / 2, 20001)
-    flux = np.trapz(i0 * np.cos(theta) * np.sin(theta), theta) * 2 * math.pi
+    flux = _trapezoid(i0 * np.cos(theta) * np.sin(theta), theta) * 2 * math.pi
     assert flux == pytest.approx(power, rel=1e-6)
 
 
@@ -277,3 +280,93 @@ def test_window_depth_round_trips_to_eye_distance(kind: str) -> None:
     got = mapping.window_depth_to_distance(np.r_[window, 1.0], p)
     np.testing.assert_allclose(got[:5], distances, rtol=1e-5)
     assert got[5] == mapping.BLENDER_EMPTY_DEPTH
+
+
+# --------------------------------------------------------------------------- 3D viewport camera
+# Hand computation (BKE_camera_params_from_view3d + BKE_camera_params_compute_viewplane): the free
+# perspective view of a 200×100 region, lens 50, clip 0.1–100 sees the 36 mm sensor at zoom 2, so the
+# view plane at the near plane spans x ∈ ±0.5·36·0.1/50·2 = ±0.072 and y ∈ ±0.036 (square pixels).
+
+
+def test_viewport_perspective_projection_by_hand() -> None:
+    got, kind = mapping.viewport_projection(
+        view_perspective="PERSP",
+        region_width=200,
+        region_height=100,
+        lens_mm=50.0,
+        clip_start=0.1,
+        clip_end=100.0,
+    )
+    n, f = 0.1, 100.0
+    expected = np.array(
+        [
+            [n / 0.072, 0, 0, 0],
+            [0, n / 0.036, 0, 0],
+            [0, 0, -(f + n) / (f - n), -2 * f * n / (f - n)],
+            [0, 0, -1, 0],
+        ]
+    )
+    assert kind == "perspective"
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(got[0, 0], 50.0 / 36.0, rtol=1e-12)  # = lens / (sensor · zoom / 2)
+
+
+def test_viewport_orthographic_projection_by_hand() -> None:
+    # Portrait region 100×200: the sensor (ortho_scale = 10·36/50 = 7.2) spans the height (AUTO fit),
+    # zoom 2 gives a 14.4 × 7.2 view; clip range ±clip_end/2.
+    got, kind = mapping.viewport_projection(
+        view_perspective="ORTHO",
+        region_width=100,
+        region_height=200,
+        lens_mm=50.0,
+        clip_end=1000.0,
+        view_distance=10.0,
+    )
+    expected = np.array([[2 / 7.2, 0, 0, 0], [0, 2 / 14.4, 0, 0], [0, 0, -2 / 1000.0, 0], [0, 0, 0, 1]])
+    assert kind == "orthographic"
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_viewport_camera_view_with_zoom_offset_and_shift_by_hand() -> None:
+    # camzoom 0: factor (√2)²/4 = 1/2, zoom 2; view_camera_offset (0.1, 0): offset 2·0.1·½ = 0.1;
+    # shift 0.2·½ = 0.1. Region 200×100 (horizontal fit, viewfac 200), lens 50, sensor 36, near 0.1:
+    # pixel 36·0.1/50/200·2 = 0.00072; dx = 0.1·200 + 200·0.1 = 40 px → x ∈ [−60, 140]·0.00072.
+    camera = {
+        "kind": "PERSP",
+        "lens_mm": 50.0,
+        "sensor_width_mm": 36.0,
+        "shift_x": 0.2,
+        "clip_start": 0.1,
+        "clip_end": 100.0,
+    }
+    got, kind = mapping.viewport_projection(
+        view_perspective="CAMERA",
+        region_width=200,
+        region_height=100,
+        camera=camera,
+        camera_zoom=0.0,
+        camera_offset=(0.1, 0.0),
+    )
+    left, right, half_y = -60 * 0.00072, 140 * 0.00072, 50 * 0.00072
+    assert kind == "perspective"
+    np.testing.assert_allclose(got[0, 0], 2 * 0.1 / (right - left), rtol=1e-12)
+    np.testing.assert_allclose(got[0, 2], (right + left) / (right - left), rtol=1e-12)  # 0.4
+    np.testing.assert_allclose(got[0, 2], 0.4, rtol=1e-12)
+    np.testing.assert_allclose(got[1, 1], 0.1 / half_y, rtol=1e-12)
+
+
+def test_view3d_zoom_factor_is_one_where_the_frame_fills_the_region() -> None:
+    assert mapping.view3d_zoom_factor(0.0) == pytest.approx(0.5, rel=1e-15)
+    assert mapping.view3d_zoom_factor(50.0 * (2.0 - math.sqrt(2.0))) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_viewport_bad_inputs_are_named() -> None:
+    with pytest.raises(ValueError, match="view_perspective"):
+        mapping.viewport_projection(view_perspective="PANO", region_width=10, region_height=10)
+    with pytest.raises(ValueError, match="camera"):
+        mapping.viewport_projection(view_perspective="CAMERA", region_width=10, region_height=10)
+    with pytest.raises(ValueError, match="width"):
+        mapping.viewport_projection(view_perspective="PERSP", region_width=0, region_height=10)
+    with pytest.raises(ValueError, match="reduction"):
+        mapping.viewport_size(100, 50, 0)
+    assert mapping.viewport_size(101, 50, 4) == (25, 12)

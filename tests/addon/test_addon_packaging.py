@@ -172,3 +172,30 @@ def test_loads_the_legacy_way_from_scripts_addons(built_zip: Path, tmp_path: Pat
     assert got["state"] == [True, True]
     assert got["scene_module"] == "blinn_phong_render.blinn_phong.scene"
     assert got["top_level_loaded"] == []
+
+
+def test_build_stages_outside_the_checkout(tmp_path: Path) -> None:
+    # The default staging directory is temporary: building leaves the repository as it was (a
+    # read-only checkout builds), and the manifest in the checkout lists no wheels.
+    before = sorted(p.name for p in REPO.iterdir())
+    zip_path = build_extension.build(tmp_path / "dist")
+    assert zip_path.parent == tmp_path / "dist" and zip_path.exists()
+    assert sorted(p.name for p in REPO.iterdir()) == before
+    assert "wheels" not in (REPO / "addon" / "blender_manifest.toml").read_text()
+
+
+def test_wheel_list_and_platforms_are_written_into_the_staged_manifest(tmp_path: Path) -> None:
+    stage = tmp_path / "stage"
+    shutil.copytree(REPO / "addon", stage, ignore=shutil.ignore_patterns("__pycache__"))
+    wheel = tmp_path / "numba-0.68.1-cp311-cp311-manylinux_2_28_x86_64.whl"
+    wheel.write_bytes(b"not a real wheel")
+    build_extension.add_wheels(stage, [wheel], ["linux-x64"])
+    import tomllib
+
+    manifest = tomllib.loads((stage / "blender_manifest.toml").read_text())
+    assert manifest["platforms"] == ["linux-x64"]
+    assert manifest["wheels"] == ["./wheels/numba-0.68.1-cp311-cp311-manylinux_2_28_x86_64.whl"]
+    assert manifest["permissions"]["files"]  # the tables after the new fields are intact
+    assert (stage / "wheels" / wheel.name).read_bytes() == b"not a real wheel"
+    pins = build_extension.pinned_versions()
+    assert set(pins) == set(build_extension.WHEEL_PACKAGES) and "numpy" not in pins

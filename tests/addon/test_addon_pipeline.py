@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from addon.pipeline import EffectOptions, render_frame
+from addon.pipeline import RenderOptions, render_frame
 from blinn_phong.render import render
 from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
 
@@ -56,8 +56,7 @@ def test_effects_recipe_without_effects_equals_the_z_buffer_renderer() -> None:
         scene,
         40,
         40,
-        samples=4,
-        options=EffectOptions(transparency="A_BUFFER", shadows="NONE", fog="EXP", fog_density=0.0),
+        RenderOptions(transparency="A_BUFFER", shadows="NONE", fog="EXP", fog_density=0.0),
     )
     assert got.choices["transparency"] == "a_buffer" and got.choices["fog"] == "EXP"
     np.testing.assert_allclose(got.rgba, reference.rgba, atol=1e-6)
@@ -83,7 +82,9 @@ def test_fog_follows_the_opengl_fog_equations(mode: str, factor: Callable[[float
         scene,
         8,
         8,
-        options=EffectOptions(fog=mode, fog_color=fog, fog_density=0.15, fog_start=2.0, fog_end=12.0),
+        options=RenderOptions(
+            samples_per_axis=1, fog=mode, fog_color=fog, fog_density=0.15, fog_start=2.0, fog_end=12.0
+        ),
     )
     f = factor(10.0)
     expected = np.array([f * c + (1 - f) * g for c, g in zip((0.8, 0.4, 0.2), fog, strict=True)] + [1.0])
@@ -96,7 +97,7 @@ def test_transparent_quad_composites_over_the_one_behind(method: str) -> None:
     glass = Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0.2, 0.6, 1.0), opacity=0.4)
     floor = Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.5, 0.0))
     scene = Scene((_quad(0.0, 5.0, floor), _quad(1.0, 5.0, glass)), (), _top_camera(), ambient=(0, 0, 0))
-    got = render_frame(scene, 8, 8, options=EffectOptions(transparency=method))
+    got = render_frame(scene, 8, 8, options=RenderOptions(samples_per_axis=1, transparency=method))
     expected = 0.4 * np.array([0.2, 0.6, 1.0]) + 0.6 * np.array([1.0, 0.5, 0.0])
     np.testing.assert_allclose(got.rgba[..., :3], np.broadcast_to(expected, (8, 8, 3)), atol=1e-6)
     np.testing.assert_allclose(got.rgba[..., 3], 1.0, atol=1e-7)
@@ -113,7 +114,7 @@ def test_shadow_of_a_square_under_an_overhead_sun(shadows: str) -> None:
         _top_camera(),
         ambient=(0, 0, 0),
     )
-    got = render_frame(scene, 40, 40, options=EffectOptions(shadows=shadows))
+    got = render_frame(scene, 40, 40, options=RenderOptions(samples_per_axis=1, shadows=shadows))
     # The planner may pick planar shadows (exact here: one receiving plane); HARD forces ray tracing.
     assert got.choices["shadows"] == (["ray_traced"] if shadows == "HARD" else ["planar"])
     # Pixel (row, col) centre -> world x = -2 + (col + 0.5)·0.1, y = 2 - (row + 0.5)·0.1.
@@ -136,7 +137,7 @@ def test_shadow_falls_beside_the_occluder_under_a_slanted_sun() -> None:
         _top_camera(),
         ambient=(0, 0, 0),
     )
-    got = render_frame(scene, 40, 40, options=EffectOptions(shadows="HARD"))
+    got = render_frame(scene, 40, 40, options=RenderOptions(samples_per_axis=1, shadows="HARD"))
     rows, cols = np.indices((40, 40))
     x, y = -2 + (cols + 0.5) * 0.1, 2 - (rows + 0.5) * 0.1
     shadow = (np.abs(x - 0.0) < 0.25) & (np.abs(y) < 0.25)
@@ -148,9 +149,9 @@ def test_shadow_falls_beside_the_occluder_under_a_slanted_sun() -> None:
 
 def test_bad_options_are_named() -> None:
     with pytest.raises(ValueError, match="transparency"):
-        EffectOptions(transparency="MAGIC")
+        RenderOptions(transparency="MAGIC")
     with pytest.raises(ValueError, match="fog"):
-        EffectOptions(fog="SMOKE")
+        RenderOptions(fog="SMOKE")
 
 
 @pytest.mark.parametrize("tilt_degrees", [0.0, 60.0])
@@ -165,7 +166,7 @@ def test_kay_greenberg_glass_opacity_follows_the_eye_normal(tilt_degrees: float)
     glass = replace(_quad(0.0, 1.0, kay), transform=rotate)
     floor = _quad(0.0, 5.0, Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.0, 0.0)))
     scene = Scene((floor, glass), (), _top_camera(), ambient=(0, 0, 0))
-    got = render_frame(scene, 40, 40)
+    got = render_frame(scene, 40, 40, RenderOptions(samples_per_axis=1))
     t = t_min + (t_max - t_min) * (1 - (1 - c) ** power)
     alpha = 1 - t
     centre = got.rgba[18:22, 18:22]  # inside the glass's footprint for both tilts
@@ -187,7 +188,7 @@ def test_without_embree_shadows_fall_back_to_shadow_volumes(monkeypatch: pytest.
         _top_camera(),
         ambient=(0, 0, 0),
     )
-    got = render_frame(scene, 40, 40, options=EffectOptions(shadows="HARD"))
+    got = render_frame(scene, 40, 40, options=RenderOptions(samples_per_axis=1, shadows="HARD"))
     assert got.choices["shadows"] == ["shadow_volume"]
     assert any("Embree" in reason for reason in got.choices["reasons"])
     rows, cols = np.indices((40, 40))
@@ -209,7 +210,53 @@ def test_auto_shading_is_exact_on_flat_faces_under_a_sun() -> None:
         ambient=(0.1, 0.1, 0.1),
         light_model=LightModel(local_viewer=False),
     )
-    auto = render_frame(scene, 24, 24, shading="auto", samples=4)
-    phong = render_frame(scene, 24, 24, shading="phong", samples=4)
+    auto = render_frame(scene, 24, 24, RenderOptions(shading="AUTO"))
+    phong = render_frame(scene, 24, 24, RenderOptions(shading="PHONG"))
     assert any("flat" in reason for reason in auto.choices["reasons"])
     np.testing.assert_allclose(auto.rgba, phong.rgba, atol=1e-6)
+
+
+@pytest.mark.parametrize("shadows", ["AUTO", "HARD", "SOFT"])
+def test_a_light_whose_cast_shadow_is_off_lights_the_shadow_region(shadows: str) -> None:
+    # Blender's Light > Cast Shadow off: the slanted sun lights the floor behind the occluder as
+    # everywhere else, kd·I·(n·l) = 1/√2; a second, overhead sun that does cast keeps the occluder's
+    # own footprint dark for that light only.
+    floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
+    scene = Scene(
+        (_quad(0.0, 2.0, floor), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (
+            DirectionalLight((1.0, 0.0, -1.0), intensity=1.0),
+            DirectionalLight((0.0, 0.0, -1.0), intensity=0.5),
+        ),
+        _top_camera(),
+        ambient=(0, 0, 0),
+    )
+    options = RenderOptions(samples_per_axis=1, shadows=shadows)
+    got = render_frame(scene, 40, 40, options, light_radii=(0.0, 0.0), casts_shadows=(False, True))
+    rows, cols = np.indices((40, 40))
+    x, y = -2 + (cols + 0.5) * 0.1, 2 - (rows + 0.5) * 0.1
+    behind = (np.abs(x - 0.0) < 0.25) & (np.abs(y) < 0.25)  # the slanted sun's shadow if it cast one
+    np.testing.assert_allclose(got.rgba[..., 0][behind], 1 / math.sqrt(2) + 0.5, atol=1e-6)
+    assert got.choices["shadows"][0] == "none"
+    assert got.choices["shadows"][1] != "none"
+
+
+def test_cast_shadow_flags_must_match_the_lights() -> None:
+    scene = Scene((_quad(0.0, 2.0, Material()),), (DirectionalLight((0, 0, -1.0)),), _top_camera())
+    with pytest.raises(ValueError, match="casts_shadows"):
+        render_frame(scene, 4, 4, RenderOptions(), casts_shadows=(True, False))
+
+
+def test_status_line_names_kernels_embree_and_the_plan() -> None:
+    from addon.pipeline import status_line
+
+    scene = Scene(
+        (_quad(0.0, 2.0, Material()), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (DirectionalLight((1.0, 0.0, -1.0)),),
+        _top_camera(),
+    )
+    got = render_frame(scene, 16, 16, RenderOptions(samples_per_axis=1, shadows="HARD", engine="NUMPY"))
+    line = status_line(got.choices, 1.5, {"compile": 2.25})
+    assert got.choices["engine"] == "numpy"
+    assert line.startswith("Blinn-Phong 1.50 s (kernels compiled 2.25 s) | numpy, ")
+    assert f"shadows {got.choices['shadows'][0]}" in line and "transparency zbuffer" in line

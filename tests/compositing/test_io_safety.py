@@ -207,6 +207,22 @@ def test_named_alpha_is_used_wherever_it_sits(tmp_path):
     np.testing.assert_array_equal(got, want)
 
 
+@pytest.mark.parametrize("first", ["Combined", "Diffuse"])
+def test_a_multilayer_exr_never_mixes_one_layers_colour_with_anothers_alpha(tmp_path, first):
+    # Blender's multilayer EXR: RGBA of the render pass plus RGB passes, in any file order.
+    rng = np.random.default_rng(21)
+    layers = {"Combined": "RGBA", "Diffuse": "RGB"}
+    order = [first] + [n for n in layers if n != first]
+    names = tuple(f"{layer}.{c}" for layer in order for c in layers[layer])
+    data = rng.random((3, 4, len(names))).astype(np.float32)
+    path = tmp_path / "layers.exr"
+    _write_raw_exr(path, data, names)
+    with pytest.warns(UserWarning, match="ignored: Diffuse.R, Diffuse.G, Diffuse.B"):
+        got = read_image(path)
+    want = np.stack([data[..., names.index(f"Combined.{c}")] for c in "RGBA"], axis=-1)
+    np.testing.assert_array_equal(got, want)
+
+
 def test_plain_rgba_and_grey_alpha_files_read_silently(tmp_path, recwarn):
     img = _image(9, 4, 4)
     write_image(tmp_path / "a.exr", img)

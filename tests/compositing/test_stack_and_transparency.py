@@ -72,6 +72,27 @@ def test_single_layer_and_broadcast_colour():
     np.testing.assert_array_equal(composite_stack(layers[:1]), layers[0])
 
 
+@pytest.mark.parametrize("engine", ["numpy", "numba"])
+@pytest.mark.parametrize("order", ["back_to_front", "front_to_back"])
+def test_an_opaque_broadcast_front_layer_gives_the_full_image(engine, order):
+    # Porter & Duff: an opaque A over anything is A (Fb = 1 − αA = 0), at every pixel of the
+    # broadcast shape, even when the front layer is a single colour that stops front to back.
+    back = _layers(1, 41)[0]
+    front = np.array([[[0.2, 0.3, 0.4, 1.0]]])
+    got = composite_stack([back, front], order, engine=engine)
+    np.testing.assert_array_equal(got, np.broadcast_to(front, back.shape))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8])
+def test_an_empty_image_gives_an_empty_stack_on_both_engines(dtype):
+    layers = [np.zeros((0, 5, 4), dtype) for _ in range(3)]
+    for engine in ("numpy", "numba"):
+        image, used = composite_stack_front_to_back(layers, engine=engine)
+        assert image.shape == (0, 5, 4) and image.dtype == dtype
+        assert used == (1 if dtype == np.float32 else 3), engine  # nothing to stop on: the front layer
+        assert composite_stack(layers, engine=engine).shape == (0, 5, 4)
+
+
 def test_emission_adds_light_without_coverage():
     b = premultiplied_pixels(50, 50)
     e = np.random.default_rng(1).random((50, 3)).astype(np.float32) * 3

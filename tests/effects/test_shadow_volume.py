@@ -189,6 +189,13 @@ def test_bad_input_is_named():
         stencil_counts(np.zeros((1, 3, 4)), np.eye(4), np.eye(4), np.zeros((1, 3)), stencil="zmiddle")
     with pytest.raises(TypeError, match="light"):
         shadow_volume_visibility(object(), tris, np.zeros((3, 3)), np.ones((3, 3)))
+    for points in (np.zeros((0, 3)), np.zeros((3, 3))):  # no receiver: the names are still checked
+        with pytest.raises(ValueError, match="stencil: expected"):
+            shadow_volume_visibility(light, tris, points, np.ones_like(points), stencil="zmiddle")
+        with pytest.raises(ValueError, match="engine: expected"):
+            shadow_volume_visibility(light, tris, points, np.ones_like(points), engine="gpu")
+        with pytest.raises(TypeError, match="light"):
+            shadow_volume_visibility(object(), tris, points, np.ones_like(points))
     with pytest.raises(ValueError, match="behind the camera"):
         cam = outside_camera()
         shadow_volume_visibility(light, tris, np.array([[0.0, -20.0, 15.0]]), np.ones((1, 3)), camera=cam)

@@ -147,3 +147,40 @@ def test_wide_pcf_kernels_leak_light_into_the_shadow(kernel: str) -> None:
     # The nearest texel of such a point is inside the footprint (s ≥ 0.5·τ, and the bias is tiny
     # against the plate's 1.12 height above the ground): no leak at all.
     assert error_metrics(nearest[band], exact_vis[band])["max_steps"] < 1.0
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e4])
+def test_ray_traced_shadows_at_large_scale_need_an_offset_in_float32_spacings(scale, monkeypatch):
+    """Embree intersects in float32: a ground point of a scene 10⁴ units across sits ~1e-3 from
+    the nearest float32 value, so a fixed 1e-4 origin offset lands on either side of its own
+    surface (acne on a large share of lit points); an offset of 64 float32 spacings of the point
+    (``raytrace.OFFSET_ULPS``) keeps every lit point lit. Exact answer: the closed form above,
+    scaled; points within 1e-3·scale of a shadow edge are left out (float32 edge rounding).
+    """
+    from blinn_phong import raytrace
+
+    points, normals = _ground_points()
+    exact = _exact_shadowed(points)
+    edge = np.zeros(len(points), bool)
+    for (x0, x1, y0, y1), h in ((LOW, LOW_H), (HIGH, HIGH_H)):
+        x = points[:, 0] - 0.5 * h
+        edge |= (np.minimum(np.abs(x - x0), np.abs(x - x1)) < 1e-3) | (
+            np.minimum(np.abs(points[:, 1] - y0), np.abs(points[:, 1] - y1)) < 1e-3
+        )
+    scene = raytrace.RayScene(_scene_triangles() * scale)
+    to_light = -np.asarray(LIGHT.direction)
+    lit = ~exact & ~edge
+
+    def acne_share() -> float:
+        vis = raytrace.directional_light_visibility(scene, points * scale, normals, to_light)
+        assert not has_nonfinite(vis)
+        assert np.all(vis[exact & ~edge] == 0)  # shadowed points stay shadowed
+        return float(np.mean(vis[lit] == 0))
+
+    assert acne_share() == 0.0
+    monkeypatch.setattr(raytrace, "OFFSET_ULPS", 0.0)  # a fixed 1e-4 offset
+    fixed = acne_share()
+    if scale == 1.0:
+        assert fixed == 0.0  # at unit scale 1e-4 is ~800 float32 spacings: enough
+    else:
+        assert fixed > 0.05  # at 10⁴ it is a tenth of one spacing: acne
