@@ -11,9 +11,13 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   brightest straight radiance of the transparent fragments. Cost ``t₀ + t₁·k`` relative
   to the A-buffer, least squares.
 * ``shadow_map`` — mean visibility error over the visible lit-side points,
-  ``255·c·s·D/(r·R)`` (``s`` shadowed share, ``D`` scene diameter, ``r`` smallest caster
-  radius, ``R`` resolution); ``c`` the largest ratio on the calibration scene. Cost
-  ``t₀ + t₂·R²`` relative to ray tracing, least squares.
+  ``255·c·s·D/(f·R)`` (``s`` shadowed share, ``D`` the map's span, ``f`` the thinnest caster
+  seen from the light, both as the planner computes them, ``R`` resolution); ``c`` the
+  largest ratio on the calibration scene. Cost relative to ray tracing: ``t₀ + t₂·R²`` at
+  the calibration scene's receiver count, and the frame-aware
+  ``(m₀ + m₂·R² + m_N·N)/(b₀·τ + b_N·N)`` fitted (least squares, in seconds) to the times
+  measured at several receiver counts ``N`` (``τ``: the scene's triangle count relative to
+  the calibration scene's, for the ray tracer's scene build).
 * ``shading`` — interior max error of flat/Gouraud/Phong against per-pixel shading of the
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
@@ -28,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load, scene_extent
+from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
+from blinn_phong.planner import MapGeometry
 from compositing._atomic import write_json_atomic
 
 __all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save"]
@@ -72,7 +77,26 @@ def _fit_depth_peeling(data: dict) -> dict:
     }
 
 
-def _fit_shadow_map(data: dict, diameter: float, caster_radius: float) -> dict:
+def frame_cost_design(rows: list[dict]) -> np.ndarray:
+    """Design matrix of the frame-aware shadow cost fit: ``[1, N]`` for ray tracing rows,
+    ``[1, R², N]`` for shadow-map rows (``N`` receivers, ``R`` resolution)."""
+    if rows and rows[0]["method"] == "ray_traced":
+        return np.c_[np.ones(len(rows)), [r["receivers"] for r in rows]].astype(float)
+    return np.c_[
+        np.ones(len(rows)), [r["resolution"] ** 2 for r in rows], [r["receivers"] for r in rows]
+    ].astype(float)
+
+
+def _scaled_lstsq(design: np.ndarray, y: list[float]) -> np.ndarray:
+    """Least squares with unit-norm columns (as ``np.polyfit`` scales), then unscaled: the scaled
+    matrix is well conditioned (checked in ``tests/failures/test_calibrated_models.py``)."""
+    scale = np.sqrt((design * design).sum(axis=0))
+    coef = np.linalg.lstsq(design / scale, np.asarray(y, float), rcond=None)[0]
+    return coef / scale
+
+
+def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
+    span, feature = geometry.span, geometry.feature
     ratios, res, cost = [], [], []
     shadowed = data["shadowed_share"]
     for case in data["cases"]:
@@ -82,14 +106,14 @@ def _fit_shadow_map(data: dict, diameter: float, caster_radius: float) -> dict:
             or case["bias"] != "bias 1e-4 + 2·slope"
         ):
             continue
-        bound = 255.0 * shadowed * diameter / (caster_radius * case["resolution"])
+        bound = 255.0 * shadowed * span / (feature * case["resolution"])
         ratios.append(case["mean_steps"] / bound)
         res.append(case["resolution"])
         cost.append(case["ratio_to_ray_traced"])
     x = np.asarray(res, float) ** 2
     t2, t0 = np.polyfit(x, cost, 1)
-    return {
-        "error": "mean_steps <= 255 * c * shadowed_share * diameter / (caster_radius * resolution)",
+    model = {
+        "error": "mean_steps <= 255 * c * shadowed_share * span / (caster_size * resolution)",
         "kernel": "nearest",
         "constant_bias": 1e-4,
         "slope_bias": 2.0,
@@ -99,6 +123,27 @@ def _fit_shadow_map(data: dict, diameter: float, caster_radius: float) -> dict:
         "t0": float(t0),
         "t2": float(t2),
     }
+    rows = data.get("frame_cost")
+    if rows:
+        # seconds: ray tracing b0 + bn·N, a map m0 + m2·R² + mn·N (least squares, non-negative)
+        rt = [r for r in rows if r["method"] == "ray_traced"]
+        sm = [r for r in rows if r["method"] == "shadow_map"]
+        b = _scaled_lstsq(frame_cost_design(rt), [r["median_s"] for r in rt])
+        m = _scaled_lstsq(frame_cost_design(sm), [r["median_s"] for r in sm])
+        b, m = np.maximum(b, 0.0), np.maximum(m, 0.0)
+        model.update(
+            {
+                "cost": "ratio ~= (m0 + m2 * R**2 + mn * N) / (b0 * T / triangles + bn * N)",
+                "m0": float(m[0]),
+                "m2": float(m[1]),
+                "mn": float(m[2]),
+                "b0": float(b[0]),
+                "bn": float(b[1]),
+                "receivers": int(data["points"]),
+                "triangles": geometry.triangles,
+            }
+        )
+    return model
 
 
 def _fit_shading(data: dict) -> dict:
@@ -126,7 +171,7 @@ def _fit_shading(data: dict) -> dict:
 def fit(tradeoffs: dict) -> dict:
     """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``)."""
     from benchmarks.tradeoffs import shadow_scene
-    from blinn_phong.raytrace import world_triangles
+    from blinn_phong.planner import shadow_map_geometry
 
     families = tradeoffs["families"]
     models: dict[str, object] = {
@@ -136,9 +181,8 @@ def fit(tradeoffs: dict) -> dict:
     if "transparency" in families:
         models["depth_peeling"] = _fit_depth_peeling(families["transparency"])
     if "shadows" in families:
-        tris, _ = world_triangles(shadow_scene())
-        # the smallest caster: the sphere of radius 0.7 (the box's bounding radius is 0.73)
-        models["shadow_map"] = _fit_shadow_map(families["shadows"], scene_extent(tris), 0.7)
+        # the planner's own inputs: the map's span and the thinnest caster seen from the light
+        models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
     return models

@@ -312,9 +312,11 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
                 **error_metrics(vis, reference),
             }
         )
+    frame_cost = shadow_frame_cost(scene, points, normals, quick=quick, repeat=min(repeat, 3))
     return {
         "family": "shadows",
         "title": "Shadow maps: resolution × PCF × bias",
+        "frame_cost": frame_cost,
         "scene": "sphere and box over a ground plane, directional light; visible points facing the light",
         "size": [size, size],
         "points": len(points),
@@ -324,6 +326,48 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
         "error_unit": "visibility × 255 (a white receiver under a unit light)",
         "cases": cases,
     }
+
+
+def shadow_frame_cost(
+    scene: bp.Scene, points: np.ndarray, normals: np.ndarray, *, quick: bool = False, repeat: int = 3
+) -> list[dict]:
+    """Seconds of Embree ray tracing and of nearest-texel shadow maps (bias 1e-4 + 2·slope) for
+    several receiver counts ``N`` (the visible points, repeated or cut) and resolutions ``R``:
+    the data of the frame-aware cost model (:func:`blinn_phong.calibration.shadow_map_cost`)."""
+    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+
+    light = scene.lights[0]
+    tris, _ = world_triangles(scene)
+    to_light = -np.asarray(light.direction, float)
+    counts = (4_000, 64_000) if quick else (4_000, 16_000, 64_000, 256_000)
+    resolutions = (64, 512) if quick else (64, 256, 1024)
+    rows = []
+    for n in counts:
+        pick = np.arange(n) % len(points)
+        p, nrm = points[pick], normals[pick]
+        runs: dict[str, Callable[[], object]] = {
+            "ray_traced": lambda p=p, nrm=nrm: directional_light_visibility(RayScene(tris), p, nrm, to_light)
+        }
+        for res in resolutions:
+
+            def run(res=res, p=p, nrm=nrm) -> np.ndarray:
+                maps = light_shadow_maps(light, tris, res, constant_bias=1e-4, slope_bias=2.0)
+                return shadow_map_visibility(light, maps, p, nrm, kernel="nearest")
+
+            runs[f"map {res}"] = run
+        times = time_interleaved(runs, repeat=repeat)
+        rows.append({"receivers": n, "method": "ray_traced", "median_s": times["ray_traced"]["median_s"]})
+        rows += [
+            {
+                "receivers": n,
+                "method": "shadow_map",
+                "resolution": res,
+                "median_s": times[f"map {res}"]["median_s"],
+            }
+            for res in resolutions
+        ]
+    return rows
 
 
 # --------------------------------------------------------------------------- transparency

@@ -18,11 +18,14 @@ Models (each states the error metric it predicts):
   itself, since other scenes reach it. Cost: ``t₀ + t₁·k`` times the A-buffer's.
 * ``shadow_map`` — mean error of light visibility over the visible points facing the light
   (misclassified share × 255), nearest-texel lookup with bias ``1e-4 + 2·slope``. A
-  shadow's edge band is one texel (``D/R`` for a map of resolution ``R`` over a scene of
-  diameter ``D``) and its area/perimeter ratio about ``r/2`` for a caster of radius ``r``,
-  so the error is ``255·c·s·D/(r·R)`` with ``s`` the shadowed share of the points; ``c``
-  fitted (largest ratio). Calibrated with a directional light. Cost: ``t₀ + t₂·R²`` times
-  Embree ray tracing.
+  shadow's edge band is one texel (``D/R`` for a map of resolution ``R`` covering a span
+  ``D``) and its area/perimeter ratio about ``f/4`` for a caster whose smallest extent seen
+  from the light is ``f``, so the error is ``255·c·s·D/(f·R)`` with ``s`` the shadowed share
+  of the points; ``c`` fitted (largest ratio). Its *maximum* is the whole light on a
+  misplaced edge, so under the per-pixel tolerance a map is chosen only where the light's
+  whole shadowed contribution fits; the mean model picks no resolution, it is reported.
+  Calibrated with a directional light. Cost relative to Embree ray tracing for ``N``
+  receiver points: ``(m₀ + m₂·R² + m_N·N)/(b₀ + b_N·N)`` (:func:`shadow_map_cost`).
 * ``shading`` — max error on interior pixels of a curved mesh against per-pixel shading of
   the exact surface, per method, as a power law ``a·θ^b`` of the angle ``θ`` between the
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
@@ -200,57 +203,96 @@ def choose_depth_peeling(
 
 
 def predict_shadow_map(
-    models: dict, resolution: int, diameter: float, caster_radius: float, shadowed_share: float = 0.5
+    models: dict, resolution: int, span: float, caster_size: float, shadowed_share: float = 0.5
 ) -> float:
-    """Predicted mean visibility error (8-bit steps) of a nearest-texel map: ``255·c·s·D/(r·R)``.
+    """Predicted mean visibility error (8-bit steps) of a nearest-texel map: ``255·c·s·D/(f·R)``.
 
-    ``diameter`` (``D``) and ``caster_radius`` (``r``, the smallest caster) in world units;
-    ``shadowed_share`` (``s``) the share of lit-side points in shadow, in [0, 1].
+    ``span`` (``D``, the side of the square the map covers) and ``caster_size`` (``f``, the
+    smallest extent of a caster seen from the light, see :func:`blinn_phong.planner.plan`)
+    in world units; ``shadowed_share`` (``s``) the share of lit-side points in shadow, in
+    [0, 1]. A shadow's edge band is one texel ``D/R`` wide and its area/perimeter ratio is
+    about ``f/4`` (``f/4`` for a disc of diameter ``f``, ``f/2`` for a long strip of width
+    ``f``), so the misclassified share of the shadowed points is about ``c·D/(f·R)``.
     """
-    return 255.0 * models["shadow_map"]["c"] * shadowed_share * diameter / (caster_radius * resolution)
+    return 255.0 * models["shadow_map"]["c"] * shadowed_share * span / (caster_size * resolution)
 
 
-def shadow_map_cost(models: dict, resolution: int) -> float:
-    """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing: ``t₀ + t₂·R²``."""
+def shadow_map_cost(
+    models: dict,
+    resolution: int,
+    receivers: int | None = None,
+    triangles: int | None = None,
+) -> float:
+    """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing.
+
+    With the frame-aware fit (``m0``, ``m2``, ``mn``, ``b0``, ``bn``, seconds, measured on
+    the calibration scene): ``(m0 + m2·R² + mn·N)/(b0·τ + bn·N)`` for ``N = receivers``
+    points, with ``τ = triangles/triangles_calibrated`` (the ray tracer's scene build) —
+    set-up, rasterization and one lookup per receiver against the scene build and one ray
+    per receiver. Unknown arguments take the calibration scene's values. The rasterization
+    term is the calibration scene's: scenes of many long thin triangles across the light's
+    view rasterize slower (24 slats, 12k receivers: measured 2.6–3.9× ray tracing at 128² on a
+    loaded machine, predicted 1.8×).
+    Without that fit, ``t₀ + t₂·R²``.
+    """
     m = models["shadow_map"]
-    return m["t0"] + m["t2"] * resolution**2
+    if "m0" not in m:
+        return m["t0"] + m["t2"] * resolution**2
+    n = m["receivers"] if receivers is None else receivers
+    tau = 1.0 if triangles is None else triangles / m["triangles"]
+    return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n) / (m["b0"] * tau + m["bn"] * n)
 
 
 def choose_shadow_map(
     models: dict,
     tolerance: float,
-    diameter: float,
-    caster_radius: float,
-    shadowed_share: float = 0.5,
+    span: float,
+    caster_size: float,
+    shadowed_share: float = 1.0,
     weight: float = 1.0,
+    *,
+    receivers: int | None = None,
+    triangles: int | None = None,
 ) -> dict:
-    """The cheapest power-of-two map (64–4096) predicted within ``tolerance`` mean steps, else ray tracing.
+    """The cheapest power-of-two map (64–4096) that resolves every caster and is faster than ray tracing.
 
-    The error predicted is :func:`predict_shadow_map` times ``weight`` (≥ 0): the largest
-    change of a pixel (in the unit range) between lit and shadowed, which turns visibility
-    steps into image steps (1 compares visibilities). ``shadowed_share`` defaults to 0.5,
-    which over-predicts for mostly lit scenes; 1 is the bound for any scene.
+    A map is a candidate when its texel ``span/R`` is at most half of ``caster_size`` (no
+    caster falls between texel centres) and, with the tolerance a per-pixel maximum, when the
+    largest change a misplaced edge makes, ``255·weight`` (``weight`` ≥ 0: the largest change
+    of a pixel, in the unit range, between lit and shadowed), is within ``tolerance``. The
+    cheapest candidate predicted faster than ray tracing (:func:`shadow_map_cost` for
+    ``receivers`` points and the scene's ``triangles``) is returned.
 
     Returns:
-        ``{"method": "shadow_map", "resolution", "predicted_steps", "predicted_cost"}`` or
-        ``{"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}``; costs
-        relative to ray tracing.
+        ``{"method": "shadow_map", "resolution", "predicted_steps" (the per-pixel bound
+        255·weight), "predicted_mean" (:func:`predict_shadow_map` × weight), "predicted_cost"}``
+        or ``{"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}``.
     """
     tol = _check_tolerance(tolerance)
-    _check_positive(diameter, "diameter")
-    _check_positive(caster_radius, "caster_radius")
+    _check_positive(span, "span")
+    _check_positive(caster_size, "caster_size")
     if not (0 <= shadowed_share <= 1):
         raise ValueError(f"shadowed_share: expected a value in [0, 1], got {shadowed_share!r}")
     if not (math.isfinite(weight) and weight >= 0):
         raise ValueError(f"weight: expected a finite number >= 0, got {weight!r}")
+    exact = {"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}
+    if 255.0 * weight > tol:
+        return exact
     for res in SHADOW_MAP_RESOLUTIONS:
-        cost = shadow_map_cost(models, res)
+        if span / res > caster_size / 2:
+            continue
+        cost = shadow_map_cost(models, res, receivers, triangles)
         if cost >= 1.0:
             break
-        err = weight * predict_shadow_map(models, res, diameter, caster_radius, shadowed_share)
-        if err <= tol:
-            return {"method": "shadow_map", "resolution": res, "predicted_steps": err, "predicted_cost": cost}
-    return {"method": "ray_traced", "predicted_steps": 0.0, "predicted_cost": 1.0}
+        mean = weight * predict_shadow_map(models, res, span, caster_size, shadowed_share)
+        return {
+            "method": "shadow_map",
+            "resolution": res,
+            "predicted_steps": 255.0 * weight,
+            "predicted_mean": mean,
+            "predicted_cost": cost,
+        }
+    return exact
 
 
 # --------------------------------------------------------------------------- shading frequency

@@ -17,7 +17,7 @@ from blinn_phong._checks import colour3, number
 from blinn_phong.fog import FOG_MODES
 from blinn_phong.oit import TRANSPARENCY_METHODS
 from blinn_phong.planner import Choice, Plan, plan
-from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Material, Scene
+from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS
 
 __all__ = [
@@ -56,7 +56,9 @@ class ShadowOptions:
         slope_bias: shadow-map slope-scaled bias (None: 2.0), as ``glPolygonOffset``.
         kernel: percentage-closer filter, one of :data:`blinn_phong.shadows.PCF_KERNELS` (None: nearest).
         plane: ``(a, b, c, d)`` receiving plane for ``planar`` (None: the planner's).
-        samples: rays per point for ``soft`` (rounded to the nearest square m², m ≥ 1).
+        samples: rays per point for ``soft``; a stratified grid is square, so ``m×m`` rays with
+            ``m = round(√samples)`` are cast and, when that differs from ``samples``, the plan's
+            reason says so (e.g. 20 → 4×4 = 16).
         radius: half-side of the square area light for ``soft``, world units.
         offset: ray-origin offset along the normal for ``soft``, world units.
 
@@ -150,31 +152,6 @@ class Fog:
 # --------------------------------------------------------------------------- choices
 
 
-def _planning_scene(scene: Scene) -> Scene:
-    """``scene`` as the planner should see it: each mesh at the lowest opacity its fragments can have.
-
-    The planner reads ``mesh.material.opacity``; a Kay–Greenberg material reaches ``1 − max(t)``,
-    an emission-model one hides nothing behind it (fragment alpha 0) so it plans as opacity 0,
-    and under two-sided lighting the back material counts too.
-    """
-
-    def lowest(material: Material) -> float:
-        if not material.transparent:
-            return 1.0
-        return 0.0 if material.transparency_model == "emission" else material.min_opacity
-
-    two_sided = scene.light_model.two_sided
-    meshes = []
-    for mesh in scene.meshes:
-        sides = [mesh.material] + ([mesh.back_material] if two_sided and mesh.back_material else [])
-        opacity = min(lowest(m) for m in sides)
-        front = mesh.material
-        if opacity != front.opacity or front.kay_greenberg is not None:
-            mesh = replace(mesh, material=replace(front, opacity=opacity, kay_greenberg=None))
-        meshes.append(mesh)
-    return replace(scene, meshes=tuple(meshes))
-
-
 def _shadow_list(shadows: object, n_lights: int) -> list[ShadowOptions]:
     """Normalise ``render(shadows=...)`` to one :class:`ShadowOptions` per entry of ``scene.lights``."""
 
@@ -255,11 +232,10 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             )
         params["plane"] = plane
     elif method == "soft":
-        params = {
-            "samples_per_axis": max(1, round(math.sqrt(options.samples))),
-            "radius": options.radius,
-            "offset": options.offset,
-        }
+        m = max(1, round(math.sqrt(options.samples)))
+        params = {"samples_per_axis": m, "radius": options.radius, "offset": options.offset}
+        if m * m != options.samples:
+            reason = f"{reason}; {options.samples} samples asked, {m}×{m} = {m * m} cast (strata are square)"
     if method == planned.method and reason == planned.reason:
         return replace(planned, params=params)  # the planner's choice keeps its predictions
     return Choice(method, reason, params)
@@ -269,12 +245,15 @@ def frame_plan(
     scene: Scene,
     *,
     tolerance: float = 0.0,
-    shading: str = "phong",
+    shading: str = "auto",
     transparency: str | None = None,
     peel_layers: int | None = None,
     wboit_weight: str = "eq10",
     shadows: object = None,
     gl_compat: bool = False,
+    width: int | None = None,
+    height: int | None = None,
+    samples: int = 1,
 ) -> Plan:
     """The plan a render follows: :func:`blinn_phong.planner.plan`, with the caller's choices replacing it.
 
@@ -293,6 +272,9 @@ def frame_plan(
             or a list of those with one entry per ``scene.lights`` entry.
         gl_compat: the OpenGL 2.1 preset: no effects (fixed-function OpenGL has neither shadows
             nor order-independent transparency); asking for one raises ``ValueError``.
+        width: frame width in pixels, for the cost models (None: the planner's default frame).
+        height: frame height in pixels (None: the planner's default frame).
+        samples: k for k×k samples per pixel.
 
     Returns:
         A :class:`~blinn_phong.planner.Plan` whose choices carry the keyword parameters of the
@@ -311,7 +293,7 @@ def frame_plan(
     if wboit_weight not in WBOIT_WEIGHTS:
         raise ValueError(f"wboit_weight: expected one of {WBOIT_WEIGHTS}, got {wboit_weight!r}")
     per_light = _shadow_list(shadows, len(scene.lights))
-    planned = plan(_planning_scene(scene), tolerance)
+    planned = plan(scene, tolerance, width=width, height=height, samples=samples)
 
     if gl_compat:
         if transparency not in (*_AUTO, "zbuffer"):

@@ -35,7 +35,7 @@ from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import interpolate
 from blinn_phong.resolve import FogParameters, FrameImage, fragment_colours, resolve_frame, side_tables
-from blinn_phong.scene import AmbientLight, Scene
+from blinn_phong.scene import AmbientLight, Scene, SpotLight
 from blinn_phong.shading import shade_fragments
 from blinn_phong.shadows import light_visibility
 from blinn_phong.texturing import texture_fragments
@@ -60,13 +60,19 @@ def _world_triangles(scene: Scene) -> np.ndarray:
 def _soft_visibility(
     light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
-    """Area-light visibility: a square of side ``2·radius`` at the light, facing the receivers' centroid."""
+    """Area-light visibility: a square of side ``2·radius`` at the light, facing along a spot light's
+    axis, else towards the centre of the scene's bounding box (never the camera's view)."""
     from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
 
     radius = float(params["radius"])  # type: ignore[arg-type]
     centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
-    axis = points.mean(axis=0) - centre
-    axis /= max(float(np.linalg.norm(axis)), 1e-12)
+    corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
+    axis = (corners.min(axis=0) + corners.max(axis=0)) / 2 - centre
+    if isinstance(light, SpotLight):
+        axis = np.array(light.direction, dtype=np.float64)
+    if float(np.linalg.norm(axis)) < 1e-12:
+        axis = np.array([0.0, 0.0, -1.0])  # the light at the scene's centre: any orientation
+    axis /= float(np.linalg.norm(axis))
     helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     u = np.cross(axis, helper)
     u /= np.linalg.norm(u)
@@ -108,9 +114,9 @@ def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_pla
     for light, c in lit:
         if c.method == "soft":
             if not ray_scene:
-                from blinn_phong.raytrace import RayScene  # Embree: imported only when used
+                from blinn_phong.raytrace import cached_ray_scene  # Embree: imported only when used
 
-                ray_scene.append(RayScene(tris))
+                ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
             columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
         else:
             extra = {"camera": scene.camera} if c.method == "shadow_volume" else {}

@@ -118,7 +118,7 @@ def render(
     width: int,
     height: int,
     *,
-    shading: str = "phong",
+    shading: str = "auto",
     samples: int = 1,
     gl_compat: bool = False,
     cull_backfaces: bool = False,
@@ -130,6 +130,7 @@ def render(
     shadows: object = None,
     fog: Fog | None = None,
     tolerance: float = 0.0,
+    layers: int | None = None,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
 
@@ -143,7 +144,9 @@ def render(
         scene: the :class:`~blinn_phong.scene.Scene` (camera required).
         width: image width in pixels.
         height: image height in pixels.
-        shading: ``"flat"``, ``"gouraud"`` or ``"phong"`` (a mesh's ``shading`` overrides it).
+        shading: ``"auto"`` — the planner's per-mesh shading frequency (flat where it is exact,
+            else Phong at tolerance 0); or ``"flat"``, ``"gouraud"``, ``"phong"`` for every mesh
+            (a mesh's ``shading`` overrides it).
         samples: supersampling: k² samples per pixel on an ordered k×k grid; the result's
             alpha is the covered fraction.
         gl_compat: the OpenGL 2.1 fixed-function preset (see the module docstring).
@@ -161,7 +164,7 @@ def render(
             :data:`blinn_phong.frame.TRANSPARENCY_CHOICES`: ``zbuffer`` (nearest fragment,
             alpha = opacity), ``draw_last``, ``sort_objects``, ``sort_triangles``,
             ``depth_peeling``, ``a_buffer`` (exact), ``weighted_blended``.
-        peel_layers: layers for depth peeling (None: the planner's, else 8).
+        peel_layers: layers for depth peeling (None: the planner's, else 8); older name of ``layers``.
         wboit_weight: weighted blended OIT weight, ``"eq10"`` (McGuire & Bavoil eq. 10) or ``"constant"``.
         shadows: ``None``/``"auto"`` (the planner's choice per light), a method of
             :data:`blinn_phong.frame.SHADOW_CHOICES` or a :class:`blinn_phong.frame.ShadowOptions`
@@ -170,14 +173,22 @@ def render(
         fog: a :class:`blinn_phong.Fog` applied per fragment before blending, or None.
         tolerance: the planner's tolerance in 8-bit steps (0: exact methods only; see
             :func:`blinn_phong.planner.plan` for the error each concern bounds).
+        layers: layers for depth peeling, the name the plan's parameters use
+            (``result.plan.transparency.params["layers"]``); same as ``peel_layers``.
 
-    ``shading="auto"`` uses the planner's per-mesh shading frequency (flat where it is exact).
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
 
     Returns:
         :class:`RenderResult`, with ``plan`` the plan followed.
     """
+    if layers is not None:
+        if peel_layers is not None and peel_layers != layers:
+            raise ValueError(
+                f"layers, peel_layers: two names for one setting, got {layers!r} and {peel_layers!r}"
+            )
+        peel_layers = layers
+
     if shading != "auto":
         shading = _check_shading(shading)
     if engine not in ("numpy", "numba", "auto"):
@@ -209,6 +220,9 @@ def render(
         wboit_weight=wboit_weight,
         shadows=shadows,
         gl_compat=gl_compat,
+        width=width,
+        height=height,
+        samples=samples,
     )
     seconds["plan"] = time.perf_counter() - t
     if shading == "auto":

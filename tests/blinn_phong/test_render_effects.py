@@ -508,9 +508,10 @@ def test_shading_auto_takes_flat_where_the_planner_proves_it_exact() -> None:
     half = np.array([1 / math.sqrt(2), 0.0, 1 + 1 / math.sqrt(2)])
     expected = 0.5 / math.sqrt(2) + 0.4 * (half[2] / np.linalg.norm(half)) ** 10
     np.testing.assert_allclose(auto.rgba[..., :3], expected, atol=1e-6)
-    default = bp.render(scene, 8, 8)
-    assert default.plan.shading[0].method == "phong" and "planner: flat" in default.plan.shading[0].reason
-    np.testing.assert_allclose(default.rgba, auto.rgba, atol=1e-6)
+    assert bp.render(scene, 8, 8).plan.shading[0].method == "flat"  # the default follows the plan
+    phong = bp.render(scene, 8, 8, shading="phong")
+    assert phong.plan.shading[0].method == "phong" and "planner: flat" in phong.plan.shading[0].reason
+    np.testing.assert_allclose(phong.rgba, auto.rgba, atol=1e-6)
 
 
 def test_engines_agree_on_the_effects_path() -> None:
