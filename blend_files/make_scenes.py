@@ -464,7 +464,7 @@ def main(argv: list[str] | None = None) -> int:
             bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
             path = out / f"{name}.blend"
             bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True, relative_remap=True)
-            if bpy.data.images and any(not i.filepath.startswith("//") for i in bpy.data.images):
+            if any(i.filepath and not i.filepath.startswith("//") for i in bpy.data.images):
                 bpy.ops.file.make_paths_relative()  # "//images/…": the .blend opens anywhere
                 bpy.ops.wm.save_mainfile(compress=True)
             print(f"wrote {path}")
