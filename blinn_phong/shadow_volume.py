@@ -217,6 +217,12 @@ def _hash_kernels() -> tuple[object, object, object]:
     the numpy sorts and pointer jumping."""
     import numba
 
+    @numba.njit(inline="always", cache=True)
+    def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return z ^ (z >> np.uint64(31))
+
     @numba.njit(cache=True)
     def weld(bits):  # pragma: no cover - compiled
         m = bits.shape[0]
@@ -230,10 +236,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         for r in range(m):
             h = np.uint64(0)
             for c in range(3):
-                z = bits[r, c] ^ h
-                z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-                z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-                h = z ^ (z >> np.uint64(31))
+                h = mix(bits[r, c] ^ h)
             slot = np.int64(h & np.uint64(size - 1))
             while True:
                 u = table[slot]
@@ -261,10 +264,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         count = np.zeros(m, np.int64)  # indexed by the first occurrence
         first_of = np.empty(m, np.int64)
         for e in range(m):
-            z = np.uint64(key[e])
-            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            slot = np.int64(mix(np.uint64(key[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -282,10 +282,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         twin_first = np.full(m, -1, np.int64)
         for e in range(m):
             own[e] = count[first_of[e]]
-            z = np.uint64(twin[e])
-            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-            slot = np.int64((z ^ (z >> np.uint64(31))) & np.uint64(size - 1))
+            slot = np.int64(mix(np.uint64(twin[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:

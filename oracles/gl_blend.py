@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from oracles.egl import gl_context
+from oracles.gl_common import compile_program
 
 __all__ = ["MESA_TARGETS", "BlendState", "mesa_accepts_blend_func", "mesa_blend"]
 
@@ -78,15 +79,6 @@ class BlendState:
             self.equation_alpha or self.equation,
         )
         return tuple(getattr(GL, "GL_" + n.upper()) for n in names)  # type: ignore[return-value]
-
-
-def _compile_program() -> int:
-    from OpenGL.GL import GL_FRAGMENT_SHADER, GL_VERTEX_SHADER
-    from OpenGL.GL.shaders import compileProgram, compileShader
-
-    return compileProgram(
-        compileShader(_VERTEX_SHADER, GL_VERTEX_SHADER), compileShader(_FRAGMENT_SHADER, GL_FRAGMENT_SHADER)
-    )
 
 
 def _tiles(values: np.ndarray, tile: int, cols: int, rows: int) -> np.ndarray:
@@ -157,7 +149,7 @@ def mesa_blend(
     colour_tex, source_tex = int(textures[0]), int(textures[1])
     fbo = GL.glGenFramebuffers(1)
     vao = GL.glGenVertexArrays(1)
-    program = _compile_program()
+    program = compile_program(GL, _VERTEX_SHADER, _FRAGMENT_SHADER)
     GL.glPushAttrib(GL.GL_ALL_ATTRIB_BITS)
     GL.glPushClientAttrib(GL.GL_CLIENT_ALL_ATTRIB_BITS)
     try:

@@ -30,6 +30,7 @@ from blinn_phong.lighting import lights_in_eye_space
 from blinn_phong.normals import vertex_normals
 from blinn_phong.scene import Mesh, Scene
 from oracles.egl import gl_context
+from oracles.gl_common import Framebuffer, blinn_phong_main, compile_program
 
 __all__ = ["GLRender", "render_fixed_function", "render_glsl_phong"]
 
@@ -55,49 +56,7 @@ uniform bool local_viewer;
 uniform bool two_sided;
 varying vec3 v_position;
 varying vec3 v_normal;
-void main() {
-    bool front = gl_FrontFacing || !two_sided;
-    vec3 n = normalize(v_normal);
-    if (!front) n = -n;
-    vec4 m_ambient = front ? gl_FrontMaterial.ambient : gl_BackMaterial.ambient;
-    vec4 m_diffuse = front ? gl_FrontMaterial.diffuse : gl_BackMaterial.diffuse;
-    vec4 m_specular = front ? gl_FrontMaterial.specular : gl_BackMaterial.specular;
-    float shininess = front ? gl_FrontMaterial.shininess : gl_BackMaterial.shininess;
-    vec3 scene = front ? gl_FrontLightModelProduct.sceneColor.rgb : gl_BackLightModelProduct.sceneColor.rgb;
-    vec3 v = local_viewer ? normalize(-v_position) : vec3(0.0, 0.0, 1.0);
-    vec3 ambient = scene;
-    vec3 diffuse = vec3(0.0);
-    vec3 specular = vec3(0.0);
-    for (int i = 0; i < 8; i++) {
-        if (i >= n_lights) break;
-        vec4 p = gl_LightSource[i].position;
-        vec3 l;
-        float att = 1.0;
-        if (p.w != 0.0) {
-            vec3 d = p.xyz / p.w - v_position;
-            float dist = length(d);
-            l = d / dist;
-            att = 1.0 / (gl_LightSource[i].constantAttenuation + gl_LightSource[i].linearAttenuation * dist
-                         + gl_LightSource[i].quadraticAttenuation * dist * dist);
-        } else {
-            l = normalize(p.xyz);
-        }
-        if (gl_LightSource[i].spotCutoff != 180.0) {
-            float c = dot(-l, normalize(gl_LightSource[i].spotDirection));
-            float cone = pow(max(c, 0.0), gl_LightSource[i].spotExponent);
-            att *= (c >= gl_LightSource[i].spotCosCutoff) ? cone : 0.0;
-        }
-        ambient += att * m_ambient.rgb * gl_LightSource[i].ambient.rgb;
-        float ndl = dot(n, l);
-        if (ndl > 0.0) {
-            diffuse += att * ndl * m_diffuse.rgb * gl_LightSource[i].diffuse.rgb;
-            float nh = max(dot(n, normalize(l + v)), 0.0);
-            specular += att * pow(nh, shininess) * m_specular.rgb * gl_LightSource[i].specular.rgb;
-        }
-    }
-    gl_FragColor = vec4(ambient + diffuse + specular, m_diffuse.a);
-}
-"""
+""" + blinn_phong_main()
 
 
 @dataclass(frozen=True)
@@ -115,49 +74,6 @@ class GLRender:
     renderer: str
     cpu_seconds: float = float("nan")
     depth: np.ndarray | None = None
-
-
-class _Framebuffer:
-    """An RGBA8 + DEPTH24 framebuffer object of the given size, bound for drawing."""
-
-    def __init__(self, gl: object, width: int, height: int) -> None:
-        self.gl = gl
-        self.fbo = gl.glGenFramebuffers(1)
-        gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, self.fbo)
-        self.rbs = gl.glGenRenderbuffers(2)
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, self.rbs[0])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_RGBA8, width, height)
-        gl.glFramebufferRenderbuffer(
-            gl.GL_FRAMEBUFFER, gl.GL_COLOR_ATTACHMENT0, gl.GL_RENDERBUFFER, self.rbs[0]
-        )
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, self.rbs[1])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_DEPTH_COMPONENT24, width, height)
-        gl.glFramebufferRenderbuffer(
-            gl.GL_FRAMEBUFFER, gl.GL_DEPTH_ATTACHMENT, gl.GL_RENDERBUFFER, self.rbs[1]
-        )
-        status = gl.glCheckFramebufferStatus(gl.GL_FRAMEBUFFER)
-        if status != gl.GL_FRAMEBUFFER_COMPLETE:
-            raise RuntimeError(f"framebuffer incomplete: status 0x{int(status):x}")
-        gl.glViewport(0, 0, width, height)
-        self.width, self.height = width, height
-
-    def read(self) -> np.ndarray:
-        gl = self.gl
-        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
-        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_RGBA, gl.GL_UNSIGNED_BYTE)
-        img = np.frombuffer(data, np.uint8).reshape(self.height, self.width, 4)
-        return img[::-1].copy()  # OpenGL rows are bottom-up
-
-    def read_depth(self) -> np.ndarray:
-        gl = self.gl
-        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
-        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_DEPTH_COMPONENT, gl.GL_FLOAT)
-        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
-
-    def delete(self) -> None:
-        self.gl.glBindFramebuffer(self.gl.GL_FRAMEBUFFER, 0)
-        self.gl.glDeleteRenderbuffers(2, self.rbs)
-        self.gl.glDeleteFramebuffers(1, [self.fbo])
 
 
 def _mesh_normals(mesh: Mesh) -> np.ndarray:
@@ -271,12 +187,6 @@ class _MeshBuffers:
         gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
         gl.glDisableClientState(gl.GL_NORMAL_ARRAY)
 
-    def read_depth(self) -> np.ndarray:
-        gl = self.gl
-        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
-        data = gl.glReadPixels(0, 0, self.width, self.height, gl.GL_DEPTH_COMPONENT, gl.GL_FLOAT)
-        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
-
     def delete(self) -> None:
         for _, ids, _ in self.items:
             self.gl.glDeleteBuffers(3, ids)
@@ -293,7 +203,7 @@ def render_fixed_function(scene: Scene, width: int, height: int, *, flat: bool =
 
     gl = GL
 
-    fb = _Framebuffer(gl, width, height)
+    fb = Framebuffer(gl, width, height)
     try:
         start = time.perf_counter()
         _set_state(gl, scene, flat=flat)
@@ -313,17 +223,7 @@ _PROGRAM: dict[str, int] = {}
 def _program(gl) -> int:
     if "phong" in _PROGRAM:
         return _PROGRAM["phong"]
-    program = gl.glCreateProgram()
-    for kind, source in ((gl.GL_VERTEX_SHADER, _VERTEX_SHADER), (gl.GL_FRAGMENT_SHADER, _FRAGMENT_SHADER)):
-        shader = gl.glCreateShader(kind)
-        gl.glShaderSource(shader, source)
-        gl.glCompileShader(shader)
-        if not gl.glGetShaderiv(shader, gl.GL_COMPILE_STATUS):
-            raise RuntimeError(f"GLSL compile failed: {gl.glGetShaderInfoLog(shader).decode()}")
-        gl.glAttachShader(program, shader)
-    gl.glLinkProgram(program)
-    if not gl.glGetProgramiv(program, gl.GL_LINK_STATUS):
-        raise RuntimeError(f"GLSL link failed: {gl.glGetProgramInfoLog(program).decode()}")
+    program = compile_program(gl, _VERTEX_SHADER, _FRAGMENT_SHADER)
     _PROGRAM["phong"] = program
     return program
 
@@ -340,7 +240,7 @@ def render_glsl_phong(scene: Scene, width: int, height: int, *, repeats: int = 1
 
     gl = GL
 
-    fb = _Framebuffer(gl, width, height)
+    fb = Framebuffer(gl, width, height)
     try:
         program = _program(gl)
         gl.glUseProgram(program)

@@ -36,7 +36,8 @@ from blinn_phong.lighting import lights_in_eye_space
 from blinn_phong.scene import AmbientLight, Scene
 from blinn_phong.shadows import PCF_KERNELS, light_cameras
 from oracles.egl import gl_context
-from oracles.gl_lighting import MAX_LIGHTS, _Framebuffer, _MeshBuffers, _set_state
+from oracles.gl_common import Framebuffer, blinn_phong_main, compile_program, world_triangles
+from oracles.gl_lighting import MAX_LIGHTS, _MeshBuffers, _set_state
 
 __all__ = ["ShadowGLRender", "render_shadow_mapped"]
 
@@ -124,50 +125,7 @@ float visibility(int i) {
     return total / float(kernel * kernel);
 }
 
-void main() {
-    bool front = gl_FrontFacing || !two_sided;
-    vec3 n = normalize(v_normal);
-    if (!front) n = -n;
-    vec4 m_ambient = front ? gl_FrontMaterial.ambient : gl_BackMaterial.ambient;
-    vec4 m_diffuse = front ? gl_FrontMaterial.diffuse : gl_BackMaterial.diffuse;
-    vec4 m_specular = front ? gl_FrontMaterial.specular : gl_BackMaterial.specular;
-    float shininess = front ? gl_FrontMaterial.shininess : gl_BackMaterial.shininess;
-    vec3 scene = front ? gl_FrontLightModelProduct.sceneColor.rgb : gl_BackLightModelProduct.sceneColor.rgb;
-    vec3 v = local_viewer ? normalize(-v_position) : vec3(0.0, 0.0, 1.0);
-    vec3 ambient = scene;
-    vec3 diffuse = vec3(0.0);
-    vec3 specular = vec3(0.0);
-    for (int i = 0; i < 8; i++) {
-        if (i >= n_lights) break;
-        vec4 p = gl_LightSource[i].position;
-        vec3 l;
-        float att = 1.0;
-        if (p.w != 0.0) {
-            vec3 d = p.xyz / p.w - v_position;
-            float dist = length(d);
-            l = d / dist;
-            att = 1.0 / (gl_LightSource[i].constantAttenuation + gl_LightSource[i].linearAttenuation * dist
-                         + gl_LightSource[i].quadraticAttenuation * dist * dist);
-        } else {
-            l = normalize(p.xyz);
-        }
-        if (gl_LightSource[i].spotCutoff != 180.0) {
-            float c = dot(-l, normalize(gl_LightSource[i].spotDirection));
-            float cone = pow(max(c, 0.0), gl_LightSource[i].spotExponent);
-            att *= (c >= gl_LightSource[i].spotCosCutoff) ? cone : 0.0;
-        }
-        ambient += att * m_ambient.rgb * gl_LightSource[i].ambient.rgb;
-        float ndl = dot(n, l);
-        if (ndl > 0.0) {
-            float vis = visibility(i);
-            diffuse += vis * att * ndl * m_diffuse.rgb * gl_LightSource[i].diffuse.rgb;
-            float nh = max(dot(n, normalize(l + v)), 0.0);
-            specular += vis * att * pow(nh, shininess) * m_specular.rgb * gl_LightSource[i].specular.rgb;
-        }
-    }
-    gl_FragColor = vec4(ambient + diffuse + specular, m_diffuse.a);
-}
-"""
+""" + blinn_phong_main("visibility(i)")
 
 
 @dataclass(frozen=True)
@@ -194,27 +152,9 @@ _PROGRAM: dict[str, int] = {}
 def _program(gl) -> int:
     if "shadow" in _PROGRAM:
         return _PROGRAM["shadow"]
-    program = gl.glCreateProgram()
-    for kind, source in ((gl.GL_VERTEX_SHADER, _VERTEX_SHADER), (gl.GL_FRAGMENT_SHADER, _FRAGMENT_SHADER)):
-        shader = gl.glCreateShader(kind)
-        gl.glShaderSource(shader, source)
-        gl.glCompileShader(shader)
-        if not gl.glGetShaderiv(shader, gl.GL_COMPILE_STATUS):
-            raise RuntimeError(f"GLSL compile failed: {gl.glGetShaderInfoLog(shader).decode()}")
-        gl.glAttachShader(program, shader)
-    gl.glLinkProgram(program)
-    if not gl.glGetProgramiv(program, gl.GL_LINK_STATUS):
-        raise RuntimeError(f"GLSL link failed: {gl.glGetProgramInfoLog(program).decode()}")
+    program = compile_program(gl, _VERTEX_SHADER, _FRAGMENT_SHADER)
     _PROGRAM["shadow"] = program
     return program
-
-
-def _world_triangles(scene: Scene) -> np.ndarray:
-    parts = [
-        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
-        for m in scene.meshes
-    ]
-    return np.concatenate(parts)
 
 
 def render_shadow_mapped(
@@ -253,7 +193,7 @@ def render_shadow_mapped(
     from OpenGL import GL
 
     gl = GL
-    tris = _world_triangles(scene)
+    tris = world_triangles(scene)
     lights = lights_in_eye_space(scene.lights, scene.camera.view)
     if len(lights) > MAX_LIGHTS:
         raise ValueError(f"scene.lights: at most {MAX_LIGHTS} non-ambient lights, got {len(lights)}")
@@ -290,7 +230,7 @@ def render_shadow_mapped(
         if status != gl.GL_FRAMEBUFFER_COMPLETE:
             raise RuntimeError(f"depth framebuffer incomplete: status 0x{int(status):x}")
 
-    fb = _Framebuffer(gl, width, height)
+    fb = Framebuffer(gl, width, height)
     buffers = _MeshBuffers(gl, scene)
     program = _program(gl)
     try:

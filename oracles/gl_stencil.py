@@ -35,6 +35,7 @@ import numpy as np
 
 from blinn_phong.scene import DirectionalLight, PointLight, Scene, SpotLight
 from oracles.egl import gl_context
+from oracles.gl_common import Framebuffer, world_triangles
 
 __all__ = ["StencilRender", "per_triangle_volumes", "render_stencil_shadows"]
 
@@ -52,14 +53,6 @@ class StencilRender:
     depth: np.ndarray
     seconds: float
     renderer: str
-
-
-def _world_triangles(scene: Scene) -> np.ndarray:
-    parts = [
-        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
-        for m in scene.meshes
-    ]
-    return np.concatenate(parts)
 
 
 def per_triangle_volumes(
@@ -130,7 +123,7 @@ def render_stencil_shadows(
 
     gl = GL
 
-    tris = _world_triangles(scene)
+    tris = world_triangles(scene)
     if volumes is None:
         volumes = per_triangle_volumes(tris, light, caps=method == "zfail")
     scene_v = np.ascontiguousarray(np.c_[tris.reshape(-1, 3), np.ones(3 * len(tris))], dtype=np.float64)
@@ -141,22 +134,9 @@ def render_stencil_shadows(
         gl.glMatrixMode(stack)
         gl.glPushMatrix()
     previous_fbo = gl.glGetIntegerv(gl.GL_DRAW_FRAMEBUFFER_BINDING)
-    fbo = gl.glGenFramebuffers(1)
-    rbs = gl.glGenRenderbuffers(2)
+    fb = None
     try:
-        gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, fbo)
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, rbs[0])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_RGBA8, width, height)
-        gl.glFramebufferRenderbuffer(gl.GL_FRAMEBUFFER, gl.GL_COLOR_ATTACHMENT0, gl.GL_RENDERBUFFER, rbs[0])
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, rbs[1])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_DEPTH24_STENCIL8, width, height)
-        gl.glFramebufferRenderbuffer(
-            gl.GL_FRAMEBUFFER, gl.GL_DEPTH_STENCIL_ATTACHMENT, gl.GL_RENDERBUFFER, rbs[1]
-        )
-        status = gl.glCheckFramebufferStatus(gl.GL_FRAMEBUFFER)
-        if status != gl.GL_FRAMEBUFFER_COMPLETE:
-            raise RuntimeError(f"framebuffer incomplete: status 0x{int(status):x}")
-        gl.glViewport(0, 0, width, height)
+        fb = Framebuffer(gl, width, height, stencil=True)
         start = time.perf_counter()
         gl.glMatrixMode(gl.GL_PROJECTION)
         gl.glLoadMatrixd(np.ascontiguousarray(scene.camera.projection.T))
@@ -197,15 +177,12 @@ def render_stencil_shadows(
         gl.glFinish()
         seconds = time.perf_counter() - start
         gl.glDisableClientState(gl.GL_VERTEX_ARRAY)
-        gl.glPixelStorei(gl.GL_PACK_ALIGNMENT, 1)
-        raw = gl.glReadPixels(0, 0, width, height, gl.GL_STENCIL_INDEX, gl.GL_UNSIGNED_BYTE)
-        stencil = np.frombuffer(raw, np.uint8).reshape(height, width)[::-1].copy()
-        raw = gl.glReadPixels(0, 0, width, height, gl.GL_DEPTH_COMPONENT, gl.GL_FLOAT)
-        depth = np.frombuffer(raw, np.float32).reshape(height, width)[::-1].copy()
+        stencil = fb.read_stencil()
+        depth = fb.read_depth()
     finally:
+        if fb is not None:
+            fb.delete()
         gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, int(previous_fbo))
-        gl.glDeleteRenderbuffers(2, rbs)
-        gl.glDeleteFramebuffers(1, [fbo])
         for stack in (gl.GL_MODELVIEW, gl.GL_PROJECTION):
             gl.glMatrixMode(stack)
             gl.glPopMatrix()

@@ -27,7 +27,8 @@ import numpy as np
 from blinn_phong.scene import Scene
 from blinn_phong.texture import Texture, straight_colour
 from oracles.egl import gl_context
-from oracles.gl_lighting import GLRender, _Framebuffer, _mesh_normals, _set_material, _set_state
+from oracles.gl_common import Framebuffer
+from oracles.gl_lighting import GLRender, _mesh_normals, _set_material, _set_state
 
 __all__ = ["FORMATS", "render_textured"]
 
@@ -48,45 +49,18 @@ def _upload(gl, texture: Texture, fmt: str, encoded: np.ndarray | None, premulti
         data = np.rint(straight * 255.0)
         if np.abs(data - straight * 255.0).max() > 1e-3:
             raise ValueError("texture: rgba8 upload needs values that are multiples of 1/255")
-        gl.glTexImage2D(
-            gl.GL_TEXTURE_2D,
-            0,
-            gl.GL_RGBA8,
-            w,
-            h,
-            0,
-            gl.GL_RGBA,
-            gl.GL_UNSIGNED_BYTE,
-            np.ascontiguousarray(data.astype(np.uint8)),
-        )
+        internal, pixel_type, pixels = gl.GL_RGBA8, gl.GL_UNSIGNED_BYTE, data.astype(np.uint8)
     elif fmt == "rgba32f":
-        gl.glTexImage2D(
-            gl.GL_TEXTURE_2D,
-            0,
-            gl.GL_RGBA32F,
-            w,
-            h,
-            0,
-            gl.GL_RGBA,
-            gl.GL_FLOAT,
-            np.ascontiguousarray(straight.astype(np.float32)),
-        )
+        internal, pixel_type, pixels = gl.GL_RGBA32F, gl.GL_FLOAT, straight.astype(np.float32)
     elif fmt == "srgb8_alpha8":
         if encoded is None or encoded.dtype != np.uint8 or encoded.shape != (h, w, 4):
             raise ValueError(f"encoded: expected (H, W, 4) = ({h}, {w}, 4) uint8 sRGB bytes for srgb8_alpha8")
-        gl.glTexImage2D(
-            gl.GL_TEXTURE_2D,
-            0,
-            gl.GL_SRGB8_ALPHA8,
-            w,
-            h,
-            0,
-            gl.GL_RGBA,
-            gl.GL_UNSIGNED_BYTE,
-            np.ascontiguousarray(encoded[::-1]),
-        )
+        internal, pixel_type, pixels = gl.GL_SRGB8_ALPHA8, gl.GL_UNSIGNED_BYTE, encoded[::-1]
     else:
         raise ValueError(f"fmt: expected one of {FORMATS}, got {fmt!r}")
+    gl.glTexImage2D(
+        gl.GL_TEXTURE_2D, 0, internal, w, h, 0, gl.GL_RGBA, pixel_type, np.ascontiguousarray(pixels)
+    )
     filt = gl.GL_NEAREST if texture.interpolation == "closest" else gl.GL_LINEAR
     wrap = {"repeat": gl.GL_REPEAT, "extend": gl.GL_CLAMP_TO_EDGE, "clip": gl.GL_CLAMP_TO_BORDER}[
         texture.extension
@@ -127,7 +101,7 @@ def render_textured(
     from OpenGL import GL
 
     gl = GL
-    fb = _Framebuffer(gl, width, height)
+    fb = Framebuffer(gl, width, height)
     textures: list[int] = []
     try:
         start = time.perf_counter()

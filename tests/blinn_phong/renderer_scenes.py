@@ -73,3 +73,18 @@ def ortho_camera() -> bp.Camera:
     return bp.Camera.orthographic(
         -1.6, 1.6, -1.6, 1.6, 0.5, 20.0, view=bp.look_at((0.4, 1.2, 5.0), (0.0, -0.2, 0.0))
     )
+
+
+def texel_interior(scene: bp.Scene, texture, width: int, height: int, margin: float) -> np.ndarray:
+    """(H, W) bool: pixels whose centre's texel coordinates ``(u·W_tex, v·H_tex)`` on the first
+    mesh lie ≥ ``margin`` texel from a texel boundary (uncovered pixels are False)."""
+    prepared = bp.prepare_scene(scene)
+    frags = bp.rasterize(prepared.clip, prepared.triangles, width, height)
+    winner = bp.resolve_nearest(frags)
+    hit = np.flatnonzero(winner >= 0)
+    uv = bp.interpolate(frags.subset(winner[hit]), prepared.triangles, scene.meshes[0].uv)
+    t = uv * [texture.width, texture.height]
+    frac = t - np.floor(t)
+    ok = np.zeros(width * height, bool)
+    ok[hit] = ((frac > margin) & (frac < 1.0 - margin)).all(axis=1)
+    return ok.reshape(height, width)

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import renderer_scenes
 from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
@@ -151,16 +152,7 @@ def our_scene(texture: Texture) -> bp.Scene:
 
 
 def texel_interior(scene: bp.Scene, texture: Texture, margin: float) -> np.ndarray:
-    prepared = bp.prepare_scene(scene)
-    frags = bp.rasterize(prepared.clip, prepared.triangles, SIZE, SIZE)
-    winner = bp.resolve_nearest(frags)
-    hit = np.flatnonzero(winner >= 0)
-    uv = bp.interpolate(frags.subset(winner[hit]), prepared.triangles, scene.meshes[0].uv)
-    t = uv * [texture.width, texture.height]
-    frac = t - np.floor(t)
-    ok = np.zeros(SIZE * SIZE, bool)
-    ok[hit] = ((frac > margin) & (frac < 1.0 - margin)).all(axis=1)
-    return ok.reshape(SIZE, SIZE)
+    return renderer_scenes.texel_interior(scene, texture, SIZE, SIZE, margin)
 
 
 def test_closest_texture_matches_cycles(tmp_path) -> None:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import renderer_scenes
 from test_renderer_vs_mesa import interior_mask, to_unorm8
 
 import blinn_phong as bp
@@ -96,16 +97,7 @@ def plane_scene(texture: Texture, *, specular: float = 0.3, alpha_clip: float | 
 
 def texel_interior(scene: bp.Scene, texture: Texture, margin: float = 1.0 / 64.0) -> np.ndarray:
     """Pixels whose centre's texel coordinates lie ≥ ``margin`` texel from a texel boundary."""
-    prepared = bp.prepare_scene(scene)
-    frags = bp.rasterize(prepared.clip, prepared.triangles, SIZE, SIZE)
-    winner = bp.resolve_nearest(frags)
-    hit = np.flatnonzero(winner >= 0)
-    uv = bp.interpolate(frags.subset(winner[hit]), prepared.triangles, scene.meshes[0].uv)
-    t = uv * [texture.width, texture.height]
-    frac = t - np.floor(t)
-    ok = np.zeros(SIZE * SIZE, bool)
-    ok[hit] = ((frac > margin) & (frac < 1.0 - margin)).all(axis=1)
-    return ok.reshape(SIZE, SIZE)
+    return renderer_scenes.texel_interior(scene, texture, SIZE, SIZE, margin)
 
 
 def premultiplied_gl(rgba: np.ndarray) -> np.ndarray:

@@ -34,8 +34,8 @@ from .volume_scenes import (
     WIDTH,
     boundary_band,
     casters,
+    embree_reference,
     embree_visibility,
-    image_of,
     inside_camera,
     outside_camera,
     samples,
@@ -48,11 +48,9 @@ pytest.importorskip("embreex")
 
 
 def _compare(scene, light, method):
-    pts, nrm, pix, _ = samples(scene)
     tris = world_triangles(scene)
-    ref = embree_visibility(light, tris, pts, nrm)
+    pts, nrm, _, ref, band = embree_reference(scene, light, tris)
     got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera, stencil=method)
-    band = boundary_band(image_of(ref.astype(np.int64), pix), radius=0).ravel()[pix]
     return ref, got, band
 
 
@@ -237,10 +235,8 @@ def test_auto_picks_zpass_only_where_it_is_exact(light_name):
     assert zpass_is_safe(light, tris, outside.camera.view, outside.camera.projection)
     assert not zpass_is_safe(light, tris, inside_cam.view, inside_cam.projection)
     for scene in (outside, inside):
-        pts, nrm, pix, _ = samples(scene)
-        ref = embree_visibility(light, tris, pts, nrm)
+        pts, nrm, _, ref, band = embree_reference(scene, light, tris)
         got = shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera)  # stencil="auto"
-        band = boundary_band(image_of(ref.astype(np.int64), pix), radius=0).ravel()[pix]
         assert np.count_nonzero((got != ref) & ~band) == 0
 
 

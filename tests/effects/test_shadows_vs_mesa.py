@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from benchmarks.bench_shadows_mesa import away_from_shadow_edges, build_scene, to_unorm8
 from blinn_phong.raytrace import world_triangles
 from blinn_phong.shadows import light_shadow_maps
 from oracles.egl import EGLUnavailable, gl_context
@@ -42,18 +42,8 @@ def gl():
 
 
 def two_spheres(lights) -> bp.Scene:
-    meshes = []
-    for x, colour in ((-1.2, (0.8, 0.3, 0.2)), (1.2, (0.2, 0.5, 0.8))):
-        p, t, n = uv_sphere(24, 12)
-        transform = np.eye(4)
-        transform[:3, 3] = (x, 1.0, 0.0)
-        material = bp.Material(ambient=colour, diffuse=colour, specular=(0.5, 0.5, 0.5), shininess=32.0)
-        meshes.append(bp.Mesh(p, t, n, transform=transform, material=material))
-    p, t, n = grid_plane(8, 8, (12.0, 12.0))
-    floor = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)
-    meshes.append(bp.Mesh(p, t, n, transform=floor, material=bp.Material(diffuse=(0.6, 0.6, 0.6))))
-    camera = bp.Camera.perspective(45.0, 1.0, 0.5, 50.0, view=bp.look_at((0, 3, 8), (0, 0.5, 0)))
-    return bp.Scene(meshes, lights, camera, ambient=(0.1, 0.1, 0.1))
+    """Two 24×12 UV spheres over a ground plane (the benchmark's scene, small)."""
+    return build_scene(24, 1.0, lights, rings=12)
 
 
 LIGHT_SETS = {
@@ -64,22 +54,6 @@ LIGHT_SETS = {
     "spot": [bp.SpotLight((0.0, 5.0, 1.0), (0.0, -1.0, -0.2), cutoff=50.0, color=(0.9, 0.9, 0.8))],
 }
 SLOPE = {"nearest": 2.0, "bilinear": 3.0, "box3": 3.0, "box5": 5.0}  # 1 + 2h, see blinn_phong.shadows
-
-
-def to_unorm8(rgba: np.ndarray) -> np.ndarray:
-    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does."""
-    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
-
-
-def away_from_shadow_edges(shadow: np.ndarray) -> np.ndarray:
-    """True where the visibility pass is the same over the pixel's 3×3 neighbourhood."""
-    v = np.pad(shadow, 1, mode="edge")
-    h, w = shadow.shape
-    same = np.ones((h, w), bool)
-    for dy in range(3):
-        for dx in range(3):
-            same &= v[dy : dy + h, dx : dx + w] == shadow
-    return same
 
 
 @pytest.mark.parametrize("lights", list(LIGHT_SETS))

@@ -127,6 +127,19 @@ def embree_visibility(light, tris: np.ndarray, points: np.ndarray, normals: np.n
     return point_light_visibility(rs, points, normals, light.position)
 
 
+def embree_reference(scene: Scene, light, tris: np.ndarray | None = None):
+    """The visible samples of ``scene`` and Embree's hard shadows of ``light`` there.
+
+    ``tris``: the occluders (default: every triangle of ``scene``). Returns (world points, face
+    normals, flat pixel index, visibility 0/1, boundary band): the band marks the samples touching
+    a lit/shadowed boundary of the ray-traced mask (:func:`boundary_band`, radius 0).
+    """
+    pts, nrm, pix, _ = samples(scene)
+    truth = embree_visibility(light, world_triangles(scene) if tris is None else tris, pts, nrm)
+    band = boundary_band(image_of(truth.astype(np.int64), pix), radius=0).ravel()[pix]
+    return pts, nrm, pix, truth, band
+
+
 def image_of(values: np.ndarray, pixel: np.ndarray, width: int = WIDTH, height: int = HEIGHT, fill=-1):
     img = np.full(width * height, fill, dtype=np.int64)
     img[pixel] = values

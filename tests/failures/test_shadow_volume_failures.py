@@ -32,6 +32,7 @@ from tests.effects.volume_scenes import (
     WIDTH,
     boundary_band,
     casters,
+    embree_reference,
     embree_visibility,
     image_of,
     inside_camera,
@@ -132,9 +133,7 @@ def test_open_mesh_leaks_through_its_hole_unless_every_triangle_is_extruded():
     scene = scene_with([dome], light, camera)
     tris = world_triangles(scene)
     assert len(analyse_topology(tris).reasons) == 2  # the ground quad and the dome are both open
-    pts, nrm, pix, _ = samples(scene)
-    truth = embree_visibility(light, tris, pts, nrm)
-    band = boundary_band(image_of(truth.astype(np.int64), pix), radius=0).ravel()[pix]
+    pts, nrm, _, truth, band = embree_reference(scene, light, tris)
     ok = ~band
     # the default extrudes every triangle of an open mesh: no leak
     fallback = shadow_volume_visibility(light, tris, pts, nrm, camera=camera)
@@ -176,10 +175,8 @@ def test_a_silhouette_with_a_gap_streaks(method):
     scene = scene_with(casters("sphere"), light, outside_camera())
     tris = world_triangles(scene)
     topo = analyse_topology(tris)
-    pts, nrm, pix, _ = samples(scene)
+    pts, nrm, _, truth, band = embree_reference(scene, light, tris)
     q = pts + 1e-4 * _towards(nrm, pts, light)
-    truth = embree_visibility(light, tris, pts, nrm)
-    band = boundary_band(image_of(truth.astype(np.int64), pix), radius=0).ravel()[pix]
     ok = ~band
     full = shadow_volume_triangles(topo, light, caps=method == "zfail")
     # the two triangles of one silhouette edge's side quad come first in the volume list (edge order)
