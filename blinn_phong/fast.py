@@ -778,6 +778,76 @@ def _resolve_kernel() -> object:  # a numba dispatcher
     return resolve
 
 
+@functools.lru_cache(maxsize=1)
+def _resolve_plain_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def resolve_plain(
+        width, height, opaque_of, rgb, alpha, ambient, diffuse, specular, normal, depth, has_vis, vis_mean,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+    ):  # pragma: no cover - compiled
+        # The resolve kernel's code 0 with one sample per pixel and the fragment colour
+        # (α·c, α) of partial occlusion computed here: the same float32 values, since a sum of
+        # one term is that term (``0.0 + x`` keeps numpy's sign of zero) and 1/1 scales exactly.
+        one = np.float32(1.0)
+        for row in numba.prange(height):
+            for col in range(width):
+                o = opaque_of[row * width + col]
+                if o < 0:
+                    for ch in range(4):
+                        o_rgba[row, col, ch] = 0.0
+                    for ch in range(3):
+                        o_amb[row, col, ch] = 0.0
+                        o_dif[row, col, ch] = 0.0
+                        o_spe[row, col, ch] = 0.0
+                        o_nrm[row, col, ch] = 0.0
+                    o_depth[row, col] = one
+                    if has_vis:
+                        o_shadow[row, col, 0] = 0.0
+                    continue
+                a = alpha[o]
+                for ch in range(3):
+                    o_rgba[row, col, ch] = 0.0 + np.float32(a * rgb[o, ch])
+                    o_amb[row, col, ch] = 0.0 + np.float32(ambient[o, ch] * a)
+                    o_dif[row, col, ch] = 0.0 + np.float32(diffuse[o, ch] * a)
+                    o_spe[row, col, ch] = 0.0 + np.float32(specular[o, ch] * a)
+                    o_nrm[row, col, ch] = 0.0 + np.float32(normal[o, ch])
+                o_rgba[row, col, 3] = 0.0 + np.float32(a)
+                o_depth[row, col] = min(one, np.float32(depth[o]))
+                if has_vis:
+                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
+
+    return resolve_plain
+
+
+def resolve_plain_compiled(
+    width: int,
+    height: int,
+    opaque_of: np.ndarray,
+    rgb: np.ndarray,
+    alpha: np.ndarray,
+    ambient: np.ndarray,
+    diffuse: np.ndarray,
+    specular: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+    vis_mean: np.ndarray | None,
+    out: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, ...]:
+    """:func:`resolve_frame_compiled` with code 0 (z-buffer), one sample per pixel and the fragment
+    colours ``(α·c, α)`` (partial occlusion, no fog) computed in the same pass: the same float32
+    images without the (N, 4) fragment-colour array. ``out`` as there (C-contiguous float32)."""
+    _resolve_plain_kernel()(
+        width, height, opaque_of, np.ascontiguousarray(rgb), np.ascontiguousarray(alpha),
+        np.ascontiguousarray(ambient), np.ascontiguousarray(diffuse), np.ascontiguousarray(specular),
+        np.ascontiguousarray(normal), np.ascontiguousarray(depth), vis_mean is not None,
+        np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean),
+        *out,
+    )  # fmt: skip
+    return out
+
+
 def resolve_frame_compiled(
     width: int,
     height: int,
