@@ -54,14 +54,23 @@ def _kernel() -> object:  # a numba dispatcher
     import numba
 
     @numba.njit(inline="always", cache=True)
-    def sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z):  # pragma: no cover - compiled
-        """Window depth of sub-triangle t at fine sample (px, py), or -1 where not covered / beyond far.
+    def triangle_setup(t, xe, ye, area):  # pragma: no cover - compiled
+        """Per-triangle constants of sample_depth: the exact (unsnapped) doubled area, whether the
+        exact barycentrics apply, and |snapped area| (hoisted out of the sample loops)."""
+        ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+            ye[t, 1] - ye[t, 0]
+        )
+        return ex_area, ex_area * area[t] > 0 and abs(ex_area) > 1e-12, abs(area[t])
+
+    @numba.njit(inline="always", cache=True)
+    def sample_depth(t, cx, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z):  # pragma: no cover
+        """Window depth of sub-triangle t at the fine sample centred at (cx, cy), or -1 where not
+        covered / beyond far.
 
         The edge tests with the top-left rule and the exact (unsnapped) barycentrics of
-        raster._exact_barycentrics, then depth linear in screen space, clamped at 0.
+        raster._exact_barycentrics (``ex_area, exact, abs_area`` from triangle_setup), then
+        depth linear in screen space, clamped at 0.
         """
-        cx = px + 0.5
-        cy = py + 0.5
         e0 = a[t, 0] * cx + (b[t, 0] * cy + c[t, 0])
         if e0 < 0 or (e0 == 0 and not top_left[t, 0]):
             return -1.0
@@ -71,15 +80,11 @@ def _kernel() -> object:  # a numba dispatcher
         e2 = a[t, 2] * cx + (b[t, 2] * cy + c[t, 2])
         if e2 < 0 or (e2 == 0 and not top_left[t, 2]):
             return -1.0
-        ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-            ye[t, 1] - ye[t, 0]
-        )
-        if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+        if exact:
             l0 = ((xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])) / ex_area
             l1 = ((xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])) / ex_area
             l2 = ((xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])) / ex_area
         else:
-            abs_area = abs(area[t])
             l0 = e0 / abs_area
             l1 = e1 / abs_area
             l2 = e2 / abs_area
@@ -105,9 +110,13 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
+                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
+                    cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        depth = sample_depth(
+                            t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
+                        )
                         if depth < 0.0:
                             continue
                         key = py * fine_w + px
@@ -159,9 +168,13 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
+                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
+                    cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        depth = sample_depth(
+                            t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
+                        )
                         if depth < 0.0:
                             continue
                         fine = py * fine_w + px
@@ -784,8 +797,25 @@ def _resolve_plain_kernel() -> object:  # a numba dispatcher
 
     @numba.njit(parallel=True, cache=True)
     def resolve_plain(
-        width, height, opaque_of, rgb, alpha, ambient, diffuse, specular, normal, depth, has_vis, vis_mean,
-        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+        width,
+        height,
+        opaque_of,
+        rgb,
+        alpha,
+        ambient,
+        diffuse,
+        specular,
+        normal,
+        depth,
+        has_vis,
+        vis_mean,
+        o_rgba,
+        o_amb,
+        o_dif,
+        o_spe,
+        o_nrm,
+        o_depth,
+        o_shadow,
     ):  # pragma: no cover - compiled
         # The resolve kernel's code 0 with one sample per pixel and the fragment colour
         # (α·c, α) of partial occlusion computed here: the same float32 values, since a sum of
