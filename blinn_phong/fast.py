@@ -247,7 +247,23 @@ def _kernel() -> object:  # a numba dispatcher
             pixel[i] = (fy // k) * width + fx // k
             sample[i] = (fy % k) * k + fx % k
 
-    return zbuffer, finish, in_front
+    @numba.njit(cache=True)
+    def compact(winner, fine_key, sub, rank):  # pragma: no cover - compiled
+        # One serial pass: the covered fine keys in increasing order, their winners, and each
+        # key's rank among them (-1 where empty): flatnonzero, a gather and the inverse map at once.
+        n = 0
+        for key in range(winner.shape[0]):
+            t = winner[key]
+            if t >= 0:
+                fine_key[n] = key
+                sub[n] = t
+                rank[key] = n
+                n += 1
+            else:
+                rank[key] = -1
+        return n
+
+    return zbuffer, finish, in_front, compact
 
 
 def visible_fragments_compiled(
@@ -270,7 +286,7 @@ def visible_fragments_compiled(
     fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
     threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
     n_bands = max(1, min(fine_h, 4 * threads))
-    zbuffer, finish, _ = _kernel()
+    zbuffer, finish, _, _ = _kernel()
     winner, _ = zbuffer(
         n_bands,
         fine_w,
@@ -472,7 +488,7 @@ def frame_fragments_compiled(
     n_samples = k * k
     n_keys = setup.width * setup.height * n_samples
     n_bands = _bands(fine_h)
-    zbuffer, finish, in_front = _kernel()
+    zbuffer, finish, in_front, compact = _kernel()
     sel = setup.selected.astype(np.int64)
     if sub_opaque is None:
         op_sel, tr_sel = sel, np.zeros(0, np.int64)
@@ -485,8 +501,11 @@ def frame_fragments_compiled(
         setup.top_left, setup.x_exact, setup.y_exact, setup.area, setup.z,
     )  # fmt: skip
     winner, zbuf = zbuffer(n_bands, fine_w, fine_h, op_sel, *geometry, setup.source)
-    fine_key = np.flatnonzero(winner >= 0)
-    sub = winner[fine_key]
+    fine_key = np.empty(n_keys, np.int64)
+    sub = np.empty(n_keys, np.int64)
+    rank = np.empty(n_keys, np.int64)
+    covered = compact(winner, fine_key, sub, rank)
+    fine_key, sub = fine_key[:covered], sub[:covered]
     offsets = np.zeros(n_keys + 1, np.int64)
     t_sub = t_fine = np.zeros(0, np.int64)
     if len(tr_sel):
@@ -525,8 +544,11 @@ def frame_fragments_compiled(
     if k > 1 and n_opaque:  # fine keys -> sample keys: reorder the opaque winners
         order = np.argsort(frags.sample_key[:n_opaque], kind="stable")
         frags = frags.subset(np.concatenate([order, np.arange(n_opaque, n)]))
-    opaque_of = np.full(n_keys, -1, np.int64)
-    opaque_of[frags.sample_key[:n_opaque]] = np.arange(n_opaque)
+    if k == 1:
+        opaque_of = rank  # fine keys are sample keys: each key's rank among the covered ones
+    else:
+        opaque_of = np.full(n_keys, -1, np.int64)
+        opaque_of[frags.sample_key[:n_opaque]] = np.arange(n_opaque)
     return frags, n_opaque, opaque_of, offsets
 
 
