@@ -570,6 +570,7 @@ def scene_from_depsgraph(
                 material=material,
                 shading=extra.pop("shading"),
                 uv=uv,
+                casts_shadows=bool(getattr(obj, "visible_shadow", True)),  # Ray Visibility > Shadow
             )
             object_meshes.append((mesh, f"{obj.name}/{material_name}", extra))
         if failed is not None:
@@ -585,15 +586,9 @@ def scene_from_depsgraph(
             extras.append(extra)
 
     if no_shadow_objects and shadow_objects == 0:
-        # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow.
+        # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow,
+        # so no light needs shadow work (a subset is left out per mesh: Mesh.casts_shadows).
         casts_shadows = [False] * len(casts_shadows)
-    elif no_shadow_objects:
-        notes.append(
-            "Ray Visibility > Shadow is off on "
-            + ", ".join(f"'{n}'" for n in no_shadow_objects)
-            + " but on for other objects: this engine cannot exclude single objects from shadow casting, "
-            "so they still cast shadows"
-        )
     ambient = world_ambient(bl_scene.world)
     light_model = LightModel(
         specular="phong" if options.specular_model == "PHONG" else "blinn",

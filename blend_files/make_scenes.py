@@ -16,7 +16,12 @@ Writes:
   ("Auto" shadows: the planner's choice per light);
 * ``compositing.blend``: a torus rendered with a transparent background and composited over
   ``images/backplate.exr`` by Blender's Alpha Over node in the scene compositor;
-* ``images/backplate.exr``: a sky gradient over a checkered ground, linear premultiplied RGBA.
+* ``textures.blend``: an alpha-clipped fence card (an Image Texture node feeding the Principled
+  BSDF's Base Color and Alpha; Closest interpolation, texel alpha 0 or 1) standing on a
+  checker-textured floor beside an untextured box, under a sun casting shadows;
+* ``images/backplate.exr``: a sky gradient over a checkered ground, linear premultiplied RGBA;
+* ``images/fence.png``, ``images/floor_checker.png``: the two 32×32 textures of ``textures.blend``
+  (sRGB PNGs generated here, referenced by the .blend with relative paths ``//images/…``).
 
 Every scene is 320×180 pixels at 100 % and uses the engine ``BLINN_PHONG``.
 """
@@ -38,7 +43,11 @@ import numpy as np  # noqa: E402
 from addon import compat, engine, properties  # noqa: E402
 
 WIDTH, HEIGHT = 320, 180
-SCENES = ("showcase", "transparency", "shadows", "compositing")
+SCENES = ("showcase", "transparency", "shadows", "compositing", "textures")
+#: Texture size (texels) of the generated fence and floor images.
+TEXTURE_SIZE = 32
+#: Edge length (m) of the textured floor plane, centred at the origin (UV 0…1 across it).
+FLOOR_SIZE = 8.0
 
 
 def backplate(height: int = HEIGHT, width: int = WIDTH) -> np.ndarray:
@@ -316,6 +325,119 @@ def make_compositing(backplate_path: Path) -> bpy.types.Scene:
     return scene
 
 
+def fence_texels(size: int = TEXTURE_SIZE) -> np.ndarray:
+    """The fence card's sRGB bytes, (size, size, 4) uint8, row 0 at the top, straight alpha.
+
+    Alpha is 255 on vertical pickets (texel columns ``i % 8 < 3``) and on two rails, 0 in the
+    gaps; the gaps hold magenta so that a leak of a transparent texel's colour would show.
+    """
+    rows, cols = np.indices((size, size))
+    bottom_rows = size - 1 - rows
+    picket = cols % 8 < 3
+    rail = ((bottom_rows >= 4) & (bottom_rows < 7)) | ((bottom_rows >= 24) & (bottom_rows < 27))
+    solid = picket | rail
+    texels = np.empty((size, size, 4), np.uint8)
+    texels[...] = (255, 0, 255, 0)
+    wood = np.stack([140 + 20 * (cols // 8), 95 + 2 * (bottom_rows % 5), 55 + 0 * cols], axis=-1)
+    texels[solid, :3] = wood[solid]
+    texels[solid, 3] = 255
+    return texels
+
+
+def checker_texels(size: int = TEXTURE_SIZE) -> np.ndarray:
+    """The floor's sRGB bytes, (size, size, 4) uint8, opaque: a checker of 4×4-texel squares."""
+    rows, cols = np.indices((size, size))
+    dark = ((rows // 4 + cols // 4) % 2).astype(bool)
+    texels = np.empty((size, size, 4), np.uint8)
+    texels[...] = (205, 195, 165, 255)
+    texels[dark] = (95, 120, 85, 255)
+    return texels
+
+
+def _save_png(texels: np.ndarray, path: Path) -> bpy.types.Image:
+    """Save sRGB bytes (row 0 at the top) as an 8-bit RGBA PNG through Blender; return the image
+    datablock (its path is made relative to the .blend when the scene is saved)."""
+    height, width = texels.shape[:2]
+    image = bpy.data.images.new(path.stem, width, height, alpha=True)
+    image.pixels.foreach_set((texels[::-1].astype(np.float32) / 255.0).ravel())  # rows bottom-up
+    image.filepath_raw = str(path)
+    image.file_format = "PNG"
+    image.save()
+    image.colorspace_settings.name = "sRGB"
+    image.alpha_mode = "STRAIGHT"
+    return image
+
+
+def _textured_material(
+    name: str, image: bpy.types.Image, *, alpha: bool, custom: tuple | None = None
+) -> bpy.types.Material:
+    """A Principled material whose Base Color (and Alpha) come from ``image`` (Closest, Repeat).
+
+    ``custom``: ``(ambient, diffuse)`` Blinn-Phong coefficients with no specular (the texture then
+    modulates them); None derives them from the Principled BSDF.
+    """
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    principled = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+    principled.inputs["Roughness"].default_value = 0.7
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tex.interpolation = "Closest"
+    tex.extension = "REPEAT"
+    links.new(tex.outputs["Color"], principled.inputs["Base Color"])
+    if alpha:
+        links.new(tex.outputs["Alpha"], principled.inputs["Alpha"])
+        # Alpha clip: Blender 4.2+ (EEVEE Next) renders it as "Dithered" (the texels' alpha is 0
+        # or 1, so dithering is a clip); older versions have the Alpha Clip blend mode.
+        if hasattr(mat, "surface_render_method"):
+            mat.surface_render_method = "DITHERED"
+        else:  # pragma: no cover - Blender < 4.2
+            mat.blend_method = "CLIP"
+            mat.alpha_threshold = 0.5
+    if custom is not None:
+        bp = mat.blinn_phong
+        bp.source = "CUSTOM"
+        bp.ambient, bp.diffuse = custom
+        bp.specular = (0.0, 0.0, 0.0)
+    return mat
+
+
+def make_textures(images: Path) -> bpy.types.Scene:
+    """An alpha-clipped fence card on a textured floor beside an untextured box, under a sun."""
+    scene = _reset("Textures")
+    scene.blinn_phong.samples_per_axis = 2
+    checker = _save_png(checker_texels(), images / "floor_checker.png")
+    fence = _save_png(fence_texels(), images / "fence.png")
+    _add(
+        "primitive_plane_add",
+        _textured_material("Checker floor", checker, alpha=False, custom=((0.9,) * 3, (0.9,) * 3)),
+        smooth=False,
+        size=FLOOR_SIZE,
+        location=(0, 0, 0),
+    )
+    _add(
+        "primitive_plane_add",
+        _textured_material("Fence", fence, alpha=True),
+        smooth=False,
+        size=1.8,
+        location=(-0.3, 0, 0.9),
+        rotation=(math.radians(90), 0, 0),
+    )
+    _add(
+        "primitive_cube_add",
+        _material("Box", (0.3, 0.45, 0.75), specular=0.0),
+        smooth=False,
+        size=0.8,
+        location=(1.7, 0.4, 0.4),
+    )
+    _light(scene, "SUN", "Sun", (5, -2, 6), (0, 0, 0), 3.0)
+    _set_world_colour(scene.world, (0.08, 0.08, 0.1))
+    _camera(scene, (0.3, -6.5, 2.6), (0.2, 0.6, 0.5), lens=35.0)
+    scene.blinn_phong.shadows = "AUTO"
+    return scene
+
+
 def main(argv: list[str] | None = None) -> int:
     """Write every sample scene (and the backplate) into ``--out``."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -332,6 +454,7 @@ def main(argv: list[str] | None = None) -> int:
         "transparency": make_transparency,
         "shadows": make_shadows,
         "compositing": lambda: make_compositing(plate),
+        "textures": lambda: make_textures(out / "images"),
     }
     properties.register()
     engine.register()
@@ -341,6 +464,9 @@ def main(argv: list[str] | None = None) -> int:
             bpy.context.preferences.filepaths.save_version = 0  # no .blend1 backups
             path = out / f"{name}.blend"
             bpy.ops.wm.save_as_mainfile(filepath=str(path), compress=True, relative_remap=True)
+            if any(i.filepath and not i.filepath.startswith("//") for i in bpy.data.images):
+                bpy.ops.file.make_paths_relative()  # "//images/…": the .blend opens anywhere
+                bpy.ops.wm.save_mainfile(compress=True)
             print(f"wrote {path}")
     finally:
         engine.unregister()

@@ -45,7 +45,8 @@ __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 
 
 def _world_triangles(scene: Scene) -> np.ndarray:
-    """(T, 3, 3) world-space triangles in scene order, as :func:`blinn_phong.raytrace.world_triangles`.
+    """(T, 3, 3) world-space triangles of the meshes that cast shadows (``Mesh.casts_shadows``), in
+    scene order, as :func:`blinn_phong.raytrace.world_triangles`.
 
     Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
     :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
@@ -53,6 +54,7 @@ def _world_triangles(scene: Scene) -> np.ndarray:
     parts = [
         (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
         for m in scene.meshes
+        if m.casts_shadows
     ]
     return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
 
@@ -109,6 +111,8 @@ def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_pla
     world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
     normal = prepared.face_world_normal[f.triangle]
     tris = _world_triangles(scene)
+    if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
+        return np.ones((len(world), len(lit)))
     ray_scene: list[object] = []
     columns = []
     for light, c in lit:

@@ -457,6 +457,10 @@ class Mesh:
             ``v`` bottom → top of the image (Blender's and OpenGL's convention, see
             :mod:`blinn_phong.texture`); interpolated perspective-correctly. Required when
             a material has a ``base_color_texture``. A UV seam needs split vertices.
+        casts_shadows: False to leave the mesh out of every shadow computation (it still
+            receives shadows and is seen), as Blender's Object › Visibility › Ray Visibility ›
+            Shadow. The planner still counts it as a possible occluder, which can only add
+            shadow work, never error.
     """
 
     positions: np.ndarray
@@ -468,8 +472,11 @@ class Mesh:
     shading: Shading | None = None
     normal_weighting: Literal["area", "angle"] = "area"
     uv: np.ndarray | None = None
+    casts_shadows: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.casts_shadows, (bool, np.bool_)):
+            raise TypeError(f"Mesh.casts_shadows: expected a bool, got {type(self.casts_shadows).__name__}")
         positions = float_array(self.positions, "Mesh.positions", (None, 3))
         _check_coordinate_range(positions, "Mesh.positions")
         tri = np.asarray(self.triangles)

@@ -47,3 +47,11 @@ def test_demo_renders_composites_and_agrees_with_blender(tmp_path: Path) -> None
     )
     for name in ("render.png", "composite_ours.png", "composite_blender.png", "difference.exr"):
         assert (out / name).stat().st_size > 0
+    # The textured sample scene: both textures found, the engine's file = the core pipeline.
+    textures = results["textures"]
+    assert "textured scene" in done.stdout
+    assert sorted(n.split("/", 1)[1] for n in textures["textured_meshes"]) == ["Checker floor", "Fence"]
+    assert textures["engine_vs_core_max_abs_error"] <= 1e-5
+    assert textures["shadows"]
+    textured = read_image(out / "textures" / "render.exr")
+    assert textured.shape == (180, 320, 4) and 0.3 < textured[..., 3].mean() < 1.0

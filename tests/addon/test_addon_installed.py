@@ -275,8 +275,15 @@ def test_kernels_compile_once_into_the_extension_user_directory(installed: dict)
     # The compile time is reported apart from the frame, once per process.
     assert first["renders"][0]["stats"]["compile"] > 0 and "compile" not in first["renders"][1]["stats"]
     assert second["renders"][0]["stats"]["compile"] > 0
-    # A new Blender process loads the cached kernels: no cache file was rewritten.
-    assert installed["stamps_after"] == installed["stamps"]
+    # A new Blender process loads the cached kernels: every compiled kernel (.nbc) the first
+    # process wrote is still there, unchanged (a recompile rewrites it). A call with argument
+    # types the first process never used may add a specialization (a new .nbc, its index .nbi
+    # updated), so the index files and new files are not compared.
+    before = {name: stamp for name, stamp in installed["stamps"].items() if name.endswith(".nbc")}
+    after = installed["stamps_after"]
+    assert before and {name: after.get(name) for name in before} == before
+    added = [name for name in after if name.endswith(".nbc") and name not in before]
+    assert len(added) <= max(1, len(before) // 10), added  # nearly every kernel was reused
 
 
 def test_installed_image_equals_the_repository_render(installed: dict) -> None:

@@ -142,7 +142,10 @@ def test_generator_rebuilds_the_scenes(tmp_path: Path) -> None:
     assert got == [
         "backplate.exr",
         "compositing.blend",
+        "fence.png",
+        "floor_checker.png",
         "shadows.blend",
         "showcase.blend",
+        "textures.blend",
         "transparency.blend",
     ]

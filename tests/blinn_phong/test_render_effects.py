@@ -98,6 +98,8 @@ def test_opaque_convex_scene_is_bit_identical_to_the_z_buffer_stages() -> None:
     result = bp.render(scene, SIZE, SIZE, samples=4, engine="numpy")
     assert [c.method for c in result.plan.shadows] == ["none", "none"]
     assert result.plan.transparency.method == "zbuffer"
+    # bitwise: render() and the hand-composed stages run the same numpy stages in the same
+    # order (element-wise, no threads, no BLAS-sized products): deterministic by construction
     np.testing.assert_array_equal(result.rgba, zbuffer_stages(scene, samples=4))
     assert "shadow" not in result.passes
 
@@ -108,6 +110,8 @@ def test_shadows_switched_off_give_the_z_buffer_image_bit_for_bit() -> None:
     scene = bp.Scene((floor, occluder), (bp.DirectionalLight((1, 0, -1)),), top_camera(), ambient=(0, 0, 0))
     assert bp.plan(scene).shadows[0].method != "none"  # the planner does see the occluder
     result = bp.render(scene, SIZE, SIZE, shadows="none", engine="numpy")
+    # bitwise: render() and the hand-composed stages run the same numpy stages in the same
+    # order (element-wise, no threads, no BLAS-sized products): deterministic by construction
     np.testing.assert_array_equal(result.rgba, zbuffer_stages(scene))
     assert "set by the caller" in result.plan.shadows[0].reason
 
@@ -120,6 +124,8 @@ def test_gl_compat_ignores_the_plan_and_keeps_the_fixed_function_image() -> None
         top_camera(),
     )
     result = bp.render(scene, SIZE, SIZE, gl_compat=True, engine="numpy")
+    # bitwise: render() and the hand-composed stages run the same numpy stages in the same
+    # order (element-wise, no threads, no BLAS-sized products): deterministic by construction
     np.testing.assert_array_equal(result.rgba, zbuffer_stages(scene, gl_compat=True))
     assert result.plan.transparency.method == "zbuffer" and "gl_compat" in result.plan.transparency.reason
     assert result.plan.shadows[0].method == "none" and "gl_compat" in result.plan.shadows[0].reason
@@ -328,6 +334,7 @@ def test_planar_shadow_of_a_square_under_a_slanted_sun() -> None:
     np.testing.assert_allclose(result.passes["shadow"][..., 0][lit], 1.0, atol=1e-6)
     calls: list[tuple[str, float]] = []
     ray_traced = bp.render(sun_scene(), SIZE, SIZE, shadows="ray_traced", progress=lambda *c: calls.append(c))
+    # bitwise: both methods give visibilities of exactly 0 or 1 here, then the same shading arithmetic
     np.testing.assert_array_equal(result.rgba, ray_traced.rgba)
     fractions = [fraction for _, fraction in calls]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0 and "shadows" in {s for s, _ in calls}

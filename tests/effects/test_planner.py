@@ -426,7 +426,8 @@ def test_plan_is_the_plan_render_follows_for_kay_greenberg_and_the_default_shadi
 
 def test_soft_shadows_do_not_depend_on_the_camera_and_say_how_many_rays(monkeypatch):
     from blinn_phong import raytrace
-    from blinn_phong.frame import ShadowOptions, _shadow_choice, _soft_visibility, embree_available
+    from blinn_phong.frame import ShadowOptions, _shadow_choice, embree_available
+    from blinn_phong.pipeline import _soft_visibility
 
     if not embree_available():
         pytest.skip("soft shadows cast rays with embreex")
