@@ -8,9 +8,15 @@ Rows, timed interleaved in one process (:func:`benchmarks._util.time_interleaved
 wall and CPU time) and reported as ratios to the plain frame of the same run:
 
 * ``plain`` — ``shadows="none"``: the pipeline with no effect;
+* ``default`` — no options: the planner's choices (hard shadows from both lights);
 * ``a_buffer``, ``draw_last``, ``weighted_blended`` — the transparent sphere by each method;
 * ``fog`` — ``Fog("exp", density=0.05)`` on the opaque scene;
 * ``shadow_map`` (1024², default bias) and ``ray_traced`` — hard shadows from both lights.
+
+Peer (``--mesa``): the plain compiled frame of :mod:`benchmarks.bench_renderer`'s scene (about
+100k triangles, four lights, per-pixel Blinn-Phong, 1920×1080) against Mesa llvmpipe running
+:mod:`oracles.gl_lighting`'s GLSL shader on it, interleaved in the same run (medians of wall and
+process CPU time, llvmpipe's threads included).
 
 Peak memory: each row is rendered once more in a fresh process (after a small warm-up render that
 loads the compiled kernels) and reports its peak resident set (``VmHWM``), with the warm-up's as
@@ -24,7 +30,10 @@ size, so each point's peak RSS is its own.
 Usage::
 
     .venv/bin/python -m benchmarks.bench_frame [--out benchmarks/results] [--repeat 3] [--quick]
-        [--charts docs]
+        [--no-scaling] [--mesa] [--charts docs]
+
+``--no-scaling`` measures the table only and keeps the scaling series of the ``frame.json``
+already in ``--out`` (marked ``scaling_measured: false``).
 
 Writes ``frame.json`` to ``--out``; :func:`draw` makes ``frame_scaling.png``
 (:func:`benchmarks.charts.draw_all` calls it when ``frame.json`` is in the results directory).
@@ -76,6 +85,7 @@ def issue_scene(segments: int = 256, rings: int = 128, transparent: bool = False
 #: Row name → (transparent sphere?, render() options).
 CASES: dict[str, tuple[bool, dict[str, object]]] = {
     "plain": (False, {"shadows": "none"}),
+    "default": (False, {}),
     "a_buffer": (True, {"shadows": "none", "transparency": "a_buffer"}),
     "draw_last": (True, {"shadows": "none", "transparency": "draw_last"}),
     "weighted_blended": (True, {"shadows": "none", "transparency": "weighted_blended"}),
@@ -147,8 +157,53 @@ def _in_fresh_process(case: str, points: list[tuple[int, int, int]]) -> list[dic
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def run(out_dir: str | Path, *, repeat: int = 3, quick: bool = False) -> dict:
-    """Measure the table and the scaling series; write ``frame.json`` into ``out_dir``."""
+def mesa_peer(repeat: int = 3) -> dict[str, object] | None:
+    """Plain compiled frame vs Mesa llvmpipe GLSL on :mod:`benchmarks.bench_renderer`'s scene, interleaved.
+
+    Returns medians of wall and process CPU seconds and their ratios (ours / Mesa), or None when
+    no EGL context can be made.
+    """
+    from benchmarks.bench_renderer import HEIGHT, WIDTH, build_scene
+    from oracles.egl import EGLUnavailable, gl_context
+
+    try:
+        gl_context()
+        from oracles import gl_lighting
+    except EGLUnavailable as exc:
+        print(f"Mesa unavailable, no peer ratio: {exc}")
+        return None
+    scene = build_scene()
+    bp.render(scene, WIDTH, HEIGHT, shadows="none")  # warm-up: kernels, first-touch pages
+    gl_lighting.render_glsl_phong(scene, WIDTH, HEIGHT)
+    wall: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
+    cpu: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
+    for _ in range(repeat):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        bp.render(scene, WIDTH, HEIGHT, shadows="none")
+        wall["ours"].append(time.perf_counter() - start)
+        cpu["ours"].append(time.process_time() - start_cpu)
+        frame = gl_lighting.render_glsl_phong(scene, WIDTH, HEIGHT, repeats=1)
+        wall["mesa_glsl"].append(frame.seconds)
+        cpu["mesa_glsl"].append(frame.cpu_seconds)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    return {
+        "scene": "benchmarks.bench_renderer.build_scene()",
+        "triangles": sum(len(m.triangles) for m in scene.meshes),
+        "size": [WIDTH, HEIGHT],
+        "median_s": med,
+        "median_cpu_s": med_cpu,
+        "runs_s": wall,
+        "runs_cpu_s": cpu,
+        "ratio_to_mesa": med["ours"] / med["mesa_glsl"],
+        "cpu_ratio_to_mesa": med_cpu["ours"] / med_cpu["mesa_glsl"],
+    }
+
+
+def run(
+    out_dir: str | Path, *, repeat: int = 3, quick: bool = False, scaling: bool = True, mesa: bool = False
+) -> dict:
+    """Measure the table (and the scaling series, and the Mesa peer when asked); write ``frame.json``."""
     width, height = (960, 540) if quick else (1920, 1080)
     segments = 128 if quick else 256
     timings = time_interleaved(
@@ -180,10 +235,15 @@ def run(out_dir: str | Path, *, repeat: int = 3, quick: bool = False) -> dict:
         )
     sizes = [(480, 270), (960, 540), (1920, 1080)] + ([] if quick else [(3840, 2160)])
     tessellations = [64, 128, 256] + ([] if quick else [512])
-    scaling: dict[str, list[dict]] = {"pixels": [], "triangles": []}
-    for case in ("plain", "a_buffer", "fog"):
-        scaling["pixels"] += _in_fresh_process(case, [(w, h, segments) for w, h in sizes])
-        scaling["triangles"] += _in_fresh_process(case, [(960, 540, s) for s in tessellations])
+    series: dict[str, list[dict]] = {"pixels": [], "triangles": []}
+    previous = Path(out_dir) / "frame.json"
+    if scaling:
+        for case in ("plain", "a_buffer", "fog"):
+            series["pixels"] += _in_fresh_process(case, [(w, h, segments) for w, h in sizes])
+            series["triangles"] += _in_fresh_process(case, [(960, 540, s) for s in tessellations])
+    elif previous.exists():
+        series = json.loads(previous.read_text()).get("scaling", series)
+    peer = mesa_peer(repeat) if mesa else None
     data = {
         "benchmark": "frame",
         "scene": f"two {2 * segments * (segments // 2 - 1)}-triangle spheres over a plane, 2 lights",
@@ -191,7 +251,9 @@ def run(out_dir: str | Path, *, repeat: int = 3, quick: bool = False) -> dict:
         "repeat": repeat,
         "machine": machine_info(),
         "rows": rows,
-        "scaling": scaling,
+        "mesa_peer": peer,
+        "scaling_measured": scaling,
+        "scaling": series,
     }
     write_json(Path(out_dir) / "frame.json", data)
     return data
@@ -245,13 +307,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--charts", type=Path, default=None, help="documentation directory (PNG in <dir>/charts)"
     )
+    parser.add_argument(
+        "--no-scaling", action="store_true", help="the table only; keep the old scaling series"
+    )
+    parser.add_argument(
+        "--mesa", action="store_true", help="also the plain frame vs Mesa llvmpipe (renderer scene)"
+    )
     parser.add_argument("--child", nargs=2, metavar=("CASE", "POINTS_JSON"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         case, points = args.child
         print(json.dumps(_child(case, [tuple(p) for p in json.loads(points)])))
         return
-    data = run(args.out, repeat=args.repeat, quick=args.quick)
+    data = run(args.out, repeat=args.repeat, quick=args.quick, scaling=not args.no_scaling, mesa=args.mesa)
     print(
         markdown_table(
             ["render", "median s", "× plain", "CPU × plain", "peak RSS GB"],
@@ -267,6 +335,12 @@ def main(argv: list[str] | None = None) -> None:
             ],
         )
     )
+    peer = data.get("mesa_peer")
+    if peer:
+        print(
+            f"plain frame vs Mesa llvmpipe ({peer['triangles']} triangles): "
+            f"wall {peer['ratio_to_mesa']:.2f}×, CPU {peer['cpu_ratio_to_mesa']:.2f}×"
+        )
     if args.charts is not None:
         for path in draw(data, args.charts / "charts"):
             print(f"chart {path}")

@@ -134,9 +134,9 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
 
     # The light-visibility work alone (both lights, every visible sample of the frame), as the
     # frame's shadows stage calls it: light_visibility on world points and face normals.
+    from blinn_phong.prepared import prepare_scene
     from blinn_phong.raster import interpolate
     from blinn_phong.raytrace import world_triangles
-    from blinn_phong.render import prepare_scene
     from blinn_phong.shadows import light_visibility
     from blinn_phong.visibility import visible_fragments
 

@@ -54,14 +54,23 @@ def _kernel() -> object:  # a numba dispatcher
     import numba
 
     @numba.njit(inline="always", cache=True)
-    def sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z):  # pragma: no cover - compiled
-        """Window depth of sub-triangle t at fine sample (px, py), or -1 where not covered / beyond far.
+    def triangle_setup(t, xe, ye, area):  # pragma: no cover - compiled
+        """Per-triangle constants of sample_depth: the exact (unsnapped) doubled area, whether the
+        exact barycentrics apply, and |snapped area| (hoisted out of the sample loops)."""
+        ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+            ye[t, 1] - ye[t, 0]
+        )
+        return ex_area, ex_area * area[t] > 0 and abs(ex_area) > 1e-12, abs(area[t])
+
+    @numba.njit(inline="always", cache=True)
+    def sample_depth(t, cx, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z):  # pragma: no cover
+        """Window depth of sub-triangle t at the fine sample centred at (cx, cy), or -1 where not
+        covered / beyond far.
 
         The edge tests with the top-left rule and the exact (unsnapped) barycentrics of
-        raster._exact_barycentrics, then depth linear in screen space, clamped at 0.
+        raster._exact_barycentrics (``ex_area, exact, abs_area`` from triangle_setup), then
+        depth linear in screen space, clamped at 0.
         """
-        cx = px + 0.5
-        cy = py + 0.5
         e0 = a[t, 0] * cx + (b[t, 0] * cy + c[t, 0])
         if e0 < 0 or (e0 == 0 and not top_left[t, 0]):
             return -1.0
@@ -71,15 +80,11 @@ def _kernel() -> object:  # a numba dispatcher
         e2 = a[t, 2] * cx + (b[t, 2] * cy + c[t, 2])
         if e2 < 0 or (e2 == 0 and not top_left[t, 2]):
             return -1.0
-        ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-            ye[t, 1] - ye[t, 0]
-        )
-        if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+        if exact:
             l0 = ((xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])) / ex_area
             l1 = ((xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])) / ex_area
             l2 = ((xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])) / ex_area
         else:
-            abs_area = abs(area[t])
             l0 = e0 / abs_area
             l1 = e1 / abs_area
             l2 = e2 / abs_area
@@ -105,9 +110,13 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
+                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
+                    cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        depth = sample_depth(
+                            t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
+                        )
                         if depth < 0.0:
                             continue
                         key = py * fine_w + px
@@ -159,9 +168,13 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
+                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
+                    cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(t, px, py, a, b, c, top_left, xe, ye, area, z)
+                        depth = sample_depth(
+                            t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
+                        )
                         if depth < 0.0:
                             continue
                         fine = py * fine_w + px
@@ -234,7 +247,23 @@ def _kernel() -> object:  # a numba dispatcher
             pixel[i] = (fy // k) * width + fx // k
             sample[i] = (fy % k) * k + fx % k
 
-    return zbuffer, finish, in_front
+    @numba.njit(cache=True)
+    def compact(winner, fine_key, sub, rank):  # pragma: no cover - compiled
+        # One serial pass: the covered fine keys in increasing order, their winners, and each
+        # key's rank among them (-1 where empty): flatnonzero, a gather and the inverse map at once.
+        n = 0
+        for key in range(winner.shape[0]):
+            t = winner[key]
+            if t >= 0:
+                fine_key[n] = key
+                sub[n] = t
+                rank[key] = n
+                n += 1
+            else:
+                rank[key] = -1
+        return n
+
+    return zbuffer, finish, in_front, compact
 
 
 def visible_fragments_compiled(
@@ -257,7 +286,7 @@ def visible_fragments_compiled(
     fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
     threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
     n_bands = max(1, min(fine_h, 4 * threads))
-    zbuffer, finish, _ = _kernel()
+    zbuffer, finish, _, _ = _kernel()
     winner, _ = zbuffer(
         n_bands,
         fine_w,
@@ -459,7 +488,7 @@ def frame_fragments_compiled(
     n_samples = k * k
     n_keys = setup.width * setup.height * n_samples
     n_bands = _bands(fine_h)
-    zbuffer, finish, in_front = _kernel()
+    zbuffer, finish, in_front, compact = _kernel()
     sel = setup.selected.astype(np.int64)
     if sub_opaque is None:
         op_sel, tr_sel = sel, np.zeros(0, np.int64)
@@ -472,8 +501,11 @@ def frame_fragments_compiled(
         setup.top_left, setup.x_exact, setup.y_exact, setup.area, setup.z,
     )  # fmt: skip
     winner, zbuf = zbuffer(n_bands, fine_w, fine_h, op_sel, *geometry, setup.source)
-    fine_key = np.flatnonzero(winner >= 0)
-    sub = winner[fine_key]
+    fine_key = np.empty(n_keys, np.int64)
+    sub = np.empty(n_keys, np.int64)
+    rank = np.empty(n_keys, np.int64)
+    covered = compact(winner, fine_key, sub, rank)
+    fine_key, sub = fine_key[:covered], sub[:covered]
     offsets = np.zeros(n_keys + 1, np.int64)
     t_sub = t_fine = np.zeros(0, np.int64)
     if len(tr_sel):
@@ -512,8 +544,11 @@ def frame_fragments_compiled(
     if k > 1 and n_opaque:  # fine keys -> sample keys: reorder the opaque winners
         order = np.argsort(frags.sample_key[:n_opaque], kind="stable")
         frags = frags.subset(np.concatenate([order, np.arange(n_opaque, n)]))
-    opaque_of = np.full(n_keys, -1, np.int64)
-    opaque_of[frags.sample_key[:n_opaque]] = np.arange(n_opaque)
+    if k == 1:
+        opaque_of = rank  # fine keys are sample keys: each key's rank among the covered ones
+    else:
+        opaque_of = np.full(n_keys, -1, np.int64)
+        opaque_of[frags.sample_key[:n_opaque]] = np.arange(n_opaque)
     return frags, n_opaque, opaque_of, offsets
 
 
@@ -776,6 +811,93 @@ def _resolve_kernel() -> object:  # a numba dispatcher
                     o_shadow[row, col, 0] = tot[16]
 
     return resolve
+
+
+@functools.lru_cache(maxsize=1)
+def _resolve_plain_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def resolve_plain(
+        width,
+        height,
+        opaque_of,
+        rgb,
+        alpha,
+        ambient,
+        diffuse,
+        specular,
+        normal,
+        depth,
+        has_vis,
+        vis_mean,
+        o_rgba,
+        o_amb,
+        o_dif,
+        o_spe,
+        o_nrm,
+        o_depth,
+        o_shadow,
+    ):  # pragma: no cover - compiled
+        # The resolve kernel's code 0 with one sample per pixel and the fragment colour
+        # (α·c, α) of partial occlusion computed here: the same float32 values, since a sum of
+        # one term is that term (``0.0 + x`` keeps numpy's sign of zero) and 1/1 scales exactly.
+        one = np.float32(1.0)
+        for row in numba.prange(height):
+            for col in range(width):
+                o = opaque_of[row * width + col]
+                if o < 0:
+                    for ch in range(4):
+                        o_rgba[row, col, ch] = 0.0
+                    for ch in range(3):
+                        o_amb[row, col, ch] = 0.0
+                        o_dif[row, col, ch] = 0.0
+                        o_spe[row, col, ch] = 0.0
+                        o_nrm[row, col, ch] = 0.0
+                    o_depth[row, col] = one
+                    if has_vis:
+                        o_shadow[row, col, 0] = 0.0
+                    continue
+                a = alpha[o]
+                for ch in range(3):
+                    o_rgba[row, col, ch] = 0.0 + np.float32(a * rgb[o, ch])
+                    o_amb[row, col, ch] = 0.0 + np.float32(ambient[o, ch] * a)
+                    o_dif[row, col, ch] = 0.0 + np.float32(diffuse[o, ch] * a)
+                    o_spe[row, col, ch] = 0.0 + np.float32(specular[o, ch] * a)
+                    o_nrm[row, col, ch] = 0.0 + np.float32(normal[o, ch])
+                o_rgba[row, col, 3] = 0.0 + np.float32(a)
+                o_depth[row, col] = min(one, np.float32(depth[o]))
+                if has_vis:
+                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
+
+    return resolve_plain
+
+
+def resolve_plain_compiled(
+    width: int,
+    height: int,
+    opaque_of: np.ndarray,
+    rgb: np.ndarray,
+    alpha: np.ndarray,
+    ambient: np.ndarray,
+    diffuse: np.ndarray,
+    specular: np.ndarray,
+    normal: np.ndarray,
+    depth: np.ndarray,
+    vis_mean: np.ndarray | None,
+    out: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, ...]:
+    """:func:`resolve_frame_compiled` with code 0 (z-buffer), one sample per pixel and the fragment
+    colours ``(α·c, α)`` (partial occlusion, no fog) computed in the same pass: the same float32
+    images without the (N, 4) fragment-colour array. ``out`` as there (C-contiguous float32)."""
+    _resolve_plain_kernel()(
+        width, height, opaque_of, np.ascontiguousarray(rgb), np.ascontiguousarray(alpha),
+        np.ascontiguousarray(ambient), np.ascontiguousarray(diffuse), np.ascontiguousarray(specular),
+        np.ascontiguousarray(normal), np.ascontiguousarray(depth), vis_mean is not None,
+        np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean),
+        *out,
+    )  # fmt: skip
+    return out
 
 
 def resolve_frame_compiled(

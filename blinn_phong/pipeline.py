@@ -225,6 +225,21 @@ def render_frame(
         passes["shadow"] = np.zeros((height, width, 1), np.float32)
     seconds["shade"] = seconds["resolve_samples"] = 0.0
     fog_parameters = FogParameters.of(fog)
+    materials, _ = side_tables(scene)
+    # Fragment colours (α·c, α) of partial occlusion without fog: the compiled resolve computes
+    # them in its own pass (resolve_frame with rgba None), no (N, 4) colour array per band.
+    plain_colours = (
+        compiled
+        and fog_parameters is None
+        and f_all.samples == 1
+        and (method == "zbuffer" or not visible.n_transparent)
+        and all(
+            m.kay_greenberg is None
+            and not m.specular_washout
+            and (not m.transparent or m.transparency_model == "partial_occlusion")
+            for m in materials
+        )
+    )
     for row0 in range(0, height, rows_per_band):
         row1 = min(height, row0 + rows_per_band)
         band = visible if (row0, row1) == (0, height) else visible.rows(row0, row1)
@@ -245,7 +260,9 @@ def render_frame(
         shaded = texture_fragments(  # image textures
             prepared, band.fragments, shaded, gl_compat=gl_compat, engine=stage_engine
         )
-        colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
+        colour = alpha = None
+        if not plain_colours:
+            colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
         seconds["shade"] += time.perf_counter() - t
         t = time.perf_counter()
         resolve_frame(  # writes straight into the band's rows of the frame buffers

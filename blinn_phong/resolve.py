@@ -27,6 +27,7 @@ from blinn_phong.fast import (
     fragment_colours_compiled,
     numba_available,
     resolve_frame_compiled,
+    resolve_plain_compiled,
     scatter_samples_compiled,
 )
 from blinn_phong.fog import apply_fog, eye_distance
@@ -317,8 +318,8 @@ def resolve_frame(
     prepared: PreparedScene,
     fragments: FrameFragments,
     shaded: FragmentShading,
-    rgba: np.ndarray,
-    alpha: np.ndarray,
+    rgba: np.ndarray | None,
+    alpha: np.ndarray | None,
     method: str,
     *,
     visibility: np.ndarray | None = None,
@@ -341,8 +342,11 @@ def resolve_frame(
         prepared: the prepared scene.
         fragments: the visible fragments.
         shaded: their shading.
-        rgba: (N, 4) premultiplied fragment colours (:func:`fragment_colours`).
-        alpha: (N,) opacity used (weights the passes).
+        rgba: (N, 4) premultiplied fragment colours (:func:`fragment_colours`), or None for
+            partial occlusion ``(α·c, α)`` of ``shaded`` with no fog (what :func:`fragment_colours`
+            gives when no material has Kay–Greenberg opacity, wash-out or another model and
+            there is no fog; the compiled engine then computes it inside the resolve pass).
+        alpha: (N,) opacity used (weights the passes); None with ``rgba`` None (``shaded.alpha``).
         method: ``zbuffer`` or one of :data:`blinn_phong.oit.TRANSPARENCY_METHODS`.
         visibility: (N, L) per-light visibility of the fragments, or None (no shadow pass).
         layers: passes for ``depth_peeling``.
@@ -358,9 +362,31 @@ def resolve_frame(
     width, height, samples = f.width, f.height, f.samples
     n_keys = width * height * samples
     n_op = fragments.n_opaque
+    vis_mean = None if visibility is None else visibility.mean(axis=1)
+    if rgba is None:
+        compiled = engine != "numpy" and numba_available()
+        if compiled and samples == 1 and (method == "zbuffer" or not fragments.n_transparent):
+            if out is None:
+                names = ("ambient", "diffuse", "specular") + (() if vis_mean is None else ("shadow",))
+                out = FrameImage(
+                    np.empty((height, width, 4), np.float32),
+                    np.empty((height, width), np.float32),
+                    np.empty((height, width, 3), np.float32),
+                    {n: np.empty((height, width, 1 if n == "shadow" else 3), np.float32) for n in names},
+                )
+            p = out.passes
+            shadow_out = p["shadow"] if vis_mean is not None else np.zeros((0, 0, 1), np.float32)
+            resolve_plain_compiled(
+                width, height, fragments.opaque_of, shaded.rgb, shaded.alpha, shaded.ambient,
+                shaded.diffuse, shaded.specular, shaded.normal, f.depth, vis_mean,
+                (out.rgba, p["ambient"], p["diffuse"], p["specular"], out.normal, out.depth, shadow_out),
+            )  # fmt: skip
+            return out
+        alpha = np.asarray(shaded.alpha, dtype=np.float64)
+        rgba = np.concatenate([shaded.rgb * alpha[:, None], alpha[:, None]], axis=1)
+    assert alpha is not None
     tr = slice(n_op, len(f))
     key = f.sample_key
-    vis_mean = None if visibility is None else visibility.mean(axis=1)
     weights = sort_key = None
     if fragments.n_transparent and method == "weighted_blended":
         weights = wboit_weights(rgba[tr, 3], wboit_equation, window_depth=f.depth[tr])

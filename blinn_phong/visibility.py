@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -104,6 +105,11 @@ class FrameFragments:
     opaque_of: np.ndarray
     offsets: np.ndarray
 
+    @cached_property
+    def _opaque_keys(self) -> np.ndarray:
+        """Sample keys of the opaque fragments (increasing), computed once for every band."""
+        return self.fragments.sample_key[: self.n_opaque]
+
     @property
     def n_transparent(self) -> int:
         """Number of transparent fragments kept."""
@@ -115,8 +121,7 @@ class FrameFragments:
         f = self.fragments
         k0 = row0 * f.width * f.samples
         k1 = row1 * f.width * f.samples
-        keys = f.sample_key[: self.n_opaque]
-        o0, o1 = (int(v) for v in np.searchsorted(keys, [k0, k1]))
+        o0, o1 = (int(v) for v in np.searchsorted(self._opaque_keys, [k0, k1]))
         return o0, o1, int(self.offsets[k0]), int(self.offsets[k1])
 
     def rows(self, row0: int, row1: int) -> FrameFragments:
