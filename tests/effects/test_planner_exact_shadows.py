@@ -1,0 +1,94 @@
+"""The planner's exact hard shadows: Embree ray tracing or shadow volumes, by predicted cost.
+
+Both methods answer the same question — is the segment from a surface point to the light
+blocked? — so where the cost model predicts shadow volumes cheaper the planned render must
+equal the render with ray-traced shadows forced (Embree, the oracle) on every pixel that is
+not on a shadow edge (there the two methods may classify a sample whose shadow ray grazes a
+caster's silhouette differently: tests/effects/test_shadow_volume.py). Without Embree the
+plan itself picks shadow volumes and says why.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import blinn_phong.planner as planner
+from blinn_phong.frame import frame_plan
+from blinn_phong.planner import plan
+from blinn_phong.render import render
+from blinn_phong.scene import DirectionalLight, PointLight
+
+from .scenes import horizontal_quad, perspective_camera, scene_of, sphere
+from .volume_scenes import boundary_band
+
+FLOOR = horizontal_quad(-1.0, half=3.0, colour=(0.2, 0.3, 0.4))
+
+
+def _stacked_balls(light) -> object:
+    """A ball shading another ball (a curved receiver: not planar shadows) over a floor."""
+    balls = [sphere((0.0, 0.0, 1.2), 0.5, segments=16, rings=8), sphere((-0.3, -0.2, -0.2), 0.6)]
+    return scene_of([FLOOR, *balls], [light], perspective_camera())
+
+
+@pytest.mark.slow
+def test_where_volumes_are_predicted_cheaper_the_plan_picks_them_and_matches_embree_off_the_edges():
+    pytest.importorskip("embreex")
+    scene = _stacked_balls(PointLight((0.6, 0.4, 4.0)))
+    # A small frame: Embree's set-up is far smaller, ray tracing is predicted cheaper.
+    small = plan(scene, width=32, height=32).shadows[0]
+    assert small.method == "ray_traced", small
+    # ~96k receiver samples: past the fitted crossover, volumes cost less per sample.
+    width, height = 320, 300
+    choice = plan(scene, width=width, height=height).shadows[0]
+    assert choice.method == "shadow_volume", choice
+    assert "predicted faster than Embree" in choice.reason and " ms against " in choice.reason, choice
+    assert choice.predicted_steps == 0.0 and 0 < choice.relative_cost < 1
+    planned = render(scene, width, height)  # the plan render() follows: tolerance 0, auto shadows
+    assert planned.plan.shadows[0].method == "shadow_volume"
+    traced = render(scene, width, height, shadows="ray_traced")
+    assert traced.plan.shadows[0].method == "ray_traced"
+    shadow = traced.passes["shadow"][..., 0]
+    covered = traced.rgba[..., 3] > 0
+    mask = np.where(covered, (shadow > 0.5).astype(np.int64), -1)
+    assert (mask == 0).sum() > 500 and (mask == 1).sum() > 500  # a real shadow and real light
+    edge = boundary_band(mask, radius=0)
+    diff = np.abs(planned.rgba - traced.rgba).max(axis=2)
+    # off the shadow edges both are exact and run the same shading: bit-identical pixels
+    assert diff[~edge].max() == 0.0
+    # on the edge band only a few samples may differ (grazing rays), never a whole band
+    assert (diff[edge] > 0).mean() < 0.5
+
+
+@pytest.mark.parametrize("light", [DirectionalLight((0.2, 0.1, -1.0)), PointLight((0.6, 0.4, 4.0))])
+def test_without_embree_the_plan_picks_shadow_volumes_and_says_why(monkeypatch, light):
+    scene = _stacked_balls(light)
+    monkeypatch.setattr(planner, "embree_available", lambda: False)
+    for tolerance in (0.0, 8.0):
+        choice = plan(scene, tolerance, width=32, height=32).shadows[0]  # a frame where Embree wins
+        assert choice.method == "shadow_volume", choice
+        assert "Embree (embreex) is not installed" in choice.reason, choice
+        assert "instead of ray tracing" in choice.reason and "predicted" in choice.reason, choice
+    # the frame follows the plan without a substitution of its own
+    followed = frame_plan(scene, width=32, height=32).shadows[0]
+    assert followed.method == "shadow_volume" and "not installed" in followed.reason
+
+
+def test_without_embree_planar_shadows_become_shadow_volumes(monkeypatch):
+    # A square over a floor: projected shadows are exact, but they test points with Embree.
+    scene = scene_of(
+        [FLOOR, horizontal_quad(0.5, half=0.4)], [DirectionalLight((0.2, 0.1, -1.0))], perspective_camera()
+    )
+    assert plan(scene).shadows[0].method == "planar"
+    monkeypatch.setattr(planner, "embree_available", lambda: False)
+    choice = plan(scene).shadows[0]
+    assert choice.method == "shadow_volume" and "instead of planar" in choice.reason, choice
+
+
+def test_a_method_the_caller_sets_is_kept_where_embree_exists():
+    pytest.importorskip("embreex")
+    scene = _stacked_balls(PointLight((0.6, 0.4, 4.0)))
+    planned = frame_plan(scene, width=320, height=300).shadows[0]
+    forced = frame_plan(scene, width=320, height=300, shadows="ray_traced").shadows[0]
+    assert planned.method == "shadow_volume"
+    assert forced.method == "ray_traced" and "set by the caller" in forced.reason
