@@ -176,9 +176,9 @@ def _fit_shading(data: dict) -> dict:
 def shadow_volume_cost_design(rows: list[dict]) -> np.ndarray:
     """Design matrix of the exact shadow methods' cost fit: ``[1, T, N]`` per crossover row
     (``T`` triangles, ``N`` receiver samples)."""
-    return np.c_[
-        np.ones(len(rows)), [r["triangles"] for r in rows], [r["samples"] for r in rows]
-    ].astype(float)
+    return np.c_[np.ones(len(rows)), [r["triangles"] for r in rows], [r["samples"] for r in rows]].astype(
+        float
+    )
 
 
 def _fit_shadow_volume(data: dict) -> dict:

@@ -821,17 +821,18 @@ def _plan_shadow(
         what = f"mesh {a} can shade itself ({why_self})"
     else:
         what = f"mesh {a} can shadow mesh {b}"
-    exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts))
+    # The tolerance bounds every pixel: a sample classified differently from the ray tracer
+    # (a shadow map's misplaced edge, a shadow volume's grazing sample) costs the light's whole
+    # lit-minus-shadowed contribution there, so such a method is allowed only when that fits.
+    weight = _shadow_weight(scene, light, facts)
+    worst = 255.0 * weight
+    exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst)
     if tolerance <= 0:
         return exact
     if not isinstance(light, DirectionalLight):
         return replace(
             exact, reason=f"{exact.reason}; the shadow-map models are calibrated for directional lights only"
         )
-    # The tolerance bounds every pixel: a shadow map wrong on a hard edge costs the light's
-    # whole lit-minus-shadowed contribution there, so it is allowed only when that fits.
-    weight = _shadow_weight(scene, light, facts)
-    worst = 255.0 * weight
     if worst > tolerance:
         return replace(
             exact,
@@ -901,20 +902,27 @@ def embree_available() -> bool:
 NO_EMBREE = "Embree (embreex) is not installed: shadow volumes, exact too"
 
 
-def _exact_shadow(what: str, models: dict, frame: _Frame, triangles: int) -> Choice:
+def _exact_shadow(
+    what: str, models: dict, frame: _Frame, triangles: int, tolerance: float, worst: float
+) -> Choice:
     """The cheaper predicted exact hard-shadow method: Embree ray tracing or shadow volumes.
 
     Shadow volumes where Embree cannot be imported; otherwise the one the cost model
     (:func:`blinn_phong.calibration.shadow_volume_cost`, for the scene's ``triangles`` and the
     frame's receiver samples) predicts faster, ray tracing on a tie or without a model.
     ``relative_cost`` is relative to ray tracing.
+
+    Both methods are exact, but they are different computations: on samples whose shadow ray
+    grazes a caster's silhouette they may disagree (and the planner fuzzer measured further
+    disagreements on random scenes: docs/speed_accuracy.md). The tolerance is measured
+    against the ray tracer's image, so shadow volumes replace an available Embree only when
+    ``worst`` — 255 times the light's whole lit-minus-shadowed contribution, what one
+    differently classified sample can cost a pixel — is within ``tolerance``.
     """
     costs = calibration.shadow_volume_cost(models, triangles, frame.receivers)
     where = f"for {triangles} triangles and {frame.receivers} receiver samples"
     if not embree_available():
-        predicted = (
-            f" (predicted {costs['shadow_volume'] * 1e3:.3g} ms {where})" if costs is not None else ""
-        )
+        predicted = f" (predicted {costs['shadow_volume'] * 1e3:.3g} ms {where})" if costs is not None else ""
         return Choice(
             "shadow_volume",
             f"{what}: {NO_EMBREE}, instead of ray tracing{predicted}",
@@ -926,12 +934,23 @@ def _exact_shadow(what: str, models: dict, frame: _Frame, triangles: int) -> Cho
             "ray_traced", f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
         )
     volume, traced, ratio = costs["shadow_volume"] * 1e3, costs["ray_traced"] * 1e3, costs["ratio"]
+    if ratio < 1.0 and worst > tolerance:
+        return Choice(
+            "ray_traced",
+            f"{what}: ray-traced shadows are exact; shadow volumes, predicted faster ({volume:.3g} ms "
+            f"against {traced:.3g} ms, {ratio:.2f}×, {where}), may classify a grazing sample differently, "
+            f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > tolerance "
+            f"{tolerance:g}",
+            predicted_steps=0.0,
+            relative_cost=1.0,
+        )
     if ratio < 1.0:
         return Choice(
             "shadow_volume",
             f"{what}: shadow volumes are exact and predicted faster than Embree ray tracing, "
-            f"{volume:.3g} ms against {traced:.3g} ms ({ratio:.2f}×) {where}",
-            predicted_steps=0.0,
+            f"{volume:.3g} ms against {traced:.3g} ms ({ratio:.2f}×) {where}; a sample they classify "
+            f"differently changes a pixel by at most {worst:.3g} steps ≤ tolerance {tolerance:g}",
+            predicted_steps=worst,
             relative_cost=ratio,
         )
     return Choice(
