@@ -53,6 +53,14 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   the light (the smallest extent of its projection across the light direction,
   :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
   ray tracing's.
+* ``shadow_volume`` — exact hard shadows by stencil counting (:mod:`blinn_phong.shadow_volume`):
+  where Embree cannot be imported (for every hard shadow, ``planar`` included, which tests
+  points with it), or where the fitted cost model
+  (:func:`blinn_phong.calibration.shadow_volume_cost`, the scene's triangles and the frame's
+  receiver samples) predicts them faster than Embree ray tracing and ``255·w ≤ T``: the two
+  exact methods may classify a sample whose shadow ray grazes a silhouette differently, which
+  costs a pixel the light's whole contribution ``w`` against the ray tracer's image (see
+  :func:`_exact_shadow`).
 * ``ray_traced`` — otherwise: exact hard shadows.
 
 Shading frequency, per mesh (:mod:`blinn_phong.render`):
