@@ -22,6 +22,11 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
   residual factor) and :data:`SHADING_MARGIN` is stored with it. Calibrated at shininess 40.
+* ``shadow_volume`` — no error model (exact, like ray tracing); its cost against Embree ray
+  tracing, both in seconds, ``v₀ + v_T·T + v_N·N`` and ``r₀ + r_T·T + r_N·N`` for ``T``
+  triangles and ``N`` receiver samples, least squares (unit-norm columns, non-negative) on the
+  ``crossover`` rows of ``benchmarks/results/shadow_volume.json``
+  (:mod:`benchmarks.bench_shadow_volume`: both methods timed in the same run).
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
 from blinn_phong.planner import MapGeometry
 from compositing._atomic import write_json_atomic
 
-__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save"]
+__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save", "shadow_volume_cost_design"]
 
 #: Safety factor on the shading envelope for scenes other than the calibration sphere (other
 #: lights, views, shininess ≤ 40): the fit has one light and one view, so its largest
@@ -168,8 +173,36 @@ def _fit_shading(data: dict) -> dict:
     }
 
 
-def fit(tradeoffs: dict) -> dict:
-    """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``)."""
+def shadow_volume_cost_design(rows: list[dict]) -> np.ndarray:
+    """Design matrix of the exact shadow methods' cost fit: ``[1, T, N]`` per crossover row
+    (``T`` triangles, ``N`` receiver samples)."""
+    return np.c_[np.ones(len(rows)), [r["triangles"] for r in rows], [r["samples"] for r in rows]].astype(
+        float
+    )
+
+
+def _fit_shadow_volume(data: dict) -> dict:
+    rows = data["crossover"]
+    design = shadow_volume_cost_design(rows)
+    v = np.maximum(_scaled_lstsq(design, [r["shadow_volume_s"] for r in rows]), 0.0)
+    r = np.maximum(_scaled_lstsq(design, [r["ray_traced_s"] for r in rows]), 0.0)
+    return {
+        "error": "exact (hard shadows, like ray tracing)",
+        "cost": "seconds ~= v0 + vt * T + vn * N (volumes), r0 + rt * T + rn * N (Embree), "
+        "T triangles, N receiver samples",
+        "v0": float(v[0]),
+        "vt": float(v[1]),
+        "vn": float(v[2]),
+        "r0": float(r[0]),
+        "rt": float(r[1]),
+        "rn": float(r[2]),
+        "cases": len(rows),
+    }
+
+
+def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
+    """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``) and, when given,
+    the shadow-volume cost model to a ``shadow_volume.json`` document (``{"crossover": [...]}``)."""
     from benchmarks.tradeoffs import shadow_scene
     from blinn_phong.planner import shadow_map_geometry
 
@@ -185,6 +218,8 @@ def fit(tradeoffs: dict) -> dict:
         models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
+    if volumes is not None and volumes.get("crossover"):
+        models["shadow_volume"] = _fit_shadow_volume(volumes)
     return models
 
 
@@ -195,9 +230,11 @@ def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
 
 
 def main() -> None:
-    """Fit the models to ``benchmarks/results/tradeoffs.json`` and write ``blinn_phong/calibration.json``."""
-    source = Path(__file__).resolve().parent / "results" / "tradeoffs.json"
-    path = save(fit(json.loads(source.read_text())))
+    """Fit the models to ``benchmarks/results/tradeoffs.json`` and ``shadow_volume.json`` and write
+    ``blinn_phong/calibration.json``."""
+    results = Path(__file__).resolve().parent / "results"
+    volumes = json.loads((results / "shadow_volume.json").read_text())
+    path = save(fit(json.loads((results / "tradeoffs.json").read_text()), volumes))
     print(f"wrote {path}")
 
 

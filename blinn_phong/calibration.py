@@ -31,6 +31,11 @@ Models (each states the error metric it predicts):
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
   envelope of a log-space least-squares fit, times a safety ``margin``. Calibrated at
   shininess 40: valid for shininess ≤ ``shininess_calibrated``. Cost: ``ratio_to_phong``.
+* ``shadow_volume`` — exact (no error model). Cost, in seconds, of shadow volumes and of Embree
+  ray tracing for ``T`` triangles and ``N`` receiver samples: ``v₀ + v_T·T + v_N·N`` and
+  ``r₀ + r_T·T + r_N·N`` (:func:`shadow_volume_cost`), fitted to both methods timed in the
+  same run (``benchmarks/results/shadow_volume.json``, ``crossover``): volumes pay a larger
+  set-up (building and clipping the volume) and less per sample.
 """
 
 from __future__ import annotations
@@ -57,6 +62,7 @@ __all__ = [
     "predict_shadow_map",
     "scene_extent",
     "shadow_map_cost",
+    "shadow_volume_cost",
     "shipped_models",
 ]
 
@@ -293,6 +299,34 @@ def choose_shadow_map(
             "predicted_cost": cost,
         }
     return exact
+
+
+# --------------------------------------------------------------------------- shadow volumes
+
+
+def shadow_volume_cost(models: dict, triangles: int, receivers: int) -> dict | None:
+    """Predicted times (seconds) of the two exact hard-shadow methods for one light.
+
+    Args:
+        models: from :func:`load` or :func:`shipped_models`.
+        triangles: ``T``, triangles in the scene (≥ 0).
+        receivers: ``N``, receiver samples of the frame (``width·height·samples²``, ≥ 0).
+
+    Returns:
+        ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
+        "ratio": volumes / ray tracing}``, or None when the models have no ``shadow_volume``
+        entry. The fit is of one sphere over a plane under a point light on a loaded machine:
+        the ratio, not the seconds, carries over to other machines.
+    """
+    m = models.get("shadow_volume")
+    if m is None:
+        return None
+    for name, value in (("triangles", triangles), ("receivers", receivers)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+            raise ValueError(f"{name}: expected an integer >= 0, got {value!r}")
+    volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers
+    traced = m["r0"] + m["rt"] * triangles + m["rn"] * receivers
+    return {"shadow_volume": volume, "ray_traced": traced, "ratio": volume / traced}
 
 
 # --------------------------------------------------------------------------- shading frequency

@@ -16,7 +16,7 @@ import numpy as np
 from blinn_phong._checks import colour3, number
 from blinn_phong.fog import FOG_MODES
 from blinn_phong.oit import TRANSPARENCY_METHODS
-from blinn_phong.planner import Choice, Plan, plan
+from blinn_phong.planner import Choice, Plan, embree_available, plan
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS
 
@@ -182,15 +182,6 @@ def _overridden(planned: Choice, what: str) -> str:
 _NEEDS_EMBREE = ("ray_traced", "soft", "planar")
 
 
-def embree_available() -> bool:
-    """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it."""
-    try:
-        import embreex  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Choice:
     """The planner's choice for one light unless ``options.method`` overrides it, with full parameters."""
     if isinstance(light, AmbientLight):
@@ -206,12 +197,15 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
             "ray_traced",
             f"soft shadows asked for, but {why} has no area: hard ray-traced shadows",
         )
-    if method in ("ray_traced", "planar") and not embree_available():
+    # The planner already picks shadow volumes where Embree is missing; a method the caller
+    # sets that needs Embree is replaced here, saying so.
+    overridden = options.method not in _AUTO
+    if overridden and method in ("ray_traced", "planar") and not embree_available():
         method, reason = (
             "shadow_volume",
             f"Embree (embreex) is not installed: shadow volumes, exact too, instead of {method} ({reason})",
         )
-    if method in _NEEDS_EMBREE and not embree_available():
+    if overridden and method in _NEEDS_EMBREE and not embree_available():
         method, reason = (
             "shadow_map",
             f"Embree (embreex) is not installed: a shadow map instead of {method} ({reason})",

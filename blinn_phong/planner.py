@@ -53,6 +53,14 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   the light (the smallest extent of its projection across the light direction,
   :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
   ray tracing's.
+* ``shadow_volume`` — exact hard shadows by stencil counting (:mod:`blinn_phong.shadow_volume`):
+  where Embree cannot be imported (for every hard shadow, ``planar`` included, which tests
+  points with it), or where the fitted cost model
+  (:func:`blinn_phong.calibration.shadow_volume_cost`, the scene's triangles and the frame's
+  receiver samples) predicts them faster than Embree ray tracing and ``255·w ≤ T``: the two
+  exact methods may classify a sample whose shadow ray grazes a silhouette differently, which
+  costs a pixel the light's whole contribution ``w`` against the ray tracer's image (see
+  :func:`_exact_shadow`).
 * ``ray_traced`` — otherwise: exact hard shadows.
 
 Shading frequency, per mesh (:mod:`blinn_phong.render`):
@@ -85,6 +93,7 @@ __all__ = [
     "MapGeometry",
     "Plan",
     "coordinate_tolerance",
+    "embree_available",
     "plan",
     "shadow_map_geometry",
 ]
@@ -796,6 +805,13 @@ def _plan_shadow(
                 h = facts[a].world @ oriented[:3] + oriented[3]
                 if h.min() < -1e-9 or h.max() >= light_height:
                     ok = False
+            if ok and not embree_available():
+                return Choice(
+                    "shadow_volume",
+                    f"{NO_EMBREE}, instead of planar projected shadows (which test points against the "
+                    f"casters with it); only the plane of mesh {min(receivers)} receives shadows",
+                    predicted_steps=0.0,
+                )
             if ok:
                 return Choice(
                     "planar",
@@ -813,35 +829,31 @@ def _plan_shadow(
         what = f"mesh {a} can shade itself ({why_self})"
     else:
         what = f"mesh {a} can shadow mesh {b}"
-    exact = Choice(
-        "ray_traced", f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
-    )
+    # The tolerance bounds every pixel: a sample classified differently from the ray tracer
+    # (a shadow map's misplaced edge, a shadow volume's grazing sample) costs the light's whole
+    # lit-minus-shadowed contribution there, so such a method is allowed only when that fits.
+    weight = _shadow_weight(scene, light, facts)
+    worst = 255.0 * weight
+    exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst)
     if tolerance <= 0:
         return exact
     if not isinstance(light, DirectionalLight):
         return replace(
-            exact,
-            reason=f"{what}: ray-traced shadows are exact (the shadow-map models are calibrated for "
-            "directional lights only)",
+            exact, reason=f"{exact.reason}; the shadow-map models are calibrated for directional lights only"
         )
-    # The tolerance bounds every pixel: a shadow map wrong on a hard edge costs the light's
-    # whole lit-minus-shadowed contribution there, so it is allowed only when that fits.
-    weight = _shadow_weight(scene, light, facts)
-    worst = 255.0 * weight
     if worst > tolerance:
         return replace(
             exact,
-            reason=f"{what}: ray-traced shadows are exact; a shadow map can misplace a hard edge, "
-            f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > "
-            f"tolerance {tolerance:g}",
+            reason=f"{exact.reason}; a shadow map can misplace a hard edge, where a pixel changes by the "
+            f"light's whole contribution, up to {worst:.3g} steps > tolerance {tolerance:g}",
         )
     geometry = _map_geometry(facts, light, casters)
     span, feature = geometry.span, geometry.feature
     if span <= 0 or feature <= 0:
         return replace(
             exact,
-            reason=f"{what}: ray-traced shadows are exact; a caster has no width seen from the light "
-            "(a pane edge-on), which no shadow-map resolution resolves",
+            reason=f"{exact.reason}; a caster has no width seen from the light (a pane edge-on), which no "
+            "shadow-map resolution resolves",
         )
     pick = calibration.choose_shadow_map(
         models,
@@ -853,23 +865,108 @@ def _plan_shadow(
         receivers=frame.receivers,
         triangles=geometry.triangles,
     )
-    if pick["method"] == "shadow_map":
+    exact_cost = 1.0 if exact.relative_cost is None else exact.relative_cost
+    if pick["method"] == "shadow_map" and pick["predicted_cost"] < exact_cost:
         res, cost = pick["resolution"], pick["predicted_cost"]
         return Choice(
             "shadow_map",
             f"{what}; a {res}² shadow map: every pixel within the light's contribution {worst:.3g} steps "
             f"≤ tolerance {tolerance:g}; texel {span / res:.3g} ≤ half the thinnest caster seen from the "
             f"light ({feature:.3g}); predicted mean {pick['predicted_mean']:.2g} steps, cost {cost:.2f}× "
-            f"ray tracing for {frame.receivers} receiver samples",
+            f"ray tracing for {frame.receivers} receiver samples"
+            + (f" (shadow volumes: {exact_cost:.2f}×)" if exact.method == "shadow_volume" else ""),
             {"resolution": res},
             predicted_steps=worst,
             relative_cost=cost,
         )
+    if pick["method"] == "shadow_map":
+        return replace(
+            exact,
+            reason=f"{exact.reason}; the cheapest shadow map resolving every caster ({pick['resolution']}²) "
+            f"is predicted at {pick['predicted_cost']:.2f}× ray tracing, not below {exact_cost:.2f}×",
+        )
     return replace(
         exact,
-        reason=f"{what}: ray-traced shadows are exact; no shadow map with texels of at most half the "
-        f"thinnest caster seen from the light ({feature:.3g} of a {span:.3g} span) is predicted faster for "
-        f"{frame.receivers} receiver samples",
+        reason=f"{exact.reason}; no shadow map with texels of at most half the thinnest caster seen from "
+        f"the light ({feature:.3g} of a {span:.3g} span) is predicted faster for {frame.receivers} "
+        "receiver samples",
+    )
+
+
+def embree_available() -> bool:
+    """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it.
+
+    Ray-traced and planar shadows cast rays with it; without it the planner picks shadow
+    volumes, exact too, for hard shadows.
+    """
+    try:
+        import embreex  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+#: Why a plan without Embree uses shadow volumes (the start of the choice's reason).
+NO_EMBREE = "Embree (embreex) is not installed: shadow volumes, exact too"
+
+
+def _exact_shadow(
+    what: str, models: dict, frame: _Frame, triangles: int, tolerance: float, worst: float
+) -> Choice:
+    """The cheaper predicted exact hard-shadow method: Embree ray tracing or shadow volumes.
+
+    Shadow volumes where Embree cannot be imported; otherwise the one the cost model
+    (:func:`blinn_phong.calibration.shadow_volume_cost`, for the scene's ``triangles`` and the
+    frame's receiver samples) predicts faster, ray tracing on a tie or without a model.
+    ``relative_cost`` is relative to ray tracing.
+
+    Both methods are exact, but they are different computations: on samples whose shadow ray
+    grazes a caster's silhouette they may disagree (and the planner fuzzer measured further
+    disagreements on random scenes: docs/speed_accuracy.md). The tolerance is measured
+    against the ray tracer's image, so shadow volumes replace an available Embree only when
+    ``worst`` — 255 times the light's whole lit-minus-shadowed contribution, what one
+    differently classified sample can cost a pixel — is within ``tolerance``.
+    """
+    costs = calibration.shadow_volume_cost(models, triangles, frame.receivers)
+    where = f"for {triangles} triangles and {frame.receivers} receiver samples"
+    if not embree_available():
+        predicted = f" (predicted {costs['shadow_volume'] * 1e3:.3g} ms {where})" if costs is not None else ""
+        return Choice(
+            "shadow_volume",
+            f"{what}: {NO_EMBREE}, instead of ray tracing{predicted}",
+            predicted_steps=0.0,
+            relative_cost=None if costs is None else costs["ratio"],
+        )
+    if costs is None:
+        return Choice(
+            "ray_traced", f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
+        )
+    volume, traced, ratio = costs["shadow_volume"] * 1e3, costs["ray_traced"] * 1e3, costs["ratio"]
+    if ratio < 1.0 and worst > tolerance:
+        return Choice(
+            "ray_traced",
+            f"{what}: ray-traced shadows are exact; shadow volumes, predicted faster ({volume:.3g} ms "
+            f"against {traced:.3g} ms, {ratio:.2f}×, {where}), may classify a grazing sample differently, "
+            f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > tolerance "
+            f"{tolerance:g}",
+            predicted_steps=0.0,
+            relative_cost=1.0,
+        )
+    if ratio < 1.0:
+        return Choice(
+            "shadow_volume",
+            f"{what}: shadow volumes are exact and predicted faster than Embree ray tracing, "
+            f"{volume:.3g} ms against {traced:.3g} ms ({ratio:.2f}×) {where}; a sample they classify "
+            f"differently changes a pixel by at most {worst:.3g} steps ≤ tolerance {tolerance:g}",
+            predicted_steps=worst,
+            relative_cost=ratio,
+        )
+    return Choice(
+        "ray_traced",
+        f"{what}: ray-traced shadows are exact and predicted faster than shadow volumes, "
+        f"{traced:.3g} ms against {volume:.3g} ms ({ratio:.2f}× ray tracing) {where}",
+        predicted_steps=0.0,
+        relative_cost=1.0,
     )
 
 

@@ -23,6 +23,8 @@ from .scenes import (
 
 LIGHT = DirectionalLight((0.3, 0.2, -1.0))
 FLOOR = horizontal_quad(-1.0, half=3.0, colour=(0.2, 0.3, 0.4))
+#: The exact hard-shadow methods: the planner picks the one predicted cheaper for the frame.
+EXACT_SHADOWS = ("ray_traced", "shadow_volume")
 
 
 # --------------------------------------------------------------------------- transparency
@@ -179,12 +181,12 @@ def test_objects_over_a_plane_get_exact_planar_shadows(light):
 def test_objects_shadowing_each_other_need_ray_tracing_unless_the_light_is_faint():
     spheres = [FLOOR, sphere((0.0, 0.0, 1.2), 0.5), sphere((-0.3, -0.2, -0.2), 0.6)]
     scene = scene_of(spheres, [DirectionalLight((0.2, 0.1, -1.0))])
-    assert plan(scene).shadows[0].method == "ray_traced"
+    assert plan(scene).shadows[0].method in EXACT_SHADOWS
     # The tolerance bounds every pixel. A shadow map misplaces some hard edge, where a pixel
     # changes by the light's whole contribution: diffuse 1 + specular 0.3 of the spheres'
     # materials under a white light, 255·1.3 = 331.5 steps. No tolerance below that allows a map.
     choice = plan(scene, tolerance=255.0).shadows[0]
-    assert choice.method == "ray_traced" and "332 steps > tolerance 255" in choice.reason, choice
+    assert choice.method in EXACT_SHADOWS and "332 steps > tolerance 255" in choice.reason, choice
     # A light of intensity 0.1 changes a pixel by at most 0.13, 33.15 steps: within 40 a map is
     # allowed, the coarsest whose texel resolves the thinnest caster (the 1.0-wide sphere).
     faint = scene_of(spheres, [DirectionalLight((0.2, 0.1, -1.0), intensity=0.1), AmbientLight()])
@@ -202,7 +204,7 @@ def test_objects_shadowing_each_other_need_ray_tracing_unless_the_light_is_faint
     reference = render(faint, size, size, shadows="ray_traced").rgba
     worst = 255 * np.abs(planned.rgba - reference).max()
     assert 0 < worst <= tolerance
-    assert plan(faint, tolerance=30.0).shadows[0].method == "ray_traced"  # 33.15 > 30
+    assert plan(faint, tolerance=30.0).shadows[0].method in EXACT_SHADOWS  # 33.15 > 30
 
 
 def test_shadow_maps_for_point_lights_are_outside_the_calibration_so_ray_tracing_stays():
@@ -210,7 +212,7 @@ def test_shadow_maps_for_point_lights_are_outside_the_calibration_so_ray_tracing
         [FLOOR, sphere((0.0, 0.0, 1.2), 0.5), sphere((-0.3, -0.2, -0.2), 0.6)], [PointLight((0.3, 0.2, 5.0))]
     )
     choice = plan(scene, tolerance=255.0).shadows[0]
-    assert choice.method == "ray_traced"
+    assert choice.method in EXACT_SHADOWS
     assert "directional lights only" in choice.reason
 
 
@@ -322,7 +324,7 @@ def test_an_open_box_shades_its_own_floor_under_two_sided_lighting(two_sided):
     exact = render(scene, 48, 48, shadows="ray_traced")
     unshadowed = render(scene, 48, 48, shadows="none").rgba
     if two_sided:
-        assert choice.method == "ray_traced" and "can shade itself" in choice.reason
+        assert choice.method in EXACT_SHADOWS and "can shade itself" in choice.reason
         # the shadow is real: without shadow work the inner floor is wrong by > 100 steps
         assert 255 * np.abs(unshadowed - exact.rgba).max() > 100
     else:
@@ -333,7 +335,7 @@ def test_an_open_box_shades_its_own_floor_under_two_sided_lighting(two_sided):
     closed = scene_of([_box_mesh(lid=True)], [sun], camera, LightModel(two_sided=two_sided))
     assert plan(closed).shadows[0].method == "none"
     glass = scene_of([_box_mesh(lid=True, opacity=0.5)], [sun], camera, LightModel(two_sided=two_sided))
-    assert plan(glass).shadows[0].method == ("ray_traced" if two_sided else "none")
+    assert plan(glass).shadows[0].method in (EXACT_SHADOWS if two_sided else ("none",))
 
 
 # --------------------------------------------------------------------------- bounds with every factor
@@ -396,7 +398,8 @@ def test_thin_casters_need_texels_finer_than_their_width():
     assert choice.method == "shadow_map", choice
     resolution = choice.params["resolution"]
     assert geometry.span / resolution <= 0.03 < geometry.span / (resolution // 2)
-    assert plan(scene, tolerance=16.0, width=1920, height=1080).shadows[0].method == "ray_traced"  # 16.6 > 16
+    hd = {"width": 1920, "height": 1080}
+    assert plan(scene, tolerance=16.0, **hd).shadows[0].method in EXACT_SHADOWS  # 16.6 > 16
     # on a small frame that map is predicted slower than ray tracing: the cost follows the frame
     assert plan(scene, tolerance=32.0, width=160, height=120).shadows[0].method == "ray_traced"
 

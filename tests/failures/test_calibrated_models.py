@@ -158,7 +158,9 @@ def test_the_planner_keeps_shadows_within_the_tolerance(tolerance: float) -> Non
     facing = normals @ -np.asarray(light.direction, float) > 0
     points, normals = points[facing], normals[facing]
     choice = bp.plan(scene, tolerance).shadows[0]
-    vis = light_visibility(choice.method, light, tris, points, normals, **choice.params)
+    # shadow volumes count faces in the camera's screen, as render() passes it
+    extra = {"camera": scene.camera} if choice.method == "shadow_volume" else {}
+    vis = light_visibility(choice.method, light, tris, points, normals, **choice.params, **extra)
     exact = light_visibility("ray_traced", light, tris, points, normals)
     assert not has_nonfinite(vis)
     assert error_metrics(vis, exact)["max_steps"] <= tolerance, choice
@@ -169,7 +171,8 @@ def test_the_shipped_models_are_the_fit_of_the_committed_measurements() -> None:
     from pathlib import Path
 
     measured = Path(em.__file__).resolve().parent / "results" / "tradeoffs.json"
-    refit = em.fit(json.loads(measured.read_text()))
+    volumes = json.loads((measured.parent / "shadow_volume.json").read_text())
+    refit = em.fit(json.loads(measured.read_text()), volumes)
     shipped = cal.load(cal.CALIBRATION_PATH)
     assert shipped == cal.shipped_models()  # the same file read twice: equal by construction
     # The refit is not bitwise reproducible across machines: np.polyfit solves its least-squares
@@ -233,6 +236,11 @@ def test_the_calibration_fits_are_well_conditioned() -> None:
         design = em.frame_cost_design([r for r in rows if r["method"] == method])
         design = design / np.sqrt((design * design).sum(axis=0))
         assert np.linalg.cond(design) < 1e3
+    # the exact shadow methods' cost fit ([1, T, N] over the crossover rows, unit-norm columns)
+    volumes = json.loads((Path(em.__file__).resolve().parent / "results" / "shadow_volume.json").read_text())
+    design = em.shadow_volume_cost_design(volumes["crossover"])
+    design = design / np.sqrt((design * design).sum(axis=0))
+    assert np.linalg.cond(design) < 1e3
 
 
 def test_bad_model_inputs_name_the_argument() -> None:
