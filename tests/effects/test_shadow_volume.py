@@ -225,8 +225,8 @@ def test_mesh_object_is_not_needed_for_soups():
 
 
 @pytest.mark.parametrize("light_name", sorted(LIGHTS))
-def test_auto_picks_zpass_only_where_it_is_exact(light_name):
-    """The near-clip test: z-pass from outside, z-fail from inside; both answers match Embree."""
+def test_auto_matches_embree_from_outside_and_inside(light_name):
+    """The near-clip test tells outside from inside; "auto" (z-fail) matches Embree in both."""
     light = LIGHTS[light_name]
     outside = scene_with(casters("pair"), light, outside_camera())
     inside_cam = inside_camera(light, casters("pair")[0].transform[:3, 3], 0.7)
