@@ -140,6 +140,22 @@ def _points(name: str, value: np.ndarray) -> np.ndarray:
     return arr.astype(np.float64, copy=False)
 
 
+def _lookup_normals(
+    p: np.ndarray, normals: np.ndarray | None, normal_offset: float, kernel: str
+) -> np.ndarray | None:
+    """Check a shadow-map look-up's kernel and normals; the (n, 3) normals when ``normal_offset`` is used."""
+    if kernel not in PCF_KERNELS:
+        raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
+    if normal_offset == 0.0:
+        return None
+    if normals is None:
+        raise ValueError("normals are required when normal_offset != 0")
+    n = _points("normals", normals)
+    if n.shape != p.shape:
+        raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+    return n
+
+
 def _homogeneous(points: np.ndarray) -> np.ndarray:
     return np.concatenate([points, np.ones((len(points), 1))], axis=1)
 
@@ -241,15 +257,7 @@ def shadow_visibility(
         (n,) float64 visibility in [0, 1].
     """
     p = _points("points", points)
-    if kernel not in PCF_KERNELS:
-        raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
-    n = None
-    if normal_offset != 0.0:
-        if normals is None:
-            raise ValueError("normals are required when normal_offset != 0")
-        n = _points("normals", normals)
-        if n.shape != p.shape:
-            raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+    n = _lookup_normals(p, normals, normal_offset, kernel)
     if _compiled(engine):
         from .shadow_kernels import lookup_compiled
 
@@ -462,15 +470,7 @@ def shadow_map_visibility(
     if len(maps) != 6 or isinstance(light, DirectionalLight):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
     if _compiled(engine):
-        if kernel not in PCF_KERNELS:
-            raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
-        n = None
-        if normal_offset != 0.0:
-            if normals is None:
-                raise ValueError("normals are required when normal_offset != 0")
-            n = _points("normals", normals)
-            if n.shape != p.shape:
-                raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
+        n = _lookup_normals(p, normals, normal_offset, kernel)
         from .shadow_kernels import lookup_compiled
 
         base = maps[0].depth.base
