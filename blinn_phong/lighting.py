@@ -252,7 +252,7 @@ def shade(
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if engine != "numpy" and not per_light:
-        from blinn_phong.fast import numba_available
+        from blinn_phong._numba import numba_available
 
         if numba_available():
             ids = np.zeros(count, np.int64)
@@ -338,7 +338,7 @@ def shade_many(
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if engine != "numpy":
-        from blinn_phong.fast import numba_available
+        from blinn_phong._numba import numba_available
 
         if numba_available():
             return _shade_compiled(
@@ -497,20 +497,22 @@ def _shade_compiled(
 def point_terms() -> object:  # a numba dispatcher
     """The lighting equation at one eye-space point, compiled: the per-point body of every kernel.
 
-    ``point_terms()(q, px, py, pz, nx, ny, nz, base, a_cm, d_cm, s_cm, shininess, lights,
-    local_viewer, blinn, has_vis, vis)`` returns the nine floats ``(ambient, diffuse, specular)``
-    RGB of the module docstring's equation at the point ``p`` with unit normal ``n`` (zero
-    normals get ambient and emission only), for one material (``base`` = emission +
-    ``a_cm``·(global ambient + AmbientLights), ``a_cm``, ``d_cm``, ``s_cm`` (3,), ``shininess``)
-    and the lights of an :class:`EyeLights` as the tuple ``lights = (position, spot_direction,
-    cos_cutoff, spot_exponent, attenuation, ambient, diffuse, specular)``. With ``has_vis``,
-    ``vis[q, i, c]`` (an (N, L, K) array, K = 1 or 3: one factor per light, or one per RGB
-    channel) multiplies light i's diffuse and specular terms.
+    ``point_terms()(q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
+    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis,
+    vis)`` returns the nine floats ``(ambient, diffuse, specular)`` RGB of the module
+    docstring's equation at the point ``p`` with unit normal ``n`` (zero normals get ambient and
+    emission only), for material ``m`` of the tables of :func:`material_tables` (``bases`` =
+    emission + ``a_cm``·(global ambient + AmbientLights)) and the lights of an
+    :class:`EyeLights` as the arrays of :func:`light_tables`. With ``has_vis``, ``vis[q, i, c]``
+    (an (N, L, K) array, K = 1 or 3: one factor per light, or one per RGB channel) multiplies
+    light i's diffuse and specular terms.
 
     It evaluates each light with the same Python functions as the numpy engine
     (:func:`_view_vector`, :func:`_light_direction`, :func:`_reflection`), compiled for scalars
     and inlined; the lighting kernel of :func:`shade` and the fused frame kernel of
-    :mod:`blinn_phong.fast` both call it, so the equation is written once.
+    :mod:`blinn_phong.fast` both call it, so the equation is written once. (Arrays are passed
+    one by one and light rows as tuples of scalars: inside a per-point loop, array views and
+    arrays unpacked from tuples cost a reference count each.)
     """
     import numba
     from numba.extending import overload
@@ -521,22 +523,28 @@ def point_terms() -> object:  # a numba dispatcher
 
     @numba.njit(inline="always", cache=True)
     def terms(
-        q, px, py, pz, nx, ny, nz, base, a_cm, d_cm, s_cm, shininess,
-        lights, local_viewer, blinn, has_vis, vis,
+        q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
+        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis, vis,
     ):  # fmt: skip  # pragma: no cover - compiled
-        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         vx, vy, vz = _view_vector(px, py, pz, local_viewer)
-        ar, ag, ab = base[0], base[1], base[2]
+        ar, ag, ab = bases[m, 0], bases[m, 1], bases[m, 2]
+        a0, a1, a2 = a_cms[m, 0], a_cms[m, 1], a_cms[m, 2]
+        d0, d1, d2 = d_cms[m, 0], d_cms[m, 1], d_cms[m, 2]
+        s0, s1, s2 = s_cms[m, 0], s_cms[m, 1], s_cms[m, 2]
+        shininess = shininesses[m]
         dr = dg = db = 0.0
         sr = sg = sb = 0.0
         per_channel = has_vis and vis.shape[2] == 3
         for i in range(pos.shape[0]):
             lx, ly, lz, att = _light_direction(
-                px, py, pz, pos[i], spot_dir[i], cos_cut[i], spot_exp[i], atten[i]
-            )
-            ar += att * (a_cm[0] * l_amb[i, 0])
-            ag += att * (a_cm[1] * l_amb[i, 1])
-            ab += att * (a_cm[2] * l_amb[i, 2])
+                px, py, pz,
+                (pos[i, 0], pos[i, 1], pos[i, 2], pos[i, 3]),
+                (spot_dir[i, 0], spot_dir[i, 1], spot_dir[i, 2]),
+                cos_cut[i], spot_exp[i], (atten[i, 0], atten[i, 1], atten[i, 2]),
+            )  # fmt: skip
+            ar += att * (a0 * l_amb[i, 0])
+            ag += att * (a1 * l_amb[i, 1])
+            ab += att * (a2 * l_amb[i, 2])
             if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
                 continue  # _reflection gives exactly 0 here
             fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
@@ -545,12 +553,12 @@ def point_terms() -> object:  # a numba dispatcher
                 wr = vis[q, i, 0]
                 wg = vis[q, i, 1] if per_channel else wr
                 wb = vis[q, i, 2] if per_channel else wr
-            dr += fd * (d_cm[0] * l_dif[i, 0]) * wr
-            dg += fd * (d_cm[1] * l_dif[i, 1]) * wg
-            db += fd * (d_cm[2] * l_dif[i, 2]) * wb
-            sr += fs * (s_cm[0] * l_spe[i, 0]) * wr
-            sg += fs * (s_cm[1] * l_spe[i, 1]) * wg
-            sb += fs * (s_cm[2] * l_spe[i, 2]) * wb
+            dr += fd * (d0 * l_dif[i, 0]) * wr
+            dg += fd * (d1 * l_dif[i, 1]) * wg
+            db += fd * (d2 * l_dif[i, 2]) * wb
+            sr += fs * (s0 * l_spe[i, 0]) * wr
+            sg += fs * (s1 * l_spe[i, 1]) * wg
+            sb += fs * (s2 * l_spe[i, 2]) * wb
         return ar, ag, ab, dr, dg, db, sr, sg, sb
 
     return terms
@@ -607,12 +615,13 @@ def _kernel() -> object:  # a numba dispatcher
         out_amb, out_dif, out_spe,
     ):  # fmt: skip  # pragma: no cover - compiled
         count = p.shape[0]
-        has_vis = vis.shape[0] == count and vis.shape[1] == lights[0].shape[0] and count > 0
+        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
+        has_vis = vis.shape[0] == count and vis.shape[1] == pos.shape[0] and count > 0
         for q in numba.prange(count):
-            mid = ids[q]
             ar, ag, ab, dr, dg, db, sr, sg, sb = terms(
-                q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], bases[mid], a_cms[mid], d_cms[mid],
-                s_cms[mid], shininesses[mid], lights, local_viewer, blinn, has_vis, vis,
+                q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], ids[q], bases, a_cms, d_cms,
+                s_cms, shininesses, pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
+                local_viewer, blinn, has_vis, vis,
             )  # fmt: skip
             out_amb[q, 0], out_amb[q, 1], out_amb[q, 2] = ar, ag, ab
             out_dif[q, 0], out_dif[q, 1], out_dif[q, 2] = dr, dg, db
