@@ -951,7 +951,7 @@ def resolve_frame_compiled(
 
 
 @functools.lru_cache(maxsize=1)
-def _plain_kernels() -> object:  # numba dispatchers
+def _plain_kernel() -> object:  # a numba dispatcher
     import math
 
     import numba
@@ -960,183 +960,148 @@ def _plain_kernels() -> object:  # numba dispatchers
 
     terms = point_terms()  # the lighting equation, the same compiled function as lighting.shade's
 
-    # Output arrays are separate arguments, never unpacked from a tuple: numba's dead-code
-    # elimination (in functions with inlined calls or prange) does not see writes through arrays
-    # taken out of a tuple as side effects and drops them. Inlined at numba's IR level: a compiled
-    # call per pixel would pay a reference count per array argument.
-    @numba.njit(inline="always", cache=True)
-    def empty_sample(
-        row, col, has_vis, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow
-    ):  # pragma: no cover - compiled
-        for ch in range(4):
-            o_rgba[row, col, ch] = 0.0
-        for ch in range(3):
-            o_amb[row, col, ch] = 0.0
-            o_dif[row, col, ch] = 0.0
-            o_spe[row, col, ch] = 0.0
-            o_nrm[row, col, ch] = 0.0
-        o_depth[row, col] = np.float32(1.0)
-        if has_vis:
-            o_shadow[row, col, 0] = 0.0
-
-    @numba.njit(cache=True)
-    def shade_sample(
-        row, col, o, t, b0, b1, b2, depth, back,
-        triangles, triangle_mesh, eye_pos, eye_n, world_n,
-        bases, a_cms, d_cms, s_cms, shininesses, opacity,
-        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
-        local_viewer, blinn, gl_compat, separate,
-        has_vis, vis, vis_mean, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+    @numba.njit(parallel=True, cache=True)
+    def plain(
+        width, height, from_winners, index, tri, bary, frag_depth, frag_front,
+        source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
+        geometry, materials, lights, flags, has_vis, vis, vis_mean,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
-        # One visible sample: surface_at_fragments_compiled's interpolation, the lighting kernel's
-        # equation (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
+        # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
+        # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
+        # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Then
+        # surface_at_fragments_compiled's interpolation, the lighting kernel's equation
+        # (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
         # resolve_plain's float32 writes, with the same operations in the same order.
-        v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
-        px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
-        py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
-        pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-        nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
-        ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
-        nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
-        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-        scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
-        nx, ny, nz = nx * scale, ny * scale, nz * scale
-        wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
-        wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
-        wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
-        length = math.sqrt(wx * wx + wy * wy + wz * wz)
-        scale = 1.0 / length if length > 0 else 0.0
-        wx, wy, wz = wx * scale, wy * scale, wz * scale
-        mid = 2 * triangle_mesh[t] + back
-        ar, ag, ab, dr, dg, db, sr, sg, sb = terms(
-            o, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-            pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis, vis,
-        )  # fmt: skip
-        r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
-        if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
-            if separate:
-                r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
-                g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
-                b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
-            else:
-                r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
-        a = opacity[mid]
-        # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve_plain does.
-        o_rgba[row, col, 0] = 0.0 + np.float32(a * r)
-        o_rgba[row, col, 1] = 0.0 + np.float32(a * g)
-        o_rgba[row, col, 2] = 0.0 + np.float32(a * b)
-        o_rgba[row, col, 3] = 0.0 + np.float32(a)
-        o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
-        o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
-        o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
-        o_dif[row, col, 0] = 0.0 + np.float32(dr * a)
-        o_dif[row, col, 1] = 0.0 + np.float32(dg * a)
-        o_dif[row, col, 2] = 0.0 + np.float32(db * a)
-        o_spe[row, col, 0] = 0.0 + np.float32(sr * a)
-        o_spe[row, col, 1] = 0.0 + np.float32(sg * a)
-        o_spe[row, col, 2] = 0.0 + np.float32(sb * a)
-        o_nrm[row, col, 0] = 0.0 + np.float32(wx)
-        o_nrm[row, col, 1] = 0.0 + np.float32(wy)
-        o_nrm[row, col, 2] = 0.0 + np.float32(wz)
-        o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
-        if has_vis:
-            o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
-
-    @numba.njit(parallel=True, cache=True)
-    def from_fragments(
-        width, height, opaque_of, tri, bary, depth, front, two_sided, geometry, materials, lights, flags,
-        has_vis, vis, vis_mean, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
-    ):  # fmt: skip  # pragma: no cover - compiled
-        triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry  # unpacked outside the loops
+        # One loop body, no calls per pixel: a compiled call per pixel would pay a reference
+        # count per array argument; tuples are unpacked once, outside the parallel loop.
+        triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
-        for row in numba.prange(height):
-            for col in range(width):
-                o = opaque_of[row * width + col]
-                if o < 0:
-                    empty_sample(row, col, has_vis, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow)
-                    continue
-                back = 1 if two_sided and not front[o] else 0
-                shade_sample(
-                    row, col, o, tri[o], bary[o, 0], bary[o, 1], bary[o, 2], depth[o], back,
-                    triangles, triangle_mesh, eye_pos, eye_n, world_n,
-                    bases, a_cms, d_cms, s_cms, shininesses, opacity,
-                    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
-                    local_viewer, blinn, gl_compat, separate,
-                    has_vis, vis, vis_mean,
-                    o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
-                )  # fmt: skip
-
-    @numba.njit(parallel=True, cache=True)
-    def from_winners(
-        width, height, winner, source, front, xe, ye, area, a, b, c, z, w, weights, two_sided,
-        geometry, materials, lights, flags, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
-    ):  # fmt: skip  # pragma: no cover - compiled
-        # The z-buffer's winners (sub-triangles, one sample per pixel) shaded where they are:
-        # ``finish``'s barycentrics and depth, then shade_sample. No fragment arrays.
-        triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry  # unpacked outside the loops
-        bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
-        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
-        local_viewer, blinn, gl_compat, separate = flags
-        no_vis = np.zeros((0, 0, 1))
-        no_mean = np.zeros(0)
         covered = np.zeros(height, np.int64)
         for row in numba.prange(height):
-            n = 0
+            n_row = 0
             cy = row + 0.5
             for col in range(width):
-                t = winner[row * width + col]
-                if t < 0:
-                    empty_sample(row, col, False, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow)
+                o = index[row * width + col]
+                if o < 0:
+                    for ch in range(4):
+                        o_rgba[row, col, ch] = 0.0
+                    for ch in range(3):
+                        o_amb[row, col, ch] = 0.0
+                        o_dif[row, col, ch] = 0.0
+                        o_spe[row, col, ch] = 0.0
+                        o_nrm[row, col, ch] = 0.0
+                    o_depth[row, col] = np.float32(1.0)
+                    if has_vis:
+                        o_shadow[row, col, 0] = 0.0
                     continue
-                n += 1
-                cx = col + 0.5
-                ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-                    ye[t, 1] - ye[t, 0]
-                )
-                if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
-                    l0 = (
-                        (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
-                    ) / ex_area
-                    l1 = (
-                        (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
-                    ) / ex_area
-                    l2 = (
-                        (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
-                    ) / ex_area
+                n_row += 1
+                if from_winners:
+                    t = o
+                    cx = col + 0.5
+                    ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+                        ye[t, 1] - ye[t, 0]
+                    )
+                    if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+                        l0 = (
+                            (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
+                        ) / ex_area
+                        l1 = (
+                            (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
+                        ) / ex_area
+                        l2 = (
+                            (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
+                        ) / ex_area
+                    else:
+                        aa = abs(area[t])
+                        l0 = (ea[t, 0] * cx + eb[t, 0] * cy + ec[t, 0]) / aa
+                        l1 = (ea[t, 1] * cx + eb[t, 1] * cy + ec[t, 1]) / aa
+                        l2 = (ea[t, 2] * cx + eb[t, 2] * cy + ec[t, 2]) / aa
+                    depth = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
+                    q0 = l0 / w[t, 0]
+                    q1 = l1 / w[t, 1]
+                    q2 = l2 / w[t, 2]
+                    qs = q0 + q1 + q2
+                    q0 /= qs
+                    q1 /= qs
+                    q2 /= qs
+                    b0 = q0 * weights[t, 0, 0] + q1 * weights[t, 1, 0] + q2 * weights[t, 2, 0]
+                    b1 = q0 * weights[t, 0, 1] + q1 * weights[t, 1, 1] + q2 * weights[t, 2, 1]
+                    b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
+                    src = source[t]
+                    front = sub_front[t]
                 else:
-                    aa = abs(area[t])
-                    l0 = (a[t, 0] * cx + b[t, 0] * cy + c[t, 0]) / aa
-                    l1 = (a[t, 1] * cx + b[t, 1] * cy + c[t, 1]) / aa
-                    l2 = (a[t, 2] * cx + b[t, 2] * cy + c[t, 2]) / aa
-                depth = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
-                q0 = l0 / w[t, 0]
-                q1 = l1 / w[t, 1]
-                q2 = l2 / w[t, 2]
-                qs = q0 + q1 + q2
-                q0 /= qs
-                q1 /= qs
-                q2 /= qs
-                b0 = q0 * weights[t, 0, 0] + q1 * weights[t, 1, 0] + q2 * weights[t, 2, 0]
-                b1 = q0 * weights[t, 0, 1] + q1 * weights[t, 1, 1] + q2 * weights[t, 2, 1]
-                b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
-                back = 1 if two_sided and not front[t] else 0
-                shade_sample(
-                    row, col, 0, source[t], b0, b1, b2, depth, back,
-                    triangles, triangle_mesh, eye_pos, eye_n, world_n,
-                    bases, a_cms, d_cms, s_cms, shininesses, opacity,
-                    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
-                    local_viewer, blinn, gl_compat, separate,
-                    False, no_vis, no_mean,
-                    o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+                    b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
+                    depth = frag_depth[o]
+                    src = tri[o]
+                    front = frag_front[o]
+                back = 1 if two_sided and not front else 0
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
+                nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
+                nx, ny, nz = nx * scale, ny * scale, nz * scale
+                wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+                wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+                wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+                length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                scale = 1.0 / length if length > 0 else 0.0
+                wx, wy, wz = wx * scale, wy * scale, wz * scale
+                mid = 2 * triangle_mesh[src] + back
+                ar, ag, ab, dr, dg, db, sr, sg, sb = terms(
+                    o, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                    has_vis, vis,
                 )  # fmt: skip
-            covered[row] = n
+                r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
+                if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
+                    if separate:
+                        r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
+                        g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
+                        b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
+                    else:
+                        r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                a = opacity[mid]
+                # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve_plain does.
+                o_rgba[row, col, 0] = 0.0 + np.float32(a * r)
+                o_rgba[row, col, 1] = 0.0 + np.float32(a * g)
+                o_rgba[row, col, 2] = 0.0 + np.float32(a * b)
+                o_rgba[row, col, 3] = 0.0 + np.float32(a)
+                o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
+                o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
+                o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
+                o_dif[row, col, 0] = 0.0 + np.float32(dr * a)
+                o_dif[row, col, 1] = 0.0 + np.float32(dg * a)
+                o_dif[row, col, 2] = 0.0 + np.float32(db * a)
+                o_spe[row, col, 0] = 0.0 + np.float32(sr * a)
+                o_spe[row, col, 1] = 0.0 + np.float32(sg * a)
+                o_spe[row, col, 2] = 0.0 + np.float32(sb * a)
+                o_nrm[row, col, 0] = 0.0 + np.float32(wx)
+                o_nrm[row, col, 1] = 0.0 + np.float32(wy)
+                o_nrm[row, col, 2] = 0.0 + np.float32(wz)
+                o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
+                if has_vis:
+                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
+            covered[row] = n_row
         return covered.sum()
 
-    return from_fragments, from_winners
+    return plain
+
+
+_NO_SETUP = (
+    np.zeros(0, np.int64), np.zeros(0, np.bool_), *(np.zeros((0, 3)) for _ in range(2)), np.zeros(0),
+    *(np.zeros((0, 3)) for _ in range(5)), np.zeros((0, 3, 3)),
+)  # fmt: skip
+_NO_FRAGMENTS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.bool_))
 
 
 #: What the fused plain kernels read of a prepared scene: ``(two_sided, geometry, materials,
@@ -1171,12 +1136,13 @@ def shade_plain_fragments_compiled(
     shading, colour and resolve stages, without their (N, 3) float64 arrays.
     """
     two_sided, geometry, materials, lights, flags = tables
-    has_vis = visibility is not None
-    from_fragments, _ = _plain_kernels()
-    from_fragments(
-        width, height, opaque_of, np.ascontiguousarray(triangle, dtype=np.int64), np.ascontiguousarray(bary),
-        np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_), two_sided,
-        geometry, materials, lights, flags, has_vis,
+    fragments = (
+        np.ascontiguousarray(triangle, dtype=np.int64), np.ascontiguousarray(bary),
+        np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_),
+    )  # fmt: skip
+    _plain_kernel()(
+        width, height, False, opaque_of, *fragments, *_NO_SETUP, two_sided, geometry, materials, lights,
+        flags, visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
         *out,
@@ -1205,12 +1171,14 @@ def shade_plain_winners_compiled(
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
     two_sided, geometry, materials, lights, flags = tables
-    _, from_winners = _plain_kernels()
+    sub = (
+        setup.source, setup.front, setup.x_exact, setup.y_exact, setup.area, setup.a, setup.b, setup.c,
+        setup.z, setup.w, np.ascontiguousarray(setup.weights),
+    )  # fmt: skip
     return int(
-        from_winners(
-            setup.width, setup.height, winner, setup.source, setup.front, setup.x_exact, setup.y_exact,
-            setup.area, setup.a, setup.b, setup.c, setup.z, setup.w, setup.weights, two_sided,
-            geometry, materials, lights, flags, *out,
+        _plain_kernel()(
+            setup.width, setup.height, True, winner, *_NO_FRAGMENTS, *sub, two_sided, geometry, materials,
+            lights, flags, False, np.zeros((0, 0, 1)), np.zeros(0), *out,
         )
     )  # fmt: skip
 
@@ -1220,10 +1188,11 @@ def _setup_kernels() -> object:  # numba dispatchers
 
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True)
     def classify(clip, tri, n_in):  # pragma: no cover - compiled
-        # Vertices inside the near plane (z + w >= 0) per triangle, as raster._clip_near counts them.
-        for t in numba.prange(tri.shape[0]):
+        # Vertices inside the near plane (z + w >= 0) per triangle, as raster._clip_near counts them
+        # (serial: a few operations per triangle, not worth a parallel region's start-up).
+        for t in range(tri.shape[0]):
             n = 0
             for j in range(3):
                 v = tri[t, j]
