@@ -962,7 +962,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
 
     @numba.njit(parallel=True, cache=True)
     def plain(
-        width, height, from_winners, index, tri, bary, frag_depth, frag_front,
+        width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, has_vis, vis, vis_mean,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
@@ -980,7 +980,8 @@ def _plain_kernel() -> object:  # a numba dispatcher
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
         covered = np.zeros(height, np.int64)
-        for row in numba.prange(height):
+        for i_row in numba.prange(height):
+            row = row_order[i_row]  # rows interleaved over the threads (balanced work)
             n_row = 0
             cy = row + 0.5
             for col in range(width):
@@ -1104,6 +1105,12 @@ _NO_SETUP = (
 _NO_FRAGMENTS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.bool_))
 
 
+def _row_order(height: int) -> np.ndarray:
+    """Rows grouped by their residue modulo 16: a parallel loop's contiguous share of iterations
+    then covers rows spread over the whole image (an image's busy rows are often together)."""
+    return np.argsort(np.arange(height) % 16, kind="stable").astype(np.int64)
+
+
 #: What the fused plain kernels read of a prepared scene: ``(two_sided, geometry, materials,
 #: lights, flags)`` with geometry ``(triangles, triangle_mesh, eye_position, eye_normal,
 #: world_normal)``, materials and lights as :func:`blinn_phong.lighting.material_tables` and
@@ -1141,8 +1148,8 @@ def shade_plain_fragments_compiled(
         np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_),
     )  # fmt: skip
     _plain_kernel()(
-        width, height, False, opaque_of, *fragments, *_NO_SETUP, two_sided, geometry, materials, lights,
-        flags, visibility is not None,
+        width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
+        geometry, materials, lights, flags, visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
         *out,
@@ -1177,8 +1184,8 @@ def shade_plain_winners_compiled(
     )  # fmt: skip
     return int(
         _plain_kernel()(
-            setup.width, setup.height, True, winner, *_NO_FRAGMENTS, *sub, two_sided, geometry, materials,
-            lights, flags, False, np.zeros((0, 0, 1)), np.zeros(0), *out,
+            setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
+            two_sided, geometry, materials, lights, flags, False, np.zeros((0, 0, 1)), np.zeros(0), *out,
         )
     )  # fmt: skip
 
