@@ -46,6 +46,11 @@ __all__ = [
 ]
 
 
+#: The z-buffer kernels' inlined helpers, set by :func:`_kernel`.
+_triangle_setup: object = None
+_sample_depth: object = None
+
+
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
     import numba
@@ -90,6 +95,11 @@ def _kernel() -> object:  # a numba dispatcher
             return -1.0
         return max(depth, 0.0)
 
+    # Module globals, not closure variables: numba's disk-cache key hashes closure variables, and
+    # a compiled function in one changes it in every process (the kernels were never cached).
+    global _triangle_setup, _sample_depth
+    _triangle_setup, _sample_depth = triangle_setup, sample_depth
+
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
         n_bands, fine_w, fine_h, selected, x0, x1, y0, y1, a, b, c, top_left, xe, ye, area, z, source
@@ -107,11 +117,11 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
-                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
+                ex_area, exact, abs_area = _triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
                     cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(
+                        depth = _sample_depth(
                             t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
                         )
                         if depth < 0.0:
@@ -165,11 +175,11 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
-                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
+                ex_area, exact, abs_area = _triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
                     cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(
+                        depth = _sample_depth(
                             t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
                         )
                         if depth < 0.0:
@@ -950,15 +960,28 @@ def resolve_frame_compiled(
     return out
 
 
+#: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
+_point_terms: object = None
+
+
 @functools.lru_cache(maxsize=1)
 def _plain_kernel() -> object:  # a numba dispatcher
+    import hashlib
     import math
 
     import numba
 
-    from blinn_phong.lighting import point_terms
+    from blinn_phong import lighting
 
-    terms = point_terms()  # the lighting equation, the same compiled function as lighting.shade's
+    global _point_terms
+    # The lighting equation: the same compiled function as lighting.shade's kernel. A module
+    # global, not a closure variable (numba's disk-cache key hashes closure variables, and a
+    # compiled function in one changes it in every process). numba does not track that this
+    # kernel inlines code from lighting.py, so the hash of that file is a closure constant:
+    # editing the equation invalidates the cached kernel.
+    _point_terms = lighting.point_terms()
+    with open(lighting.__file__, "rb") as source:
+        lighting_stamp = int(hashlib.sha256(source.read()).hexdigest()[:15], 16)
 
     @numba.njit(parallel=True, cache=True)
     def plain(
@@ -980,6 +1003,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
         covered = np.zeros(height, np.int64)
+        covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
         for i_row in numba.prange(height):
             row = row_order[i_row]  # rows interleaved over the threads (balanced work)
             n_row = 0
@@ -1056,7 +1080,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 scale = 1.0 / length if length > 0 else 0.0
                 wx, wy, wz = wx * scale, wy * scale, wz * scale
                 mid = 2 * triangle_mesh[src] + back
-                ar, ag, ab, dr, dg, db, sr, sg, sb = terms(
+                ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                     o, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
                     pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
                     has_vis, vis,

@@ -602,12 +602,19 @@ def material_tables(
     )
 
 
+#: :func:`point_terms`'s dispatcher once compiled kernels need it (a global: see :func:`_kernel`).
+_point_terms: object = None
+
+
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
     """The lighting equation as a compiled, parallel per-point loop over :func:`point_terms`."""
     import numba
 
-    terms = point_terms()
+    global _point_terms
+    # A module global, not a closure variable: numba's disk-cache key hashes closure variables,
+    # and a compiled function in one would change it in every process (no cache hit, ever).
+    _point_terms = point_terms()
 
     @numba.njit(parallel=True, cache=True)
     def kernel(
@@ -618,7 +625,7 @@ def _kernel() -> object:  # a numba dispatcher
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         has_vis = vis.shape[0] == count and vis.shape[1] == pos.shape[0] and count > 0
         for q in numba.prange(count):
-            ar, ag, ab, dr, dg, db, sr, sg, sb = terms(
+            ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                 q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], ids[q], bases, a_cms, d_cms,
                 s_cms, shininesses, pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
                 local_viewer, blinn, has_vis, vis,
