@@ -20,7 +20,7 @@ OUT ?= out
 $(VENV)/.synced: $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet uv==0.13.8
-	$(UV) pip sync --quiet --python $(PY) $(LOCK)
+	$(UV) pip sync --quiet --compile-bytecode --python $(PY) $(LOCK)
 	touch $@
 
 setup: $(VENV)/.synced
@@ -78,7 +78,7 @@ scenes: $(VENV42)/.synced
 $(VENV42)/.synced: $(LOCK42)
 	test -x $(VENV42)/bin/python || $(PYTHON) -m venv $(VENV42)
 	$(VENV42)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV42)/bin/uv pip sync --quiet --python $(VENV42)/bin/python $(LOCK42)
+	$(VENV42)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV42)/bin/python $(LOCK42)
 	touch $@
 
 # The Blender tests again, on Blender 4.2 LTS.
@@ -88,7 +88,7 @@ test-blender42: $(VENV42)/.synced
 $(VENV45)/.synced: $(LOCK45)
 	test -x $(VENV45)/bin/python || $(PYTHON) -m venv $(VENV45)
 	$(VENV45)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV45)/bin/uv pip sync --quiet --python $(VENV45)/bin/python $(LOCK45)
+	$(VENV45)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV45)/bin/python $(LOCK45)
 	touch $@
 
 # The Blender tests again, on Blender 4.5 LTS.
@@ -98,7 +98,7 @@ test-blender45: $(VENV45)/.synced
 $(VENV52)/.synced: $(LOCK52)
 	test -x $(VENV52)/bin/python || $(PYTHON313) -m venv $(VENV52)
 	$(VENV52)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV52)/bin/uv pip sync --quiet --python $(VENV52)/bin/python $(LOCK52)
+	$(VENV52)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV52)/bin/python $(LOCK52)
 	touch $@
 
 # Blender 5.2 LTS (Python 3.13, numpy 2): the Blender tests, then the core tests on numpy 2.
