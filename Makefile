@@ -10,7 +10,10 @@ LOCK42 := requirements/blender42.lock
 VENV45 := .venv-blender45
 LOCK45 := requirements/blender45.lock
 # Blender 5.2 LTS embeds Python 3.13 and numpy 2 (bpy 5.2.3 on the package index).
-PYTHON313 ?= python3.13
+# The first working 3.13 among python3.13 on PATH and pyenv's installed 3.13s (pyenv's shim fails
+# unless 3.13 is a selected version).
+PYTHON313 ?= $(shell for p in python3.13 $$(pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13; do \
+	"$$p" -c 'import sys; assert sys.version_info[:2] == (3, 13)' >/dev/null 2>&1 && { echo "$$p"; break; }; done)
 VENV52 := .venv-blender52
 LOCK52 := requirements/blender52.lock
 OUT ?= out
