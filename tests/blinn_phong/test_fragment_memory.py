@@ -108,12 +108,15 @@ def test_visibility_memory_follows_the_kept_fragments_not_the_rasterized_ones() 
         for engine in ("numba", "numpy"):
             frame_fragments(clip, tris, W, H, opaque=first_quad_opaque, engine=engine)  # compile, warm up
             visible, peak = traced_peak(
-                lambda c=clip, t=tris, e=engine: frame_fragments(c, t, W, H, opaque=first_quad_opaque, engine=e)
+                lambda c=clip, t=tris, e=engine: frame_fragments(
+                    c, t, W, H, opaque=first_quad_opaque, engine=e
+                )
             )
             peaks[n_behind, engine] = peak
         rasterized = rasterized_count(clip, tris, W, H)
         assert rasterized == (3 + n_behind) * W * H
-        assert visible.n_opaque == W * H and visible.n_transparent == 2 * W * H  # the hidden layers are dropped
+        # The hidden layers are dropped.
+        assert visible.n_opaque == W * H and visible.n_transparent == 2 * W * H
         # Kept fragments (57 bytes each) and per-sample lists, at most twice over (the compact pass
         # copies them once), 128 bytes per sample of z-buffer/winner/key scratch (16 int64/float64
         # arrays' worth), 2 KB per triangle of set-up: all independent of the hidden layers.
