@@ -440,8 +440,10 @@ def draw(data: dict, out_dir: str | Path) -> list[Path]:
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
     fig.suptitle(
         "Frame pipeline scaling per effect (two spheres over a plane, 2 lights; A-buffer/draw-last/weighted "
-        "blended: one sphere at opacity 0.5); red line: 2 GB",
-        fontsize=10,
+        "blended: one sphere at opacity 0.5); red line: 2 GB\n"
+        "times: one render per point, each series in its own process on a shared machine — compare slopes, "
+        "and ratios only within the interleaved table",
+        fontsize=9,
     )
     fig.tight_layout(rect=(0, 0.04, 1, 0.97))
     path = save_figure(fig, out / "frame_scaling.png", dpi=DPI)  # atomic: a failed save keeps the old chart
