@@ -37,6 +37,7 @@ MODULES = (
     "blender_compositor",
     "shadow_volume",
     "shadows_mesa",
+    "frame",
 )
 
 
@@ -74,6 +75,11 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_shadow_volume
 
         return lambda: bench_shadow_volume.run(out, repeat=repeat, quick=quick)
+    if name == "frame":
+        from benchmarks import bench_frame
+
+        # --quick: 960×540, 16k-triangle spheres, scaling to 960×540 (frame_quick.json)
+        return lambda: bench_frame.run(out, repeat=repeat, quick=quick)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
