@@ -31,6 +31,11 @@ Models (each states the error metric it predicts):
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
   envelope of a log-space least-squares fit, times a safety ``margin``. Calibrated at
   shininess 40: valid for shininess ≤ ``shininess_calibrated``. Cost: ``ratio_to_phong``.
+* ``frame_cost`` — the frame-aware costs of the transparency resolve per method (seconds
+  ``a₀ + a_S·S``, depth peeling ``p₀ + p_S·S + p_k·k·S``, :func:`resolve_cost`) and of whole
+  frames per shading method and with fog (``x₀ + x_S·S + x_T·T``, :func:`frame_seconds`), for
+  ``S`` samples and ``T`` triangles, fitted to ``render()`` timings: depth peeling, shading and
+  fog costs are their ratios (:func:`depth_peeling_cost`, :func:`shading_cost`, :func:`fog_cost`).
 * ``shadow_volume`` — exact (no error model). Cost, in seconds, of shadow volumes and of Embree
   ray tracing for ``T`` triangles and ``N`` receiver samples: ``v₀ + v_T·T + v_N·N`` and
   ``r₀ + r_T·T + r_N·N`` (:func:`shadow_volume_cost`), fitted to both methods timed in the
@@ -55,12 +60,16 @@ __all__ = [
     "choose_shadow_map",
     "depth_peeling_cost",
     "depth_peeling_factor",
+    "fog_cost",
+    "frame_seconds",
     "load",
     "max_normal_angle",
     "predict_depth_peeling",
     "predict_shading",
     "predict_shadow_map",
+    "resolve_cost",
     "scene_extent",
+    "shading_cost",
     "shadow_map_cost",
     "shadow_volume_cost",
     "shipped_models",
@@ -165,14 +174,89 @@ def depth_peeling_factor(models: dict) -> float:
     return max(float(models["depth_peeling"]["c"]), 1.0)
 
 
-def depth_peeling_cost(models: dict, k: int) -> float:
-    """Predicted time of peeling ``k`` layers relative to the A-buffer's: ``t₀ + t₁·k``."""
+def depth_peeling_cost(models: dict, k: int, samples: int | None = None) -> float:
+    """Predicted time of peeling ``k`` layers relative to the A-buffer's.
+
+    With the frame fit (``frame_cost`` in the models, :func:`resolve_cost`): the frame's
+    transparency resolve in seconds, ``(p₀ + p_S·S + p_k·k·S)/(a₀ + a_S·S)`` for ``S`` samples
+    (``width·height·samples²``; None: the fit's median frame), fitted to ``render()`` timings
+    of the same frames. Without it, ``t₀ + t₁·k`` (the resolver alone on the calibration
+    fragments).
+    """
+    if "frame_cost" in models:
+        return resolve_cost(models, "depth_peeling", samples, k) / resolve_cost(models, "a_buffer", samples)
     m = models["depth_peeling"]
     return m["t0"] + m["t1"] * k
 
 
+def _samples_or_default(models: dict, samples: int | None) -> int:
+    if samples is None:
+        return int(models["frame_cost"]["samples_median"])
+    if isinstance(samples, bool) or not isinstance(samples, int | np.integer) or samples < 0:
+        raise ValueError(f"samples: expected an integer >= 0, got {samples!r}")
+    return int(samples)
+
+
+def resolve_cost(models: dict, method: str, samples: int | None = None, layers: int = 1) -> float:
+    """Predicted seconds of a frame's transparency resolve (``render()``'s ``resolve_samples`` stage).
+
+    ``a₀ + a_S·S`` per method (``a_buffer``, ``draw_last``, ``sort_objects``), and
+    ``p₀ + p_S·S + p_k·layers·S`` for ``depth_peeling``; ``S`` samples (``width·height·samples²``).
+    Fitted by :mod:`benchmarks.error_models` to the ``frame_costs`` family (``render()`` of the
+    transparency calibration scenes and the frame benchmark's scene at two sizes each, every
+    method timed in the same run): the ratio, not the seconds, carries over to other machines.
+    """
+    table = models["frame_cost"]["resolve"]
+    if method not in table:
+        raise ValueError(f"method: expected one of {sorted(table)}, got {method!r}")
+    s = _samples_or_default(models, samples)
+    c = table[method]
+    return c[0] + c[1] * s + (c[2] * layers * s if len(c) > 2 else 0.0)
+
+
+def frame_seconds(models: dict, variant: str, samples: int | None = None, triangles: int = 0) -> float:
+    """Predicted seconds of a whole ``render()`` frame without shadows: ``x₀ + x_S·S + x_T·T``.
+
+    ``variant``: ``phong``, ``gouraud``, ``flat`` (the shading of every mesh) or ``fog``
+    (Phong with exp fog); ``S`` samples (``width·height·samples²``), ``T`` triangles. Fitted to
+    the ``frame_costs`` family (see :func:`resolve_cost`).
+    """
+    table = models["frame_cost"]["frame"]
+    if variant not in table:
+        raise ValueError(f"variant: expected one of {sorted(table)}, got {variant!r}")
+    if isinstance(triangles, bool) or not isinstance(triangles, int | np.integer) or triangles < 0:
+        raise ValueError(f"triangles: expected an integer >= 0, got {triangles!r}")
+    c = table[variant]
+    return c[0] + c[1] * _samples_or_default(models, samples) + c[2] * int(triangles)
+
+
+def fog_cost(models: dict, samples: int | None = None, triangles: int = 0) -> float | None:
+    """Predicted time of a frame with fog relative to the same frame without (:func:`frame_seconds`);
+    None without the frame fit."""
+    if "frame_cost" not in models:
+        return None
+    return frame_seconds(models, "fog", samples, triangles) / frame_seconds(
+        models, "phong", samples, triangles
+    )
+
+
+def shading_cost(models: dict, method: str, samples: int | None = None, triangles: int = 0) -> float:
+    """Predicted time of a frame shaded by ``method`` relative to Phong's (:func:`frame_seconds`
+    when the frame fit exists, else the calibration sphere's measured ``ratio_to_phong``)."""
+    if "frame_cost" in models:
+        return frame_seconds(models, method, samples, triangles) / frame_seconds(
+            models, "phong", samples, triangles
+        )
+    return float(models["shading"]["methods"][method]["ratio_to_phong"])
+
+
 def choose_depth_peeling(
-    models: dict, tolerance: float, alpha_min: float, brightest: float, max_layers: int
+    models: dict,
+    tolerance: float,
+    alpha_min: float,
+    brightest: float,
+    max_layers: int,
+    samples: int | None = None,
 ) -> dict:
     """The fewest layers predicted within ``tolerance`` and faster than the A-buffer, else the A-buffer.
 
@@ -182,6 +266,8 @@ def choose_depth_peeling(
         alpha_min: smallest opacity of the transparent surfaces, in (0, 1].
         brightest: bound of the straight radiance behind the peeled layers (≥ 0).
         max_layers: an upper bound of the depth complexity (peeling that many is exact).
+        samples: the frame's samples ``width·height·samples²`` for the cost model (None: the
+            fit's median frame).
 
     Returns:
         ``{"method": "depth_peeling", "layers": k, "predicted_steps", "predicted_cost"}`` or
@@ -196,7 +282,7 @@ def choose_depth_peeling(
     ):
         raise ValueError(f"brightest: expected a finite radiance >= 0, got {brightest!r}")
     for k in range(1, max_layers):
-        cost = depth_peeling_cost(models, k)
+        cost = depth_peeling_cost(models, k, samples)
         if cost >= 1.0:
             break
         err = predict_depth_peeling(models, k, alpha_min, brightest)
@@ -344,21 +430,26 @@ def predict_shading(models: dict, method: str, theta: float) -> float:
     return shading.get("margin", 1.0) * m["a"] * theta ** m["b"]
 
 
-def choose_shading(models: dict, tolerance: float, theta: float) -> dict:
+def choose_shading(
+    models: dict, tolerance: float, theta: float, samples: int | None = None, triangles: int = 0
+) -> dict:
     """The cheapest of flat/Gouraud predicted within ``tolerance`` steps and faster than Phong, else Phong.
+
+    Costs by :func:`shading_cost` for the frame's ``samples`` (``width·height·samples²``) and
+    ``triangles``.
 
     Returns:
         ``{"method", "predicted_steps", "predicted_cost"}``, the cost relative to Phong's.
     """
     tol = _check_tolerance(tolerance)
-    methods = models["shading"]["methods"]
-    for method in sorted(("flat", "gouraud"), key=lambda name: methods[name]["ratio_to_phong"]):
+    cost = {name: shading_cost(models, name, samples, triangles) for name in ("flat", "gouraud")}
+    for method in sorted(("flat", "gouraud"), key=lambda name: cost[name]):
         err = predict_shading(models, method, theta)
-        if err <= tol and methods[method]["ratio_to_phong"] < 1.0:
+        if err <= tol and cost[method] < 1.0:
             return {
                 "method": method,
                 "predicted_steps": err,
-                "predicted_cost": methods[method]["ratio_to_phong"],
+                "predicted_cost": cost[method],
             }
     return {
         "method": "phong",
