@@ -22,6 +22,10 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
   residual factor) and :data:`SHADING_MARGIN` is stored with it. Calibrated at shininess 40.
+* ``frame_cost`` — the frame-aware costs from whole ``render()`` timings (the ``frame_costs``
+  family): process CPU seconds of a frame per transparency method, per shading method and
+  with fog, ``x₀ + x_S·S + x_T·T`` (depth peeling ``+ x_k·k·S``; ``S`` samples
+  ``width·height·samples``, ``T`` triangles); non-negative least squares on unit-norm columns.
 * ``shadow_volume`` — no error model (exact, like ray tracing); its cost against Embree ray
   tracing, both in seconds, ``v₀ + v_T·T + v_N·N`` and ``r₀ + r_T·T + r_N·N`` for ``T``
   triangles and ``N`` receiver samples, least squares (unit-norm columns, non-negative) on the
@@ -41,7 +45,17 @@ from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
 from blinn_phong.planner import MapGeometry
 from compositing._atomic import write_json_atomic
 
-__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save", "shadow_volume_cost_design"]
+__all__ = [
+    "CALIBRATION_PATH",
+    "SHADING_MARGIN",
+    "fit",
+    "fit_results",
+    "frame_cost_designs",
+    "load",
+    "main",
+    "save",
+    "shadow_volume_cost_design",
+]
 
 #: Safety factor on the shading envelope for scenes other than the calibration sphere (other
 #: lights, views, shininess ≤ 40): the fit has one light and one view, so its largest
@@ -200,6 +214,50 @@ def _fit_shadow_volume(data: dict) -> dict:
     }
 
 
+def _nonnegative_lstsq(design: np.ndarray, y: list[float]) -> np.ndarray:
+    """Non-negative least squares (Lawson–Hanson, ``scipy.optimize.nnls``) on unit-norm columns,
+    then unscaled: a cost is a sum of non-negative terms."""
+    from scipy.optimize import nnls
+
+    scale = np.sqrt((design * design).sum(axis=0))
+    scale = np.where(scale > 0, scale, 1.0)
+    coef, _ = nnls(design / scale, np.asarray(y, float))
+    return coef / scale
+
+
+def frame_cost_designs(rows: list[dict]) -> dict[str, np.ndarray]:
+    """Design matrices of the frame-aware cost fits (``frame_costs`` rows), by model key:
+    ``transparency/<method>`` and ``frame/<variant>`` ``[1, S, T]`` (``depth_peeling``:
+    ``[1, S, T, k·S]``; ``S`` samples, ``T`` triangles, ``k`` peeled layers)."""
+    out: dict[str, np.ndarray] = {}
+    groups = [("transparency", m) for m in ("a_buffer", "draw_last", "sort_objects", "depth_peeling")]
+    groups += [("frame", v) for v in ("phong", "gouraud", "flat", "fog")]
+    for kind, name in groups:
+        sel = [r for r in rows if r["kind"] == kind and r["method"] == name]
+        cols = [np.ones(len(sel)), [r["samples"] for r in sel], [r["triangles"] for r in sel]]
+        if name == "depth_peeling":
+            cols.append([r["layers"] * r["samples"] for r in sel])
+        out[f"{kind}/{name}"] = np.c_[tuple(cols)].astype(float)
+    return out
+
+
+def _fit_frame_cost(data: dict) -> dict:
+    rows = data["rows"]
+    model: dict[str, object] = {
+        "cost": "process CPU seconds of a whole render() frame ~= x0 + xs * S + xt * T (+ xk * k * S for "
+        "depth peeling), per transparency method and per shading method / fog; S samples, T triangles",
+        "transparency": {},
+        "frame": {},
+        "samples_median": int(np.median([r["samples"] for r in rows])),
+        "cases": len(rows),
+    }
+    for key, design in frame_cost_designs(rows).items():
+        kind, name = key.split("/")
+        y = [r["cpu_s"] for r in rows if r["kind"] == kind and r["method"] == name]
+        model[kind][name] = [float(v) for v in _nonnegative_lstsq(design, y)]  # type: ignore[index]
+    return model
+
+
 def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
     """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``) and, when given,
     the shadow-volume cost model to a ``shadow_volume.json`` document (``{"crossover": [...]}``)."""
@@ -218,6 +276,8 @@ def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
         models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
+    if "frame_costs" in families:
+        models["frame_cost"] = _fit_frame_cost(families["frame_costs"])
     if volumes is not None and volumes.get("crossover"):
         models["shadow_volume"] = _fit_shadow_volume(volumes)
     return models
@@ -229,12 +289,21 @@ def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
     return path
 
 
+def fit_results(results: Path, families: dict | None = None) -> dict:
+    """Fit every model to the measurements in the directory ``results``: ``tradeoffs.json`` (or the
+    given ``families``) and, when present, ``shadow_volume.json`` (the exact shadow methods' costs,
+    measured by :mod:`benchmarks.bench_shadow_volume`)."""
+    volumes_path = Path(results) / "shadow_volume.json"
+    volumes = json.loads(volumes_path.read_text()) if volumes_path.exists() else None
+    if families is None:
+        families = json.loads((Path(results) / "tradeoffs.json").read_text())["families"]
+    return fit({"families": families}, volumes)
+
+
 def main() -> None:
     """Fit the models to ``benchmarks/results/tradeoffs.json`` and ``shadow_volume.json`` and write
     ``blinn_phong/calibration.json``."""
-    results = Path(__file__).resolve().parent / "results"
-    volumes = json.loads((results / "shadow_volume.json").read_text())
-    path = save(fit(json.loads((results / "tradeoffs.json").read_text()), volumes))
+    path = save(fit_results(Path(__file__).resolve().parent / "results"))
     print(f"wrote {path}")
 
 

@@ -31,11 +31,11 @@ Models (each states the error metric it predicts):
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
   envelope of a log-space least-squares fit, times a safety ``margin``. Calibrated at
   shininess 40: valid for shininess ≤ ``shininess_calibrated``. Cost: ``ratio_to_phong``.
-* ``frame_cost`` — the frame-aware costs of the transparency resolve per method (seconds
-  ``a₀ + a_S·S``, depth peeling ``p₀ + p_S·S + p_k·k·S``, :func:`resolve_cost`) and of whole
-  frames per shading method and with fog (``x₀ + x_S·S + x_T·T``, :func:`frame_seconds`), for
-  ``S`` samples and ``T`` triangles, fitted to ``render()`` timings: depth peeling, shading and
-  fog costs are their ratios (:func:`depth_peeling_cost`, :func:`shading_cost`, :func:`fog_cost`).
+* ``frame_cost`` — the frame-aware costs: process CPU seconds of a whole ``render()`` frame
+  per transparency method (:func:`transparency_seconds`), per shading method and with fog
+  (:func:`frame_seconds`), ``x₀ + x_S·S + x_T·T`` (depth peeling ``+ x_k·k·S``) for ``S``
+  samples and ``T`` triangles, fitted to ``render()`` timings: depth peeling, shading and fog
+  costs are their ratios (:func:`depth_peeling_cost`, :func:`shading_cost`, :func:`fog_cost`).
 * ``shadow_volume`` — exact (no error model). Cost, in seconds, of shadow volumes and of Embree
   ray tracing for ``T`` triangles and ``N`` receiver samples: ``v₀ + v_T·T + v_N·N`` and
   ``r₀ + r_T·T + r_N·N`` (:func:`shadow_volume_cost`), fitted to both methods timed in the
@@ -67,12 +67,12 @@ __all__ = [
     "predict_depth_peeling",
     "predict_shading",
     "predict_shadow_map",
-    "resolve_cost",
     "scene_extent",
     "shading_cost",
     "shadow_map_cost",
     "shadow_volume_cost",
     "shipped_models",
+    "transparency_seconds",
 ]
 
 #: The models shipped with the package (written by ``benchmarks/error_models.py``).
@@ -174,17 +174,17 @@ def depth_peeling_factor(models: dict) -> float:
     return max(float(models["depth_peeling"]["c"]), 1.0)
 
 
-def depth_peeling_cost(models: dict, k: int, samples: int | None = None) -> float:
+def depth_peeling_cost(models: dict, k: int, samples: int | None = None, triangles: int = 0) -> float:
     """Predicted time of peeling ``k`` layers relative to the A-buffer's.
 
-    With the frame fit (``frame_cost`` in the models, :func:`resolve_cost`): the frame's
-    transparency resolve in seconds, ``(p₀ + p_S·S + p_k·k·S)/(a₀ + a_S·S)`` for ``S`` samples
-    (``width·height·samples²``; None: the fit's median frame), fitted to ``render()`` timings
-    of the same frames. Without it, ``t₀ + t₁·k`` (the resolver alone on the calibration
-    fragments).
+    With the frame fit (``frame_cost`` in the models): the whole frame's, by
+    :func:`transparency_seconds` for ``samples`` (``width·height·samples``; None: the fit's
+    median frame) and ``triangles``. Without it, ``t₀ + t₁·k`` (the resolver alone on the
+    calibration fragments).
     """
     if "frame_cost" in models:
-        return resolve_cost(models, "depth_peeling", samples, k) / resolve_cost(models, "a_buffer", samples)
+        peel = transparency_seconds(models, "depth_peeling", samples, triangles, k)
+        return peel / transparency_seconds(models, "a_buffer", samples, triangles)
     m = models["depth_peeling"]
     return m["t0"] + m["t1"] * k
 
@@ -197,37 +197,42 @@ def _samples_or_default(models: dict, samples: int | None) -> int:
     return int(samples)
 
 
-def resolve_cost(models: dict, method: str, samples: int | None = None, layers: int = 1) -> float:
-    """Predicted seconds of a frame's transparency resolve (``render()``'s ``resolve_samples`` stage).
-
-    ``a₀ + a_S·S`` per method (``a_buffer``, ``draw_last``, ``sort_objects``), and
-    ``p₀ + p_S·S + p_k·layers·S`` for ``depth_peeling``; ``S`` samples (``width·height·samples²``).
-    Fitted by :mod:`benchmarks.error_models` to the ``frame_costs`` family (``render()`` of the
-    transparency calibration scenes and the frame benchmark's scene at two sizes each, every
-    method timed in the same run): the ratio, not the seconds, carries over to other machines.
-    """
-    table = models["frame_cost"]["resolve"]
-    if method not in table:
-        raise ValueError(f"method: expected one of {sorted(table)}, got {method!r}")
+def _linear(
+    models: dict, kind: str, name: str, samples: int | None, triangles: int, layers: int = 0
+) -> float:
+    table = models["frame_cost"][kind]
+    if name not in table:
+        raise ValueError(f"method: expected one of {sorted(table)}, got {name!r}")
+    if isinstance(triangles, bool) or not isinstance(triangles, int | np.integer) or triangles < 0:
+        raise ValueError(f"triangles: expected an integer >= 0, got {triangles!r}")
     s = _samples_or_default(models, samples)
-    c = table[method]
-    return c[0] + c[1] * s + (c[2] * layers * s if len(c) > 2 else 0.0)
+    c = table[name]
+    return c[0] + c[1] * s + c[2] * int(triangles) + (c[3] * layers * s if len(c) > 3 else 0.0)
+
+
+def transparency_seconds(
+    models: dict, method: str, samples: int | None = None, triangles: int = 0, layers: int = 1
+) -> float:
+    """Predicted process CPU seconds of a ``render()`` frame resolving transparency by ``method``.
+
+    ``x₀ + x_S·S + x_T·T`` per method (``a_buffer``, ``draw_last``, ``sort_objects``), plus
+    ``x_k·layers·S`` for ``depth_peeling``; ``S`` samples (``width·height·samples``), ``T``
+    triangles. Fitted by :mod:`benchmarks.error_models` to the ``frame_costs`` family
+    (``render()`` of the transparency calibration scenes and the frame benchmark's scene at two
+    sizes each, every method timed in the same run): the ratios, not the seconds, carry over to
+    other machines.
+    """
+    return _linear(models, "transparency", method, samples, triangles, layers)
 
 
 def frame_seconds(models: dict, variant: str, samples: int | None = None, triangles: int = 0) -> float:
-    """Predicted seconds of a whole ``render()`` frame without shadows: ``x₀ + x_S·S + x_T·T``.
+    """Predicted process CPU seconds of a whole ``render()`` frame without shadows: ``x₀ + x_S·S + x_T·T``.
 
     ``variant``: ``phong``, ``gouraud``, ``flat`` (the shading of every mesh) or ``fog``
-    (Phong with exp fog); ``S`` samples (``width·height·samples²``), ``T`` triangles. Fitted to
-    the ``frame_costs`` family (see :func:`resolve_cost`).
+    (Phong with exp fog); ``S`` samples (``width·height·samples``), ``T`` triangles. Fitted to
+    the ``frame_costs`` family (see :func:`transparency_seconds`).
     """
-    table = models["frame_cost"]["frame"]
-    if variant not in table:
-        raise ValueError(f"variant: expected one of {sorted(table)}, got {variant!r}")
-    if isinstance(triangles, bool) or not isinstance(triangles, int | np.integer) or triangles < 0:
-        raise ValueError(f"triangles: expected an integer >= 0, got {triangles!r}")
-    c = table[variant]
-    return c[0] + c[1] * _samples_or_default(models, samples) + c[2] * int(triangles)
+    return _linear(models, "frame", variant, samples, triangles)
 
 
 def fog_cost(models: dict, samples: int | None = None, triangles: int = 0) -> float | None:
@@ -257,6 +262,7 @@ def choose_depth_peeling(
     brightest: float,
     max_layers: int,
     samples: int | None = None,
+    triangles: int = 0,
 ) -> dict:
     """The fewest layers predicted within ``tolerance`` and faster than the A-buffer, else the A-buffer.
 
@@ -266,8 +272,9 @@ def choose_depth_peeling(
         alpha_min: smallest opacity of the transparent surfaces, in (0, 1].
         brightest: bound of the straight radiance behind the peeled layers (≥ 0).
         max_layers: an upper bound of the depth complexity (peeling that many is exact).
-        samples: the frame's samples ``width·height·samples²`` for the cost model (None: the
+        samples: the frame's samples ``width·height·samples`` for the cost model (None: the
             fit's median frame).
+        triangles: the scene's triangles, for the cost model.
 
     Returns:
         ``{"method": "depth_peeling", "layers": k, "predicted_steps", "predicted_cost"}`` or
@@ -282,7 +289,7 @@ def choose_depth_peeling(
     ):
         raise ValueError(f"brightest: expected a finite radiance >= 0, got {brightest!r}")
     for k in range(1, max_layers):
-        cost = depth_peeling_cost(models, k, samples)
+        cost = depth_peeling_cost(models, k, samples, triangles)
         if cost >= 1.0:
             break
         err = predict_depth_peeling(models, k, alpha_min, brightest)
@@ -396,7 +403,7 @@ def shadow_volume_cost(models: dict, triangles: int, receivers: int) -> dict | N
     Args:
         models: from :func:`load` or :func:`shipped_models`.
         triangles: ``T``, triangles in the scene (≥ 0).
-        receivers: ``N``, receiver samples of the frame (``width·height·samples²``, ≥ 0).
+        receivers: ``N``, receiver samples of the frame (``width·height·samples``, ≥ 0).
 
     Returns:
         ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
@@ -435,7 +442,7 @@ def choose_shading(
 ) -> dict:
     """The cheapest of flat/Gouraud predicted within ``tolerance`` steps and faster than Phong, else Phong.
 
-    Costs by :func:`shading_cost` for the frame's ``samples`` (``width·height·samples²``) and
+    Costs by :func:`shading_cost` for the frame's ``samples`` (``width·height·samples``) and
     ``triangles``.
 
     Returns:

@@ -269,7 +269,7 @@ def frame_plan(
             nor order-independent transparency); asking for one raises ``ValueError``.
         width: frame width in pixels, for the cost models (None: the planner's default frame).
         height: frame height in pixels (None: the planner's default frame).
-        samples: k for k×k samples per pixel.
+        samples: samples per pixel (k² for a k×k grid), as render takes them.
         fog: the render's :class:`Fog` (or None): the planner scales its error bounds by the fog
             factor and states fog's cost (:func:`blinn_phong.planner.plan`).
 

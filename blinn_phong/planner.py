@@ -26,11 +26,14 @@ Transparency (methods of :mod:`blinn_phong.oit`):
 * ``depth_peeling`` — with a tolerance: the fewest layers ``k`` whose predicted max error
   ``255·c·B·(1 − α_min)^k`` is within it (what lies behind ``k`` layers is scaled by their
   transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them
-  with every factor of the lighting equation — emission, ambient, light colours, and the
-  attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the smallest distance from the light to a
-  mesh, above 1 when ``k_c < 1`` — see :func:`_max_radiance`; at least 1 because alpha
+  with every factor of the lighting equation — emission, ambient, light colours, and per
+  mesh the attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the mesh's nearest distance from the
+  light, above 1 when ``k_c < 1``, and the spot cone's factor at its smallest angle to the
+  mesh (:func:`_mesh_light_factor`) — see :func:`_max_radiance`; with fog
+  ``f_hi·B + (1 − f_lo)·C_f`` (:func:`_fogged_radiance_bound`); at least 1 because alpha
   counts too; divided by ``α_min`` for the absorption model whose fragments are not
-  premultiplied by their opacity; ``c`` measured), if its predicted cost ``t₀ + t₁·k`` is
+  premultiplied by their opacity; ``c`` measured), if its predicted frame cost for the
+  frame's samples and triangles (:func:`blinn_phong.calibration.depth_peeling_cost`) is
   below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
@@ -47,8 +50,9 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   every caster lies between that plane and the light: Blinn's projected shadows are exact.
 * ``shadow_map`` — with a tolerance, directional lights (the calibrated case), only when
   ``255·w ≤ T``: ``w`` is the largest change a pixel sees between lit and shadowed (the
-  light's diffuse and specular colours times the materials', times the attenuation bound),
-  which a misplaced hard edge costs in full. The resolution is the smallest power of two
+  light's diffuse and specular colours times the materials', times each mesh's bound of
+  ``att·spot`` and, with fog, its largest fog factor; see :func:`_shadow_weight`), which a
+  misplaced hard edge costs in full. The resolution is the smallest power of two
   whose texel ``D/R`` (``D`` the map's span) is at most half the thinnest caster seen from
   the light (the smallest extent of its projection across the light direction,
   :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
@@ -71,7 +75,11 @@ Shading frequency, per mesh (:mod:`blinn_phong.render`):
   are constant over each face, so the lighting is.
 * ``flat`` or ``gouraud`` — with a tolerance, shininess within the calibrated range: the
   cheaper one whose predicted max error ``margin·a·θ^b`` (``θ`` the largest angle between
-  adjacent vertex normals) is within it, if it is measured faster than Phong.
+  adjacent vertex normals) is within it, if it is predicted faster than Phong for the frame
+  (:func:`blinn_phong.calibration.shading_cost`).
+
+Fog (``plan(..., fog=Fog(...))``, as ``render`` takes it) is no choice but scales the bounds
+(:func:`_fog_range`); the plan's ``fog`` entry states its factor range and predicted cost.
 * ``phong`` — otherwise (per-pixel evaluation, the reference).
 """
 
@@ -588,8 +596,9 @@ def _plan_transparency(
     layers_bound = sum(
         1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
     )
+    n_triangles = sum(f.n_tris for f in facts)
     pick = calibration.choose_depth_peeling(
-        models, tolerance, alpha_min, brightest, layers_bound, frame.samples_total
+        models, tolerance, alpha_min, brightest, layers_bound, frame.samples_total, n_triangles
     )
     c = calibration.depth_peeling_factor(models)
     if pick["method"] == "depth_peeling":
@@ -597,7 +606,7 @@ def _plan_transparency(
         return Choice(
             "depth_peeling",
             f"{why}; depth peeling, {k} layers: predicted max error {err:.2g} steps ≤ tolerance "
-            f"{tolerance:g}, cost {cost:.2f}× A-buffer (the resolve stage, {frame.samples_total} samples) "
+            f"{tolerance:g}, cost {cost:.2f}× A-buffer (the frame, {frame.samples_total} samples) "
             f"(255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
             {"layers": k},
             predicted_steps=err,
@@ -607,8 +616,8 @@ def _plan_transparency(
         "a_buffer",
         f"{why}: no number of peeled layers is predicted within {tolerance:g} steps and faster than the "
         f"A-buffer (peeling 1 of at most {layers_bound} layers is predicted at "
-        f"{calibration.depth_peeling_cost(models, 1, frame.samples_total):.2f}× the A-buffer's resolve for "
-        f"{frame.samples_total} samples); the A-buffer is exact",
+        f"{calibration.depth_peeling_cost(models, 1, frame.samples_total, n_triangles):.2f}× the A-buffer's "
+        f"frame for {frame.samples_total} samples); the A-buffer is exact",
         predicted_steps=0.0,
         relative_cost=1.0,
     )
@@ -1333,13 +1342,14 @@ class _Frame:
 
     @property
     def samples_total(self) -> int:
-        """Samples of the frame, ``width·height·samples²`` (rasterization, shading, resolve scale with it)."""
-        return self.width * self.height * self.samples**2
+        """Samples of the frame, ``width·height·samples`` (``samples`` per pixel, a k×k grid, as
+        ``render`` takes it): what rasterization, shading and the resolve scale with."""
+        return self.width * self.height * self.samples
 
     @property
     def receivers(self) -> int:
-        """Shading samples of the frame, ``width·height·samples²`` (the points that need a visibility)."""
-        return self.width * self.height * self.samples**2
+        """Shading samples of the frame, ``width·height·samples`` (the points that need a visibility)."""
+        return self.width * self.height * self.samples
 
 
 def _frame(width: int | None, height: int | None, samples: int) -> _Frame:
@@ -1373,7 +1383,7 @@ def plan(
             fitted to ``python -m benchmarks`` measurements).
         width: frame width in pixels (None: :data:`DEFAULT_FRAME`), as passed to ``render``.
         height: frame height in pixels (None: :data:`DEFAULT_FRAME`).
-        samples: ``k`` for k×k samples per pixel, as passed to ``render``.
+        samples: samples per pixel (``k²`` for a k×k grid: 1, 4, 9, …), as passed to ``render``.
         fog: a :class:`blinn_phong.Fog` (or None), as passed to ``render``. Fog blends each
             fragment with the fog colour, ``f·c + (1 − f)·C_f`` (OpenGL 2.1 §3.10), ``f`` in [0, 1]
             taken over each mesh's eye distances (:func:`_fog_range`): a shadow's change of a

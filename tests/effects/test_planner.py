@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from blinn_phong.calibration import shipped_models
+from blinn_phong.frame import Fog
 from blinn_phong.planner import plan
 from blinn_phong.render import render
 from blinn_phong.scene import AmbientLight, DirectionalLight, LightModel, Material, Mesh, PointLight
@@ -419,11 +420,14 @@ def test_plan_is_the_plan_render_follows_for_kay_greenberg_and_the_default_shadi
     ):
         scene = scene_of(meshes, [LIGHT], perspective_camera(), light_model)
         for tolerance in (0.0, 8.0):
-            followed = render(scene, 40, 30, tolerance=tolerance).plan
-            planned = plan(scene, tolerance, width=40, height=30)
-            assert followed.transparency.method == planned.transparency.method
-            assert [c.method for c in followed.shadows] == [c.method for c in planned.shadows]
-            assert [c.method for c in followed.shading] == [c.method for c in planned.shading]
+            for fog in (None, Fog("exp2", (0.3, 0.3, 0.3), density=0.15), Fog("linear", start=2.0, end=14.0)):
+                followed = render(scene, 40, 30, tolerance=tolerance, fog=fog).plan
+                planned = plan(scene, tolerance, width=40, height=30, fog=fog)
+                assert followed.transparency.method == planned.transparency.method
+                assert [c.method for c in followed.shadows] == [c.method for c in planned.shadows]
+                assert [c.method for c in followed.shading] == [c.method for c in planned.shading]
+                assert followed.fog == planned.fog  # the same range, cost and reason
+                assert (followed.fog is None) == (fog is None)
     assert plan(scene_of([FLOOR, glass], [LIGHT])).transparency.method == "draw_last"
 
 
