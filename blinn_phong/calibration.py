@@ -15,7 +15,8 @@ Models (each states the error metric it predicts):
   contribution is scaled by the transmittance of the first ``k``), so the error is at most
   ``255·c·B·(1 − α_min)^k`` steps; ``c`` is the largest measured/bound ratio over the
   calibration cases (≤ 1 when the bound holds); predictions use ``max(c, 1)``, the bound
-  itself, since other scenes reach it. Cost: ``t₀ + t₁·k`` times the A-buffer's.
+  itself, since other scenes reach it. Cost: the frame fit's ratio (``frame_cost`` below;
+  without it ``t₀ + t₁·k`` times the A-buffer's, the resolver alone).
 * ``shadow_map`` — mean error of light visibility over the visible points facing the light
   (misclassified share × 255), nearest-texel lookup with bias ``1e-4 + 2·slope``. A
   shadow's edge band is one texel (``D/R`` for a map of resolution ``R`` covering a span
