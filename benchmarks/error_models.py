@@ -15,9 +15,9 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   seen from the light, both as the planner computes them, ``R`` resolution); ``c`` the
   largest ratio on the calibration scene. Cost relative to ray tracing: ``t₀ + t₂·R²`` at
   the calibration scene's receiver count, and the frame-aware
-  ``(m₀ + m₂·R² + m_N·N)/(b₀·τ + b_N·N)`` fitted (least squares, in seconds) to the times
-  measured at several receiver counts ``N`` (``τ``: the scene's triangle count relative to
-  the calibration scene's, for the ray tracer's scene build).
+  ``(m₀ + m₂·R² + m_N·N + m_T·T)/(b₀ + b_N·N + b_T·T)`` fitted (non-negative least squares,
+  in seconds, fastest rounds) to the times measured at several receiver counts ``N`` and two
+  triangle counts ``T`` (rasterizing the map; building the ray tracer's BVH).
 * ``shading`` — interior max error of flat/Gouraud/Phong against per-pixel shading of the
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
@@ -97,13 +97,13 @@ def _fit_depth_peeling(data: dict) -> dict:
 
 
 def frame_cost_design(rows: list[dict]) -> np.ndarray:
-    """Design matrix of the frame-aware shadow cost fit: ``[1, N]`` for ray tracing rows,
-    ``[1, R², N]`` for shadow-map rows (``N`` receivers, ``R`` resolution)."""
+    """Design matrix of the frame-aware shadow cost fit: ``[1, N, T]`` for ray tracing rows,
+    ``[1, R², N, T]`` for shadow-map rows (``N`` receivers, ``R`` resolution, ``T`` triangles)."""
+    n = [r["receivers"] for r in rows]
+    t = [r["triangles"] for r in rows]
     if rows and rows[0]["method"] == "ray_traced":
-        return np.c_[np.ones(len(rows)), [r["receivers"] for r in rows]].astype(float)
-    return np.c_[
-        np.ones(len(rows)), [r["resolution"] ** 2 for r in rows], [r["receivers"] for r in rows]
-    ].astype(float)
+        return np.c_[np.ones(len(rows)), n, t].astype(float)
+    return np.c_[np.ones(len(rows)), [r["resolution"] ** 2 for r in rows], n, t].astype(float)
 
 
 def _scaled_lstsq(design: np.ndarray, y: list[float]) -> np.ndarray:
@@ -143,21 +143,22 @@ def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
         "t2": float(t2),
     }
     rows = data.get("frame_cost")
-    if rows:
-        # seconds: ray tracing b0 + bn·N, a map m0 + m2·R² + mn·N (least squares, non-negative)
+    if rows and "triangles" in rows[0]:
+        # seconds (fastest round): ray tracing b0 + bn·N + bt·T, a map m0 + m2·R² + mn·N + mt·T
         rt = [r for r in rows if r["method"] == "ray_traced"]
         sm = [r for r in rows if r["method"] == "shadow_map"]
-        b = _scaled_lstsq(frame_cost_design(rt), [r["median_s"] for r in rt])
-        m = _scaled_lstsq(frame_cost_design(sm), [r["median_s"] for r in sm])
-        b, m = np.maximum(b, 0.0), np.maximum(m, 0.0)
+        b = _nonnegative_lstsq(frame_cost_design(rt), [r["min_s"] for r in rt])
+        m = _nonnegative_lstsq(frame_cost_design(sm), [r["min_s"] for r in sm])
         model.update(
             {
-                "cost": "ratio ~= (m0 + m2 * R**2 + mn * N) / (b0 * T / triangles + bn * N)",
+                "cost": "ratio ~= (m0 + m2 * R**2 + mn * N + mt * T) / (b0 + bn * N + bt * T)",
                 "m0": float(m[0]),
                 "m2": float(m[1]),
                 "mn": float(m[2]),
+                "mt": float(m[3]),
                 "b0": float(b[0]),
                 "bn": float(b[1]),
+                "bt": float(b[2]),
                 "receivers": int(data["points"]),
                 "triangles": geometry.triangles,
             }

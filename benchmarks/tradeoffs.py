@@ -230,10 +230,11 @@ def _box(centre: tuple[float, float, float], half: tuple[float, float, float]) -
     return bp.Mesh(corners, tris, material=bp.Material(diffuse=(0.3, 0.3, 0.9)))
 
 
-def shadow_scene() -> bp.Scene:
-    """A ground plane (z = 0), a sphere floating over it and a box standing on it."""
+def shadow_scene(segments: int = 48) -> bp.Scene:
+    """A ground plane (z = 0), a sphere (``segments`` × ``segments/2``) floating over it and a box
+    standing on it."""
     gp, gt, gn = grid_plane(1, 1, (8.0, 8.0))
-    sp, st, sn = uv_sphere(48, 24, 0.7)
+    sp, st, sn = uv_sphere(segments, segments // 2, 0.7)
     lift = np.eye(4)
     lift[:3, 3] = (0.0, 0.0, 1.4)
     meshes = [
@@ -336,42 +337,54 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
 def shadow_frame_cost(
     scene: bp.Scene, points: np.ndarray, normals: np.ndarray, *, quick: bool = False, repeat: int = 3
 ) -> list[dict]:
-    """Seconds of Embree ray tracing and of nearest-texel shadow maps (bias 1e-4 + 2·slope) for
-    several receiver counts ``N`` (the visible points, repeated or cut) and resolutions ``R``:
-    the data of the frame-aware cost model (:func:`blinn_phong.calibration.shadow_map_cost`)."""
+    """Seconds of Embree ray tracing (its BVH built in every call) and of nearest-texel shadow maps
+    (bias 1e-4 + 2·slope) for several receiver counts ``N`` (the visible points, repeated or cut),
+    resolutions ``R`` and two triangle counts ``T`` (the scene, and the same with a 192-segment
+    sphere): the data of the frame-aware cost model
+    (:func:`blinn_phong.calibration.shadow_map_cost`), fitted to the fastest round (``min_s``)."""
     from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
     from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
 
     light = scene.lights[0]
-    tris, _ = world_triangles(scene)
     to_light = -np.asarray(light.direction, float)
     counts = (4_000, 64_000) if quick else (4_000, 16_000, 64_000, 256_000)
     resolutions = (64, 512) if quick else (64, 256, 1024)
     rows = []
-    for n in counts:
-        pick = np.arange(n) % len(points)
-        p, nrm = points[pick], normals[pick]
-        runs: dict[str, Callable[[], object]] = {
-            "ray_traced": lambda p=p, nrm=nrm: directional_light_visibility(RayScene(tris), p, nrm, to_light)
-        }
-        for res in resolutions:
-
-            def run(res=res, p=p, nrm=nrm) -> np.ndarray:
-                maps = light_shadow_maps(light, tris, res, constant_bias=1e-4, slope_bias=2.0)
-                return shadow_map_visibility(light, maps, p, nrm, kernel="nearest")
-
-            runs[f"map {res}"] = run
-        times = time_interleaved(runs, repeat=repeat)
-        rows.append({"receivers": n, "method": "ray_traced", "median_s": times["ray_traced"]["median_s"]})
-        rows += [
-            {
-                "receivers": n,
-                "method": "shadow_map",
-                "resolution": res,
-                "median_s": times[f"map {res}"]["median_s"],
+    # the calibration scene and the same with a 192-segment sphere: the triangle terms
+    for tris in (world_triangles(scene)[0], world_triangles(shadow_scene(192))[0]):
+        for n in counts:
+            pick = np.arange(n) % len(points)
+            p, nrm = points[pick], normals[pick]
+            runs: dict[str, Callable[[], object]] = {
+                "ray_traced": lambda p=p, nrm=nrm, tris=tris: directional_light_visibility(
+                    RayScene(tris), p, nrm, to_light
+                )
             }
-            for res in resolutions
-        ]
+            for res in resolutions:
+
+                def run(res=res, p=p, nrm=nrm, tris=tris) -> np.ndarray:
+                    maps = light_shadow_maps(light, tris, res, constant_bias=1e-4, slope_bias=2.0)
+                    return shadow_map_visibility(light, maps, p, nrm, kernel="nearest")
+
+                runs[f"map {res}"] = run
+            times = time_interleaved(runs, repeat=repeat)
+            common = {"receivers": n, "triangles": len(tris)}
+            rows.append(
+                {
+                    **common,
+                    "method": "ray_traced",
+                    **{k: times["ray_traced"][k] for k in ("median_s", "min_s")},
+                }
+            )
+            rows += [
+                {
+                    **common,
+                    "method": "shadow_map",
+                    "resolution": res,
+                    **{k: times[f"map {res}"][k] for k in ("median_s", "min_s")},
+                }
+                for res in resolutions
+            ]
     return rows
 
 

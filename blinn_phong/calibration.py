@@ -325,8 +325,12 @@ def shadow_map_cost(
 ) -> float:
     """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing.
 
-    With the frame-aware fit (``m0``, ``m2``, ``mn``, ``b0``, ``bn``, seconds, measured on
-    the calibration scene): ``(m0 + m2·R² + mn·N)/(b0·τ + bn·N)`` for ``N = receivers``
+    With the frame-aware fit in seconds over two triangle counts (``mt``, ``bt`` present):
+    ``(m0 + m2·R² + mn·N + mt·T)/(b0 + bn·N + bt·T)`` for ``N = receivers`` points and
+    ``T = triangles`` (rasterizing the map's triangles; building Embree's BVH, which ``render``
+    reuses while the same triangles come back — the model charges it to every frame, as for
+    a first frame or an animation). The former single-scene fit:
+    ``(m0 + m2·R² + mn·N)/(b0·τ + bn·N)`` for ``N = receivers``
     points, with ``τ = triangles/triangles_calibrated`` (the ray tracer's scene build) —
     set-up, rasterization and one lookup per receiver against the scene build and one ray
     per receiver. Unknown arguments take the calibration scene's values. The rasterization
@@ -339,6 +343,11 @@ def shadow_map_cost(
     if "m0" not in m:
         return m["t0"] + m["t2"] * resolution**2
     n = m["receivers"] if receivers is None else receivers
+    if "mt" in m:
+        t = m["triangles"] if triangles is None else triangles
+        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t) / (
+            m["b0"] + m["bn"] * n + m["bt"] * t
+        )
     tau = 1.0 if triangles is None else triangles / m["triangles"]
     return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n) / (m["b0"] * tau + m["bn"] * n)
 
