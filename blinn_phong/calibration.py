@@ -26,7 +26,8 @@ Models (each states the error metric it predicts):
   misplaced edge, so under the per-pixel tolerance a map is chosen only where the light's
   whole shadowed contribution fits; the mean model picks no resolution, it is reported.
   Calibrated with a directional light. Cost relative to Embree ray tracing for ``N``
-  receiver points: ``(m₀ + m₂·R² + m_N·N)/(b₀ + b_N·N)`` (:func:`shadow_map_cost`).
+  receiver points and ``T`` triangles: ``(m₀ + m₂·R² + m_N·N + m_T·T)/(b₀ + b_N·N + b_T·T)``
+  (:func:`shadow_map_cost`).
 * ``shading`` — max error on interior pixels of a curved mesh against per-pixel shading of
   the exact surface, per method, as a power law ``a·θ^b`` of the angle ``θ`` between the
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
