@@ -623,9 +623,10 @@ def _plan_transparency(
     )
 
 
-#: Meshes up to this many triangles get the exact nearest distance to the light (one vectorised
-#: pass over their triangles); larger ones the bounding-box / bounding-sphere lower bound.
-_EXACT_DISTANCE_TRIANGLES = 200_000
+#: Meshes up to this many triangles get the exact nearest distance to the light and per-triangle
+#: cone angles (one vectorised pass over their triangles); larger ones the bounding-box /
+#: bounding-sphere bounds, which keep planning of 100k-triangle meshes cheap.
+_EXACT_DISTANCE_TRIANGLES = 20_000
 
 
 def _triangle_distances(point: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -684,7 +685,8 @@ def _spot_bound(light: SpotLight, f: _MeshFacts, view: np.ndarray, position: np.
     ``−l·s = cos θ`` with ``θ`` the angle between the spot axis ``s`` and the direction from
     the light to the point (eye space, as :mod:`blinn_phong.lighting` evaluates it). Every point
     of a triangle lies in the ball around its centroid ``m`` through its farthest vertex
-    (radius ``ρ``); seen from the light at distance ``D = |m − p_L| > ρ`` the ball subtends a
+    (radius ``ρ``; above :data:`_EXACT_DISTANCE_TRIANGLES` triangles one ball around the whole
+    mesh); seen from the light at distance ``D = |m − p_L| > ρ`` the ball subtends a
     cone of half-angle ``asin(ρ/D)`` around ``m − p_L``, so by the triangle inequality of angles
     ``θ ≥ ∠(m − p_L, s) − asin(ρ/D)``; ``θ ≥ 0`` when the light is inside a ball. With
     ``θ_min`` the smallest of these over the triangles, ``spot ≤ cos(θ_min)^e`` (cos decreasing
@@ -692,11 +694,16 @@ def _spot_bound(light: SpotLight, f: _MeshFacts, view: np.ndarray, position: np.
     """
     axis = view[:3, :3] @ np.asarray(light.direction, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
-    tris = _eye_triangles(f, view)
-    centroid = tris.mean(axis=1)
-    rho = np.sqrt(
-        np.max(np.einsum("tkc,tkc->tk", tris - centroid[:, None], tris - centroid[:, None]), axis=1)
-    )
+    if f.n_tris > _EXACT_DISTANCE_TRIANGLES:  # one ball around the whole mesh
+        eye = f.world @ view[:3, :3].T + view[:3, 3]
+        centroid = ((eye.min(axis=0) + eye.max(axis=0)) / 2)[None]
+        rho = np.sqrt(np.max(np.einsum("ij,ij->i", eye - centroid, eye - centroid)))[None]
+    else:
+        tris = _eye_triangles(f, view)
+        centroid = tris.mean(axis=1)
+        rho = np.sqrt(
+            np.max(np.einsum("tkc,tkc->tk", tris - centroid[:, None], tris - centroid[:, None]), axis=1)
+        )
     to_m = centroid - position
     dist = np.sqrt(np.einsum("ij,ij->i", to_m, to_m))
     if np.any(dist <= rho):
