@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick and {"shading", "shadows", "transparency"} <= set(selected) - set(failures):
         from benchmarks import error_models
 
-        path = error_models.save(error_models.fit({"families": results}))
+        path = error_models.save(error_models.fit_results(out, results))
         print(f"calibration {path}")
     if args.charts is not None:
         from benchmarks.charts import draw_all

@@ -26,11 +26,14 @@ Transparency (methods of :mod:`blinn_phong.oit`):
 * ``depth_peeling`` — with a tolerance: the fewest layers ``k`` whose predicted max error
   ``255·c·B·(1 − α_min)^k`` is within it (what lies behind ``k`` layers is scaled by their
   transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them
-  with every factor of the lighting equation — emission, ambient, light colours, and the
-  attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the smallest distance from the light to a
-  mesh, above 1 when ``k_c < 1`` — see :func:`_max_radiance`; at least 1 because alpha
+  with every factor of the lighting equation — emission, ambient, light colours, and per
+  mesh the attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the mesh's nearest distance from the
+  light, above 1 when ``k_c < 1``, and the spot cone's factor at its smallest angle to the
+  mesh (:func:`_mesh_light_factor`) — see :func:`_max_radiance`; with fog
+  ``f_hi·B + (1 − f_lo)·C_f`` (:func:`_fogged_radiance_bound`); at least 1 because alpha
   counts too; divided by ``α_min`` for the absorption model whose fragments are not
-  premultiplied by their opacity; ``c`` measured), if its predicted cost ``t₀ + t₁·k`` is
+  premultiplied by their opacity; ``c`` measured), if its predicted frame cost for the
+  frame's samples and triangles (:func:`blinn_phong.calibration.depth_peeling_cost`) is
   below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
@@ -47,8 +50,9 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   every caster lies between that plane and the light: Blinn's projected shadows are exact.
 * ``shadow_map`` — with a tolerance, directional lights (the calibrated case), only when
   ``255·w ≤ T``: ``w`` is the largest change a pixel sees between lit and shadowed (the
-  light's diffuse and specular colours times the materials', times the attenuation bound),
-  which a misplaced hard edge costs in full. The resolution is the smallest power of two
+  light's diffuse and specular colours times the materials', times each mesh's bound of
+  ``att·spot`` and, with fog, its largest fog factor; see :func:`_shadow_weight`), which a
+  misplaced hard edge costs in full. The resolution is the smallest power of two
   whose texel ``D/R`` (``D`` the map's span) is at most half the thinnest caster seen from
   the light (the smallest extent of its projection across the light direction,
   :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
@@ -71,7 +75,11 @@ Shading frequency, per mesh (:mod:`blinn_phong.render`):
   are constant over each face, so the lighting is.
 * ``flat`` or ``gouraud`` — with a tolerance, shininess within the calibrated range: the
   cheaper one whose predicted max error ``margin·a·θ^b`` (``θ`` the largest angle between
-  adjacent vertex normals) is within it, if it is measured faster than Phong.
+  adjacent vertex normals) is within it, if it is predicted faster than Phong for the frame
+  (:func:`blinn_phong.calibration.shading_cost`).
+
+Fog (``plan(..., fog=Fog(...))``, as ``render`` takes it) is no choice but scales the bounds
+(:func:`_fog_range`); the plan's ``fog`` entry states its factor range and predicted cost.
 * ``phong`` — otherwise (per-pixel evaluation, the reference).
 """
 
@@ -133,18 +141,22 @@ class Plan:
         shadows: one choice per entry of ``scene.lights`` (same order).
         shading: one choice per entry of ``scene.meshes`` (same order).
         tolerance: the tolerance the plan was made for, in 8-bit steps (0: exact only).
+        fog: with fog, what it does to the error bounds and what it costs (None without fog).
     """
 
     transparency: Choice
     shadows: tuple[Choice, ...]
     shading: tuple[Choice, ...]
     tolerance: float
+    fog: Choice | None = None
 
     def reasons(self) -> list[str]:
         """Every decision as one human-readable line."""
         lines = [f"transparency: {self.transparency}"]
         lines += [f"shadows, light {i}: {c}" for i, c in enumerate(self.shadows)]
         lines += [f"shading, mesh {i}: {c}" for i, c in enumerate(self.shading)]
+        if self.fog is not None:
+            lines.append(f"fog: {self.fog}")
         return lines
 
     def __str__(self) -> str:
@@ -510,7 +522,18 @@ def _lowest_opacity(scene: Scene, mesh: Mesh) -> float:
     return min(lowest(m) for m in _sides(scene, mesh))
 
 
-def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, models: dict) -> Choice:
+def _plan_transparency(
+    scene: Scene,
+    facts: list[_MeshFacts],
+    tolerance: float,
+    models: dict,
+    frame: _Frame | None = None,
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
+) -> Choice:
+    frame = frame if frame is not None else _frame(None, None, 1)
+    factors = factors if factors is not None else _light_factors(scene, facts)
+    fog = fog if fog is not None else _fog_range(scene, facts, None)
     opacity = [_lowest_opacity(scene, m) for m in scene.meshes]
     transparent = [i for i, m in enumerate(scene.meshes) if opacity[i] < 1.0 and len(m.triangles)]
     if not transparent:
@@ -561,11 +584,7 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
             relative_cost=1.0,
         )
     # what the dropped layers hide: transparent and opaque colour behind them, and coverage (alpha)
-    factors = [
-        1.0 if isinstance(light, AmbientLight) else _light_factor_bound(light, facts)
-        for light in scene.lights
-    ]
-    brightest = max(1.0, *(_max_radiance(scene, m, factors) for m in scene.meshes))
+    brightest = _fogged_radiance_bound(scene, facts, factors, fog)
     if any(m.transparency_model == "absorption" for i in transparent for m in _sides(scene, scene.meshes[i])):
         brightest /= alpha_min  # c + (1 − α)·behind: a stack behind adds up to B·Σ(1 − α)^j ≤ B/α
     if not math.isfinite(brightest):
@@ -577,14 +596,18 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
     layers_bound = sum(
         1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
     )
-    pick = calibration.choose_depth_peeling(models, tolerance, alpha_min, brightest, layers_bound)
+    n_triangles = sum(f.n_tris for f in facts)
+    pick = calibration.choose_depth_peeling(
+        models, tolerance, alpha_min, brightest, layers_bound, frame.samples_total, n_triangles
+    )
     c = calibration.depth_peeling_factor(models)
     if pick["method"] == "depth_peeling":
         k, err, cost = pick["layers"], pick["predicted_steps"], pick["predicted_cost"]
         return Choice(
             "depth_peeling",
             f"{why}; depth peeling, {k} layers: predicted max error {err:.2g} steps ≤ tolerance "
-            f"{tolerance:g}, cost {cost:.2f}× A-buffer (255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
+            f"{tolerance:g}, cost {cost:.2f}× A-buffer (the frame, {frame.samples_total} samples) "
+            f"(255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
             {"layers": k},
             predicted_steps=err,
             relative_cost=cost,
@@ -592,36 +615,204 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
     return Choice(
         "a_buffer",
         f"{why}: no number of peeled layers is predicted within {tolerance:g} steps and faster than the "
-        f"A-buffer (peeling k of at most {layers_bound} layers costs ({models['depth_peeling']['t0']:.2f} + "
-        f"{models['depth_peeling']['t1']:.3f}·k)× the A-buffer); the A-buffer is exact",
+        f"A-buffer (peeling 1 of at most {layers_bound} layers is predicted at "
+        f"{calibration.depth_peeling_cost(models, 1, frame.samples_total, n_triangles):.2f}× the A-buffer's "
+        f"frame for {frame.samples_total} samples); the A-buffer is exact",
         predicted_steps=0.0,
         relative_cost=1.0,
     )
 
 
-def _light_factor_bound(light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts]) -> float:
-    """Upper bound of ``att·spot`` of ``light`` over every surface point of the scene.
+#: Meshes up to this many triangles get the exact nearest distance to the light and per-triangle
+#: cone angles (one vectorised pass over their triangles); larger ones the bounding-box /
+#: bounding-sphere bounds, which keep planning of 100k-triangle meshes cheap.
+_EXACT_DISTANCE_TRIANGLES = 20_000
 
-    ``att = 1/(k_c + k_l·d + k_q·d²)`` decreases with the distance ``d`` (``k ≥ 0``), so it is
-    at most its value at ``d_min``, a lower bound of the distance from the light to any mesh:
-    the distance to the nearest mesh's axis-aligned bounding box. It exceeds 1 whenever the
-    denominator is below 1 there (``k_c < 1`` near the light): 100 for ``k_c = 0.01`` at
-    ``d = 0``. The spot factor ``max(−l·s, 0)^e`` is at most 1. Directional lights: 1.
-    Infinite when the denominator can be 0.
+
+def _triangle_distances(point: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Euclidean distance from ``point`` (3,) to each triangle of ``tris`` (T, 3, 3), exactly.
+
+    The nearest point of a triangle is the foot of the perpendicular on its plane when that
+    foot lies inside (same side of all three edges), otherwise the nearest point of one of its
+    edges (clamped projection on each segment; Ericson, *Real-Time Collision Detection*, 2005,
+    §5.1.5). Degenerate triangles (zero area) use their edges only.
+    """
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ap = point - a
+    inside = nn > 0
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, point - p0), n) >= 0
+    plane = np.abs(np.einsum("ij,ij->i", ap, n)) / np.sqrt(np.where(nn > 0, nn, 1.0))
+    best = np.full(len(tris), np.inf)
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", point - p0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+        q = p0 + t[:, None] * e - point
+        best = np.minimum(best, np.sqrt(np.einsum("ij,ij->i", q, q)))
+    return np.where(inside, plane, best)
+
+
+def _eye_triangles(f: _MeshFacts, view: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) triangles of a mesh in eye space (``view`` applied to the world triangles)."""
+    return f.tris @ view[:3, :3].T + view[:3, 3]
+
+
+def _nearest_distance(point: np.ndarray, f: _MeshFacts, view: np.ndarray) -> float:
+    """A lower bound of the eye-space distance from ``point`` (eye space) to any point of a mesh.
+
+    Exact (:func:`_triangle_distances`) up to :data:`_EXACT_DISTANCE_TRIANGLES` triangles;
+    beyond, the larger of the distances to the eye-space vertices' bounding box and bounding
+    sphere (each contains the mesh, so each is a lower bound). ``inf`` for an empty mesh.
+    """
+    if f.n_tris == 0 or len(f.world) == 0:
+        return math.inf
+    if f.n_tris <= _EXACT_DISTANCE_TRIANGLES:
+        return float(_triangle_distances(point, _eye_triangles(f, view)).min())
+    eye = f.world @ view[:3, :3].T + view[:3, 3]
+    lo, hi = eye.min(axis=0), eye.max(axis=0)
+    box = float(np.linalg.norm(np.maximum(np.maximum(lo - point, point - hi), 0.0)))
+    centre = (lo + hi) / 2
+    radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", eye - centre, eye - centre))))
+    return max(box, float(np.linalg.norm(point - centre)) - radius)
+
+
+def _spot_bound(light: SpotLight, f: _MeshFacts, view: np.ndarray, position: np.ndarray) -> float:
+    """Upper bound of a spot light's factor ``spot = [−l·s ≥ cos(cutoff)]·max(−l·s, 0)^e`` over a mesh.
+
+    ``−l·s = cos θ`` with ``θ`` the angle between the spot axis ``s`` and the direction from
+    the light to the point (eye space, as :mod:`blinn_phong.lighting` evaluates it). Every point
+    of a triangle lies in the ball around its centroid ``m`` through its farthest vertex
+    (radius ``ρ``; above :data:`_EXACT_DISTANCE_TRIANGLES` triangles one ball around the whole
+    mesh); seen from the light at distance ``D = |m − p_L| > ρ`` the ball subtends a
+    cone of half-angle ``asin(ρ/D)`` around ``m − p_L``, so by the triangle inequality of angles
+    ``θ ≥ ∠(m − p_L, s) − asin(ρ/D)``; ``θ ≥ 0`` when the light is inside a ball. With
+    ``θ_min`` the smallest of these over the triangles, ``spot ≤ cos(θ_min)^e`` (cos decreasing
+    on [0, π]), and ``spot = 0`` everywhere when ``θ_min`` exceeds the cut-off.
+    """
+    axis = view[:3, :3] @ np.asarray(light.direction, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    if f.n_tris > _EXACT_DISTANCE_TRIANGLES:  # one ball around the whole mesh
+        eye = f.world @ view[:3, :3].T + view[:3, 3]
+        centroid = ((eye.min(axis=0) + eye.max(axis=0)) / 2)[None]
+        rho = np.sqrt(np.max(np.einsum("ij,ij->i", eye - centroid, eye - centroid)))[None]
+    else:
+        tris = _eye_triangles(f, view)
+        centroid = tris.mean(axis=1)
+        rho = np.sqrt(
+            np.max(np.einsum("tkc,tkc->tk", tris - centroid[:, None], tris - centroid[:, None]), axis=1)
+        )
+    to_m = centroid - position
+    dist = np.sqrt(np.einsum("ij,ij->i", to_m, to_m))
+    if np.any(dist <= rho):
+        theta_min = 0.0
+    else:
+        cos_axis = np.clip((to_m @ axis) / dist, -1.0, 1.0)
+        theta = np.arccos(cos_axis) - np.arcsin(np.clip(rho / dist, 0.0, 1.0))
+        theta_min = max(float(theta.min()) - 1e-9, 0.0)  # 1e-9 rad: rounding of arccos/arcsin
+    if theta_min > math.radians(light.cutoff):
+        return 0.0
+    return max(math.cos(theta_min), 0.0) ** light.exponent
+
+
+def _mesh_light_factor(
+    light: DirectionalLight | PointLight | SpotLight, f: _MeshFacts, view: np.ndarray
+) -> float:
+    """Upper bound of ``att·spot`` of ``light`` over every point of one mesh (eye space, as lit).
+
+    ``att = 1/(k_c + k_l·d + k_q·d²)`` decreases with ``d ≥ 0`` (``k ≥ 0``), so over the mesh it
+    is at most its value at the mesh's nearest distance ``d_min`` from the light
+    (:func:`_nearest_distance`: exact, the nearest point of the nearest triangle); it exceeds 1
+    whenever the denominator is below 1 there (``k_c < 1`` near the light): 100 for
+    ``k_c = 0.01`` at ``d = 0``. The spot factor is bounded by :func:`_spot_bound` (the cone's
+    smallest angle to the mesh's triangles), 1 for point lights; ``max(att·spot) ≤
+    max(att)·max(spot)``. Directional lights: 1. Infinite when the denominator can be 0 on the
+    mesh (``k_c = 0`` and a surface at the light); 0 for an empty mesh.
     """
     if isinstance(light, DirectionalLight):
         return 1.0
-    pos = np.asarray(light.position, dtype=np.float64)
-    d_min = math.inf
-    for f in facts:
-        if len(f.world) == 0:
-            continue
-        lo, hi = f.world.min(axis=0), f.world.max(axis=0)
-        d_min = min(d_min, float(np.linalg.norm(np.maximum(np.maximum(lo - pos, pos - hi), 0.0))))
-    if not math.isfinite(d_min):
+    if f.n_tris == 0 or len(f.world) == 0:
         return 0.0
+    position = view[:3, :3] @ np.asarray(light.position, dtype=np.float64) + view[:3, 3]
+    spot = _spot_bound(light, f, view, position) if isinstance(light, SpotLight) else 1.0
+    if spot == 0.0:
+        return 0.0
+    d_min = _nearest_distance(position, f, view)
     denominator = light.constant + light.linear * d_min + light.quadratic * d_min * d_min
-    return math.inf if denominator <= 0 else 1.0 / denominator
+    return math.inf if denominator <= 0 else spot / denominator
+
+
+def _light_factor_bound(
+    light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts], view: np.ndarray | None = None
+) -> float:
+    """Upper bound of ``att·spot`` of ``light`` over every surface point of the scene: the largest
+    per-mesh bound (:func:`_mesh_light_factor`; ``view`` the camera's, identity by default)."""
+    v = np.eye(4) if view is None else np.asarray(view, dtype=np.float64)
+    return max((_mesh_light_factor(light, f, v) for f in facts), default=0.0)
+
+
+def _light_factors(scene: Scene, facts: list[_MeshFacts]) -> np.ndarray:
+    """(meshes, lights) bounds of ``att·spot`` per mesh and light (1 for ambient and directional)."""
+    view = np.asarray(scene.camera.view, dtype=np.float64) if scene.camera is not None else np.eye(4)
+    out = np.ones((len(facts), len(scene.lights)))
+    for j, light in enumerate(scene.lights):
+        if isinstance(light, AmbientLight | DirectionalLight):
+            continue
+        for i, f in enumerate(facts):
+            out[i, j] = _mesh_light_factor(light, f, view)
+    return out
+
+
+@dataclass(frozen=True)
+class _FogRange:
+    """Per mesh, the smallest and largest fog factor over its points (1, 1 without fog), and the
+    largest fog colour channel."""
+
+    low: np.ndarray
+    high: np.ndarray
+    colour: float
+
+
+def _fog_range(scene: Scene, facts: list[_MeshFacts], fog: object) -> _FogRange:
+    """The fog factor's range over each mesh (OpenGL 2.1 §3.10; :func:`blinn_phong.fog.fog_factor`).
+
+    The fog distance ``c`` of a fragment is ``|z_eye|`` (``distance="plane"``) or ``‖p_eye‖``
+    (``"radial"``) of a point of one of its mesh's eye-space triangles, so it lies in
+    ``[c_lo, c_hi]``: for ``plane`` the vertices' ``|z|`` range (0 when it spans z = 0), for
+    ``radial`` the nearest distance from the eye to the triangles (:func:`_nearest_distance`)
+    and the farthest vertex (the norm is convex: its maximum on a triangle is at a corner).
+    The three factors are monotonic in ``c ≥ 0`` (linear both ways, exp and exp2 decreasing,
+    all clamped to [0, 1]), so over the mesh ``f`` lies between its values at ``c_lo`` and ``c_hi``.
+    """
+    n = len(facts)
+    if fog is None:
+        return _FogRange(np.ones(n), np.ones(n), 0.0)
+    from .fog import fog_factor
+
+    view = np.asarray(scene.camera.view, dtype=np.float64)
+    low, high = np.ones(n), np.ones(n)
+    for i, f in enumerate(facts):
+        if f.n_tris == 0 or len(f.world) == 0:
+            continue
+        eye = f.world @ view[:3, :3].T + view[:3, 3]
+        if fog.distance == "plane":  # type: ignore[attr-defined]
+            z_lo, z_hi = float(eye[:, 2].min()), float(eye[:, 2].max())
+            c_lo = 0.0 if z_lo <= 0.0 <= z_hi else min(abs(z_lo), abs(z_hi))
+            c_hi = max(abs(z_lo), abs(z_hi))
+        else:
+            c_lo = _nearest_distance(np.zeros(3), f, view)
+            c_hi = float(np.sqrt(np.max(np.einsum("ij,ij->i", eye, eye))))
+        ends = fog_factor(
+            np.array([c_lo, c_hi]),
+            fog.mode,  # type: ignore[attr-defined]
+            density=fog.density,  # type: ignore[attr-defined]
+            start=fog.start,  # type: ignore[attr-defined]
+            end=fog.end,  # type: ignore[attr-defined]
+        )
+        low[i], high[i] = float(ends.min()), float(ends.max())
+    return _FogRange(low, high, float(max(fog.color)))  # type: ignore[attr-defined]
 
 
 def _sides(scene: Scene, mesh: Mesh) -> list[Material]:
@@ -629,6 +820,27 @@ def _sides(scene: Scene, mesh: Mesh) -> list[Material]:
     if scene.light_model.two_sided and mesh.back_material is not None:
         return [mesh.material, mesh.back_material]
     return [mesh.material]
+
+
+def _fogged_radiance_bound(
+    scene: Scene, facts: list[_MeshFacts], factors: np.ndarray, fog: _FogRange
+) -> float:
+    """Bound ``B`` of the straight colour (and of alpha, 1) of any fragment, fog included.
+
+    Per mesh, :func:`_max_radiance` bounds the unfogged colour ``c`` by ``B_m`` (with that mesh's
+    light factors). Fog (OpenGL 2.1 §3.10) makes a fragment's straight colour
+    ``f·c + (1 − f)·C_f`` with ``f`` in the mesh's range ``[f_lo, f_hi]`` (:func:`_fog_range`),
+    so it lies in ``[0, f_hi·B_m + (1 − f_lo)·max C_f]`` — smaller than ``B_m`` under dark fog,
+    larger under fog brighter than the mesh. Alpha is not fogged and counts 1. The bound is the
+    largest over the meshes, at least 1.
+    """
+    worst = 1.0
+    for i, mesh in enumerate(scene.meshes):
+        b = _max_radiance(scene, mesh, list(factors[i]))
+        if not math.isfinite(b):
+            return math.inf
+        worst = max(worst, float(fog.high[i]) * b + (1.0 - float(fog.low[i])) * fog.colour)
+    return worst
 
 
 def _max_radiance(scene: Scene, mesh: Mesh, factors: list[float]) -> float:
@@ -777,7 +989,14 @@ def shadow_map_geometry(scene: Scene, index: int) -> MapGeometry:
 
 
 def _plan_shadow(
-    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict, frame: _Frame
+    scene: Scene,
+    facts: list[_MeshFacts],
+    index: int,
+    tolerance: float,
+    models: dict,
+    frame: _Frame,
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
 ) -> Choice:
     light = scene.lights[index]
     if isinstance(light, AmbientLight):
@@ -832,7 +1051,7 @@ def _plan_shadow(
     # The tolerance bounds every pixel: a sample classified differently from the ray tracer
     # (a shadow map's misplaced edge, a shadow volume's grazing sample) costs the light's whole
     # lit-minus-shadowed contribution there, so such a method is allowed only when that fits.
-    weight = _shadow_weight(scene, light, facts)
+    weight = _shadow_weight(scene, light, facts, factors, fog, index)
     worst = 255.0 * weight
     exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst)
     if tolerance <= 0:
@@ -971,24 +1190,81 @@ def _exact_shadow(
 
 
 def _shadow_weight(
-    scene: Scene, light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts]
+    scene: Scene,
+    light: DirectionalLight | PointLight | SpotLight,
+    facts: list[_MeshFacts],
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
+    index: int | None = None,
 ) -> float:
-    """Largest change of a pixel channel between lit and shadowed by ``light``: over every side's
-    material, ``F·(d_cm·d_cl + s_cm·s_cl)`` with ``F`` the bound of ``att·spot``
-    (:func:`_light_factor_bound`), since ``n ⊙ l ≤ 1`` and the specular factor ``≤ 1``; the
-    light's ambient term is not shadowed."""
-    factor = _light_factor_bound(light, facts)
+    """Largest change of a pixel channel between lit and shadowed by ``light``.
+
+    A fragment of mesh ``m`` changes by at most ``F_m·max(d_cm·d_cl + s_cm·s_cl)`` over its
+    sides' materials, ``F_m`` the bound of ``att·spot`` on that mesh (:func:`_mesh_light_factor`),
+    since ``n ⊙ l ≤ 1`` and the specular factor ``≤ 1``; the light's ambient term is not
+    shadowed. Fog turns a fragment's colour into ``f·c + (1 − f)·C_f`` with the same ``f`` lit
+    or shadowed, so the change is ``f·Δc ≤ f_hi,m·Δc`` (:func:`_fog_range`). A pixel blends
+    fragments: with partial occlusion (and Kay–Greenberg) the weights of the fragments and the
+    background add up to 1, so the pixel changes by at most the largest fragment change; the
+    absorption model adds each layer's colour unscaled, ``c_j`` times the transmittance in
+    front, at most ``Σ(1 − α_min)^j ≤ 1/α_min`` of it; emission-model fragments (α = 0) add
+    up over every layer (:func:`_layer_bound`).
+    """
+    j = index if index is not None else (list(scene.lights).index(light) if factors is not None else None)
+    view = np.asarray(scene.camera.view, dtype=np.float64) if scene.camera is not None else np.eye(4)
     weight = 0.0
-    for mesh in scene.meshes:
+    for i, mesh in enumerate(scene.meshes):
+        factor = (
+            float(factors[i, j])
+            if factors is not None and j is not None
+            else _mesh_light_factor(light, facts[i], view)
+        )
+        if factor == 0.0:
+            continue
         for m in _sides(scene, mesh):
             term = np.asarray(m.diffuse) * np.asarray(light.diffuse)
             term = term + np.asarray(m.specular) * np.asarray(light.specular)
-            weight = max(weight, float(np.max(term)))
-    return factor * weight
+            peak = float(np.max(term))
+            if peak > 0.0:
+                f_hi = 1.0 if fog is None else float(fog.high[i])
+                weight = max(weight, f_hi * factor * peak)
+    return weight * _stack_gain(scene, facts)
+
+
+def _layer_bound(scene: Scene, facts: list[_MeshFacts], meshes: list[int]) -> int:
+    """An upper bound of the fragments of ``meshes`` on one sample: 1 per planar mesh, its
+    triangles (two per ray at most for a convex one) otherwise."""
+    return sum(
+        1 if facts[i].planar else (2 if facts[i].convex else max(len(scene.meshes[i].triangles), 1))
+        for i in meshes
+    )
+
+
+def _stack_gain(scene: Scene, facts: list[_MeshFacts]) -> float:
+    """How much a pixel can change when every fragment on it changes by at most 1 (see
+    :func:`_shadow_weight`): 1, ``1/α_min`` with absorbing transparent layers, the layer bound
+    with emission-model ones (their α is 0: colours add)."""
+    transparent = [
+        i for i, m in enumerate(scene.meshes) if _lowest_opacity(scene, m) < 1.0 and len(m.triangles)
+    ]
+    models = {
+        m.transparency_model for i in transparent for m in _sides(scene, scene.meshes[i]) if m.transparent
+    }
+    if "emission" in models:
+        return float(max(_layer_bound(scene, facts, transparent), 1))
+    if "absorption" in models:
+        lowest = min(_lowest_opacity(scene, scene.meshes[i]) for i in transparent)
+        return math.inf if lowest <= 0 else 1.0 / lowest
+    return 1.0
 
 
 def _plan_shading(
-    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict
+    scene: Scene,
+    facts: list[_MeshFacts],
+    index: int,
+    tolerance: float,
+    models: dict,
+    frame: _Frame | None = None,
 ) -> Choice:
     mesh = scene.meshes[index]
     if mesh.shading is not None:
@@ -1029,7 +1305,9 @@ def _plan_shading(
             f"{choice.reason}; adjacent normals {math.degrees(theta):.3g}° apart, beyond the calibrated "
             f"{math.degrees(theta_max):.3g}°",
         )
-    pick = calibration.choose_shading(models, tolerance, theta)
+    triangles = sum(f.n_tris for f in facts)
+    samples = (frame if frame is not None else _frame(None, None, 1)).samples_total
+    pick = calibration.choose_shading(models, tolerance, theta, samples, triangles)
     err, cost = pick["predicted_steps"], pick["predicted_cost"]
     if pick["method"] != "phong":
         return Choice(
@@ -1040,10 +1318,9 @@ def _plan_shading(
             predicted_steps=err,
             relative_cost=cost,
         )
-    methods = models["shading"]["methods"]
     others = ", ".join(
         f"{name} {calibration.predict_shading(models, name, theta):.2g} steps at "
-        f"{methods[name]['ratio_to_phong']:.2f}×"
+        f"{calibration.shading_cost(models, name, samples, triangles):.2f}×"
         for name in ("flat", "gouraud")
     )
     return Choice(
@@ -1071,9 +1348,15 @@ class _Frame:
     samples: int
 
     @property
+    def samples_total(self) -> int:
+        """Samples of the frame, ``width·height·samples`` (``samples`` per pixel, a k×k grid, as
+        ``render`` takes it): what rasterization, shading and the resolve scale with."""
+        return self.width * self.height * self.samples
+
+    @property
     def receivers(self) -> int:
-        """Shading samples of the frame, ``width·height·samples²`` (the points that need a visibility)."""
-        return self.width * self.height * self.samples**2
+        """Shading samples of the frame, ``width·height·samples`` (the points that need a visibility)."""
+        return self.width * self.height * self.samples
 
 
 def _frame(width: int | None, height: int | None, samples: int) -> _Frame:
@@ -1093,6 +1376,7 @@ def plan(
     width: int | None = None,
     height: int | None = None,
     samples: int = 1,
+    fog: object = None,
 ) -> Plan:
     """Pick, per concern, the fastest method that is exact or predicted within ``tolerance`` for ``scene``.
 
@@ -1106,11 +1390,17 @@ def plan(
             fitted to ``python -m benchmarks`` measurements).
         width: frame width in pixels (None: :data:`DEFAULT_FRAME`), as passed to ``render``.
         height: frame height in pixels (None: :data:`DEFAULT_FRAME`).
-        samples: ``k`` for k×k samples per pixel, as passed to ``render``.
+        samples: samples per pixel (``k²`` for a k×k grid: 1, 4, 9, …), as passed to ``render``.
+        fog: a :class:`blinn_phong.Fog` (or None), as passed to ``render``. Fog blends each
+            fragment with the fog colour, ``f·c + (1 − f)·C_f`` (OpenGL 2.1 §3.10), ``f`` in [0, 1]
+            taken over each mesh's eye distances (:func:`_fog_range`): a shadow's change of a
+            pixel is scaled by ``f`` (``C_f`` cancels), and the colours behind peeled layers lie
+            in ``[0, f_hi·B + (1 − f_lo)·C_f]``; the plan's ``fog`` choice states the range and
+            the predicted cost of fog for the frame.
 
-    ``render(scene, width, height, samples=k, tolerance=T)`` follows
-    ``plan(scene, T, width=width, height=height, samples=k)`` wherever the caller sets no
-    method (:func:`blinn_phong.frame.frame_plan`); the frame matters only to the cost models.
+    ``render(scene, width, height, samples=k, tolerance=T, fog=F)`` follows
+    ``plan(scene, T, width=width, height=height, samples=k, fog=F)`` wherever the caller sets
+    no method (:func:`blinn_phong.frame.frame_plan`); the frame matters only to the cost models.
 
     Returns:
         :class:`Plan` with a choice and a reason per concern; approximate choices carry their
@@ -1122,11 +1412,44 @@ def plan(
         isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0
     ):
         raise ValueError(f"tolerance must be a finite number of 8-bit steps >= 0, got {tolerance!r}")
+    if fog is not None:
+        from .frame import Fog
+
+        if not isinstance(fog, Fog):
+            raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")
     tol = float(tolerance)
     frame = _frame(width, height, samples)
     m = models if models is not None else calibration.shipped_models()
     facts = [_mesh_facts(mesh) for mesh in scene.meshes]
-    transparency = _plan_transparency(scene, facts, tol, m)
-    shadows = tuple(_plan_shadow(scene, facts, i, tol, m, frame) for i in range(len(scene.lights)))
-    shading = tuple(_plan_shading(scene, facts, i, tol, m) for i in range(len(scene.meshes)))
-    return Plan(transparency, shadows, shading, tol)
+    factors = _light_factors(scene, facts)
+    fogged = _fog_range(scene, facts, fog)
+    transparency = _plan_transparency(scene, facts, tol, m, frame, factors, fogged)
+    shadows = tuple(
+        _plan_shadow(scene, facts, i, tol, m, frame, factors, fogged) for i in range(len(scene.lights))
+    )
+    shading = tuple(_plan_shading(scene, facts, i, tol, m, frame) for i in range(len(scene.meshes)))
+    return Plan(transparency, shadows, shading, tol, _plan_fog(fog, fogged, m, frame, facts))
+
+
+def _plan_fog(
+    fog: object, fogged: _FogRange, models: dict, frame: _Frame, facts: list[_MeshFacts]
+) -> Choice | None:
+    """The fog entry of a plan: its factor range over the meshes and its predicted cost."""
+    if fog is None:
+        return None
+    used = [i for i, f in enumerate(facts) if f.n_tris]
+    lo = min((float(fogged.low[i]) for i in used), default=1.0)
+    hi = max((float(fogged.high[i]) for i in used), default=1.0)
+    triangles = sum(f.n_tris for f in facts)
+    cost = calibration.fog_cost(models, frame.samples_total, triangles)
+    mode = fog.mode  # type: ignore[attr-defined]
+    where = f"for {frame.samples_total} samples and {triangles} triangles"
+    return Choice(
+        mode,
+        f"{mode} fog by {fog.distance} distance (OpenGL 2.1 §3.10): factor f in [{lo:.3g}, {hi:.3g}] "  # type: ignore[attr-defined]
+        "over the meshes' eye distances; a shadow's change of a pixel is scaled by f, the colour behind "
+        "peeled layers lies within f·B + (1 − f)·C_f"
+        + (f"; predicted cost {cost:.2f}× the frame without fog {where}" if cost is not None else ""),
+        predicted_steps=0.0,
+        relative_cost=cost,
+    )
