@@ -195,16 +195,18 @@ def _object_arrays_numpy(
 # --------------------------------------------------------------------------- compiled
 
 
-@functools.lru_cache(maxsize=1)
-def _kernels() -> dict[str, object] | None:
+@functools.lru_cache(maxsize=2)
+def _kernels(parallel: bool = False) -> dict[str, object] | None:
     """The compiled twins of the numpy reference (None without numba), cached on disk.
 
     ``object_arrays``: used vertices, good triangles, the coordinate tolerance, planarity and
-    flat normals in two passes. ``adjacency``: the directed edges as rows of out-neighbours per
-    vertex (a counting sort, each row sorted) and whether every edge occurs once with its twin
-    once. ``weld``: a hash table over the integer cells, labels in first-occurrence order.
+    flat normals in two passes. ``rows``: the directed edges as rows of out-neighbours per
+    vertex (a counting sort). ``paired``: whether every edge occurs once with its twin once.
+    ``weld``: a hash table over the integer cells, labels in first-occurrence order.
     ``convex``: tests (1)–(3) of :func:`_convex_surface` in one pass over the triangles.
-    Same arithmetic as the numpy path, operation for operation.
+    ``world_bounds``: world positions, bounding box and sphere. Same arithmetic as the numpy
+    path, operation for operation. ``parallel``: chunks in numba threads (on a busy machine
+    the threads wait for each other; the planner runs them serially, see ``_PARALLEL``).
     """
     try:
         import numba
@@ -287,16 +289,17 @@ def _kernels() -> dict[str, object] | None:
         return used, good, tol, planar, flat
 
     @numba.njit(cache=True)
-    def adjacency(tri, nv):  # pragma: no cover - compiled
+    def rows(tri, nv):  # pragma: no cover - compiled
+        """Out-neighbours per vertex (a counting sort of the directed edges); False on a loop edge."""
         nt = tri.shape[0]
         start = np.zeros(nv + 1, np.int64)
         dst = np.empty(3 * nt, np.int64)
-        closed = nt > 0
+        simple = nt > 0
         for t in range(nt):
             for k in range(3):
                 a, b = tri[t, k], tri[t, (k + 1) % 3]
                 if a == b:
-                    closed = False
+                    simple = False
                 start[a + 1] += 1
         for v in range(nv):
             start[v + 1] += start[v]
@@ -306,35 +309,54 @@ def _kernels() -> dict[str, object] | None:
                 a = tri[t, k]
                 dst[fill[a]] = tri[t, (k + 1) % 3]
                 fill[a] += 1
-        for v in range(nv):  # sort each row (insertion sort; long rows by numpy's sort)
-            s, e = start[v], start[v + 1]
-            if e - s > 32:
-                dst[s:e] = np.sort(dst[s:e])
-                continue
-            for i in range(s + 1, e):
-                x = dst[i]
-                j = i - 1
-                while j >= s and dst[j] > x:
-                    dst[j + 1] = dst[j]
-                    j -= 1
-                dst[j + 1] = x
-        if not closed:
-            return False, start, dst
+        return simple, start, dst
+
+    @numba.njit(parallel=parallel, cache=True)
+    def paired(start, dst, n_chunks):  # pragma: no cover - compiled
+        """Whether every directed edge (v, w) occurs once in v's row and its twin (w, v) once.
+
+        A row holds about 6 entries: a short row is scanned; a row longer than 32 (a fan's
+        centre) is sorted first and searched by bisection. Each edge checks that v's row holds
+        w once and that w's row holds v; w's own check makes that once."""
+        nv = start.shape[0] - 1
         for v in range(nv):
-            for e in range(start[v], start[v + 1]):
-                w = dst[e]
-                if e > start[v] and dst[e - 1] == w:
-                    return False, start, dst  # the directed edge (v, w) occurs twice
-                lo, hi = start[w], start[w + 1]  # the twin (w, v): a binary search in w's row
-                while lo < hi:
-                    mid = (lo + hi) // 2
-                    if dst[mid] < v:
-                        lo = mid + 1
+            if start[v + 1] - start[v] > 32:
+                dst[start[v] : start[v + 1]] = np.sort(dst[start[v] : start[v + 1]])
+        ok = np.ones(n_chunks, np.bool_)
+        for c in numba.prange(n_chunks):
+            for v in range(c * nv // n_chunks, (c + 1) * nv // n_chunks):
+                s, e = start[v], start[v + 1]
+                for i in range(s, e):
+                    w = dst[i]
+                    once = True
+                    if e - s > 32:
+                        once = i == s or dst[i - 1] != w
                     else:
-                        hi = mid
-                if lo == start[w + 1] or dst[lo] != v:
-                    return False, start, dst
-        return True, start, dst
+                        for j in range(s, i):
+                            if dst[j] == w:
+                                once = False
+                                break
+                    found = False
+                    lo, hi = start[w], start[w + 1]
+                    if hi - lo > 32:
+                        while lo < hi:
+                            mid = (lo + hi) // 2
+                            if dst[mid] < v:
+                                lo = mid + 1
+                            else:
+                                hi = mid
+                        found = lo < start[w + 1] and dst[lo] == v
+                    else:
+                        for j in range(lo, hi):
+                            if dst[j] == v:
+                                found = True
+                                break
+                    if not (once and found):
+                        ok[c] = False
+                        break
+                if not ok[c]:
+                    break
+        return ok.all()
 
     @numba.njit(inline="always", cache=True)
     def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
@@ -376,13 +398,60 @@ def _kernels() -> dict[str, object] | None:
                 welded[label[r], c] = points[r, c]
         return label, welded
 
-    @numba.njit(cache=True)
-    def convex(points, tri, tol, start, dst):  # pragma: no cover - compiled
+    @numba.njit(inline="always", cache=True)
+    def triangle_test(points, tri, t, tol, cx, cy, cz, start, dst):  # pragma: no cover - compiled
+        """Tests (2) and (1) for triangle t (status 1: passed, 0: no area, -1: failed) and its
+        solid angle seen from the centroid (Van Oosterom & Strackee) for test (3)."""
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+        ux, uy, uz = (
+            points[i1, 0] - points[i0, 0],
+            points[i1, 1] - points[i0, 1],
+            points[i1, 2] - points[i0, 2],
+        )
+        vx, vy, vz = (
+            points[i2, 0] - points[i0, 0],
+            points[i2, 1] - points[i0, 1],
+            points[i2, 2] - points[i0, 2],
+        )
+        fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        ln = math.sqrt(fx * fx + fy * fy + fz * fz)
+        status = 0
+        if ln > tol * math.sqrt(ux * ux + uy * uy + uz * uz):
+            status = 1
+            nx, ny, nz = fx / ln, fy / ln, fz / ln
+            off = nx * points[i0, 0] + ny * points[i0, 1] + nz * points[i0, 2]
+            if not (nx * cx + ny * cy + nz * cz) - off < -tol:
+                return -1, 0.0  # (2) the centroid is not strictly below this plane
+            for k in range(3):  # (1) the vertex stars
+                v = tri[t, k]
+                for e in range(start[v], start[v + 1]):
+                    w = dst[e]
+                    if w == i0 or w == i1 or w == i2:
+                        continue  # a corner of t lies on t's plane
+                    h = (points[w, 0] * nx + points[w, 1] * ny + points[w, 2] * nz) - off
+                    if h > tol:
+                        return -1, 0.0
+        ax, ay, az = points[i0, 0] - cx, points[i0, 1] - cy, points[i0, 2] - cz
+        bx, by, bz = points[i1, 0] - cx, points[i1, 1] - cy, points[i1, 2] - cz
+        dx, dy, dz = points[i2, 0] - cx, points[i2, 1] - cy, points[i2, 2] - cz
+        la = math.sqrt(ax * ax + ay * ay + az * az)
+        lb = math.sqrt(bx * bx + by * by + bz * bz)
+        ld = math.sqrt(dx * dx + dy * dy + dz * dz)
+        num = ax * (by * dz - bz * dy) + ay * (bz * dx - bx * dz) + az * (bx * dy - by * dx)
+        den = (
+            la * lb * ld
+            + (ax * bx + ay * by + az * bz) * ld
+            + (ax * dx + ay * dy + az * dz) * lb
+            + (bx * dx + by * dy + bz * dz) * la
+        )
+        return status, 2.0 * math.atan2(num, den)
+
+    @numba.njit(parallel=parallel, cache=True)
+    def convex(points, tri, used, tol, start, dst, n_chunks):  # pragma: no cover - compiled
+        """Tests (1)–(3) of :func:`_convex_surface` (``used``: the vertices of the triangles),
+        chunks of triangles in parallel; each chunk stops at its first failure and keeps its own
+        sum of solid angles, added in chunk order (the same result on any number of threads)."""
         nv, nt = points.shape[0], tri.shape[0]
-        used = np.zeros(nv, np.bool_)
-        for t in range(nt):
-            for k in range(3):
-                used[tri[t, k]] = True
         cx = cy = cz = 0.0
         count = 0
         for v in range(nv):
@@ -392,52 +461,25 @@ def _kernels() -> dict[str, object] | None:
                 cz += points[v, 2]
                 count += 1
         cx, cy, cz = cx / count, cy / count, cz / count
-        any_good = False
-        winding = 0.0
-        for t in range(nt):
-            i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-            ux, uy, uz = (
-                points[i1, 0] - points[i0, 0],
-                points[i1, 1] - points[i0, 1],
-                points[i1, 2] - points[i0, 2],
-            )
-            vx, vy, vz = (
-                points[i2, 0] - points[i0, 0],
-                points[i2, 1] - points[i0, 1],
-                points[i2, 2] - points[i0, 2],
-            )
-            fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-            ln = math.sqrt(fx * fx + fy * fy + fz * fz)
-            if ln > tol * math.sqrt(ux * ux + uy * uy + uz * uz):
-                any_good = True
-                nx, ny, nz = fx / ln, fy / ln, fz / ln
-                off = nx * points[i0, 0] + ny * points[i0, 1] + nz * points[i0, 2]
-                if not (nx * cx + ny * cy + nz * cz) - off < -tol:
-                    return False  # (2) the centroid is not strictly below this plane
-                for k in range(3):  # (1) the vertex stars
-                    v = tri[t, k]
-                    for e in range(start[v], start[v + 1]):
-                        w = dst[e]
-                        h = (points[w, 0] * nx + points[w, 1] * ny + points[w, 2] * nz) - off
-                        if h > tol:
-                            return False
-            # (3) the solid angle of the triangle seen from the centroid (Van Oosterom & Strackee)
-            ax, ay, az = points[i0, 0] - cx, points[i0, 1] - cy, points[i0, 2] - cz
-            bx, by, bz = points[i1, 0] - cx, points[i1, 1] - cy, points[i1, 2] - cz
-            dx, dy, dz = points[i2, 0] - cx, points[i2, 1] - cy, points[i2, 2] - cz
-            la = math.sqrt(ax * ax + ay * ay + az * az)
-            lb = math.sqrt(bx * bx + by * by + bz * bz)
-            ld = math.sqrt(dx * dx + dy * dy + dz * dz)
-            num = ax * (by * dz - bz * dy) + ay * (bz * dx - bx * dz) + az * (bx * dy - by * dx)
-            den = (
-                la * lb * ld
-                + (ax * bx + ay * by + az * bz) * ld
-                + (ax * dx + ay * dy + az * dz) * lb
-                + (bx * dx + by * dy + bz * dz) * la
-            )
-            winding += 2.0 * math.atan2(num, den)
-        if not any_good:
+        failed = np.zeros(n_chunks, np.bool_)
+        good = np.zeros(n_chunks, np.bool_)
+        angle = np.zeros(n_chunks)
+        for c in numba.prange(n_chunks):
+            total = 0.0
+            for t in range(c * nt // n_chunks, (c + 1) * nt // n_chunks):
+                status, omega = triangle_test(points, tri, t, tol, cx, cy, cz, start, dst)
+                if status < 0:
+                    failed[c] = True
+                    break
+                if status > 0:
+                    good[c] = True
+                total += omega
+            angle[c] = total
+        if failed.any() or not good.any():
             return False
+        winding = 0.0
+        for c in range(n_chunks):
+            winding += angle[c]
         return abs(winding / (4.0 * math.pi) - 1.0) <= 0.25
 
     @numba.njit(cache=True)
@@ -469,14 +511,22 @@ def _kernels() -> dict[str, object] | None:
 
     return {
         "object_arrays": object_arrays,
-        "adjacency": adjacency,
+        "rows": rows,
+        "paired": paired,
         "weld": weld,
         "convex": convex,
         "world_bounds": world_bounds,
     }
 
 
-def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tuple[bool, bool]:
+#: Whether the compiled passes run their chunks in threads. Serial: the passes take a few
+#: milliseconds, and on a machine whose cores are busy the threads' joins cost more than that.
+_PARALLEL = False
+
+
+def _convex_surface(
+    points: np.ndarray, triangles: np.ndarray, tol: float, used: np.ndarray | None = None
+) -> tuple[bool, bool]:
     """``(closed, convex)`` of an indexed triangle mesh by local tests, in linear time.
 
     ``closed``: every directed edge ``(i, j)`` occurs once and its twin ``(j, i)`` once — a
@@ -514,26 +564,48 @@ def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tu
     welded cells (a hash table instead of a sort; welding needs only which vertices share a
     cell, not the cells' order), the same per-triangle planes, heights and solid angles.
 
-    Cost: linear. Building the rows is one counting pass over the 3T directed edges (each
-    row, about 6 entries, sorted in place), the twin of each edge found by a binary search in
-    its row; then one pass over the triangles computing each plane once, its 18-odd neighbour
-    heights and its solid angle, stopping at the first failed test. No hull is built.
+    The compiled pass skips, in (1), the neighbours that are corners of ``t`` itself: they
+    lie on ``t``'s plane, so (1) holds for them whatever the rounding.
+
+    Cost: linear. Building the rows is one counting pass over the 3T directed edges; the twin
+    of each edge is found by scanning its row (about 6 entries; rows longer than 32 are sorted
+    and bisected); then one pass over the triangles computing each plane once, its dozen
+    neighbour heights and its solid angle, stopping at the first failed test. No hull is built.
+    ``used`` (the vertices of the triangles, optional) saves a pass.
     """
-    k = _kernels()
+    k = _kernels(_PARALLEL)
     if k is None:
         return _convex_surface_numpy(points, triangles, tol)
     points = np.ascontiguousarray(points, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
-    closed, start, dst = k["adjacency"](triangles, len(points))
+    closed, start, dst = _closed_rows(k, triangles, len(points))
     if not closed:
         label, welded = k["weld"](_weld_cells(points, tol), points)
         if len(welded) == len(points):
             return False, False
-        points, triangles = welded, label[triangles]
-        closed, start, dst = k["adjacency"](triangles, len(points))
+        points, triangles, used = welded, label[triangles], None
+        closed, start, dst = _closed_rows(k, triangles, len(points))
         if not closed:
             return False, False
-    return True, bool(k["convex"](points, triangles, float(tol), start, dst))
+    if used is None:
+        used = np.zeros(len(points), dtype=bool)
+        used[triangles.reshape(-1)] = True
+    chunks = _chunks(len(triangles))
+    return True, bool(k["convex"](points, triangles, used, float(tol), start, dst, chunks))
+
+
+def _chunks(n: int) -> int:
+    """Work items the compiled passes split ``n`` rows or triangles into (about 4096 each)."""
+    return max(1, min(256, n // 4096))
+
+
+def _closed_rows(k: dict, triangles: np.ndarray, n_vertices: int) -> tuple[bool, np.ndarray, np.ndarray]:
+    """Whether the indexed mesh is closed (every directed edge once, its twin once), and the
+    sorted rows of out-neighbours per vertex (``start``, ``dst``)."""
+    simple, start, dst = k["rows"](triangles, n_vertices)
+    if not simple:
+        return False, start, dst
+    return bool(k["paired"](start, dst, _chunks(n_vertices))), start, dst
 
 
 # --------------------------------------------------------------------------- cached facts
@@ -601,7 +673,7 @@ def _object_facts(mesh: Mesh) -> _ObjectFacts:
 
 def _analyse(pos: np.ndarray, tri: np.ndarray, normals: np.ndarray | None) -> _ObjectFacts:
     """The :class:`_ObjectFacts` of one mesh's arrays, compiled when numba imports."""
-    k = _kernels()
+    k = _kernels(_PARALLEL)
     if k is None:
         used, good, tol, planar, flat_normals = _object_arrays_numpy(pos, tri, normals)
     else:
@@ -613,7 +685,7 @@ def _analyse(pos: np.ndarray, tri: np.ndarray, normals: np.ndarray | None) -> _O
             pos, tri, nrm, normals is not None, eps32, eps64
         )
         tol, planar, flat_normals = float(tol), bool(planar), bool(flat_normals)
-    closed, convex = _convex_surface(pos, tri, tol) if len(tri) else (False, False)
+    closed, convex = _convex_surface(pos, tri, tol, used) if len(tri) else (False, False)
     return _ObjectFacts(used, good, planar, closed, convex, flat_normals)
 
 
@@ -625,7 +697,7 @@ def _mesh_facts(mesh: Mesh) -> _MeshFacts:
     if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
         return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
     linear = mesh.transform[:3, :3]
-    k = _kernels()
+    k = _kernels(_PARALLEL)
     if k is None:
         world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
         if len(world):
