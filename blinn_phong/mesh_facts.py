@@ -195,333 +195,18 @@ def _object_arrays_numpy(
 # --------------------------------------------------------------------------- compiled
 
 
-@functools.lru_cache(maxsize=2)
-def _kernels(parallel: bool = False) -> dict[str, object] | None:
-    """The compiled twins of the numpy reference (None without numba), cached on disk.
-
-    ``object_arrays``: used vertices, good triangles, the coordinate tolerance, planarity and
-    flat normals in two passes. ``rows``: the directed edges as rows of out-neighbours per
-    vertex (a counting sort). ``paired``: whether every edge occurs once with its twin once.
-    ``weld``: a hash table over the integer cells, labels in first-occurrence order.
-    ``convex``: tests (1)–(3) of :func:`_convex_surface` in one pass over the triangles.
-    ``world_bounds``: world positions, bounding box and sphere. Same arithmetic as the numpy
-    path, operation for operation. ``parallel``: chunks in numba threads (on a busy machine
-    the threads wait for each other; the planner runs them serially, see ``_PARALLEL``).
+@functools.lru_cache(maxsize=1)
+def _kernels() -> dict[str, object] | None:
+    """The compiled twins of the numpy reference (:mod:`blinn_phong._mesh_kernels`), or None
+    without numba. Same arithmetic as the numpy path, operation for operation; serial (each
+    pass takes a few milliseconds, less than numba threads' start and join on a busy machine).
     """
     try:
-        import numba
+        from . import _mesh_kernels as m
     except Exception:
         return None
-
-    @numba.njit(cache=True)
-    def object_arrays(pos, tri, normals, has_normals, eps32, eps64):  # pragma: no cover - compiled
-        nv, nt = pos.shape[0], tri.shape[0]
-        used = np.zeros(nv, np.bool_)
-        for t in range(nt):
-            for k in range(3):
-                used[tri[t, k]] = True
-        biggest = 0.0
-        single = True
-        any_used = False
-        for v in range(nv):
-            if used[v]:
-                any_used = True
-                for k in range(3):
-                    x = pos[v, k]
-                    if abs(x) > biggest:
-                        biggest = abs(x)
-                    if single and np.float64(np.float32(x)) != x:
-                        single = False
-        tol = 0.0
-        if any_used:
-            tol = 64.0 * (eps32 if single else eps64) * max(biggest, 1e-300)
-        good = np.zeros(nt, np.bool_)
-        first = -1
-        for t in range(nt):
-            a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
-            ux, uy, uz = pos[b, 0] - pos[a, 0], pos[b, 1] - pos[a, 1], pos[b, 2] - pos[a, 2]
-            vx, vy, vz = pos[c, 0] - pos[a, 0], pos[c, 1] - pos[a, 1], pos[c, 2] - pos[a, 2]
-            fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-            if math.sqrt(fx * fx + fy * fy + fz * fz) > 0:
-                good[t] = True
-                if first < 0:
-                    first = t
-        planar = False
-        flat = not has_normals
-        if first >= 0:
-            a, b, c = tri[first, 0], tri[first, 1], tri[first, 2]
-            ux, uy, uz = pos[b, 0] - pos[a, 0], pos[b, 1] - pos[a, 1], pos[b, 2] - pos[a, 2]
-            vx, vy, vz = pos[c, 0] - pos[a, 0], pos[c, 1] - pos[a, 1], pos[c, 2] - pos[a, 2]
-            fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-            ln = math.sqrt(fx * fx + fy * fy + fz * fz)
-            nx, ny, nz = fx / ln, fy / ln, fz / ln
-            planar = True
-            for v in range(nv):
-                if used[v]:
-                    d = (
-                        (pos[v, 0] - pos[a, 0]) * nx
-                        + (pos[v, 1] - pos[a, 1]) * ny
-                        + (pos[v, 2] - pos[a, 2]) * nz
-                    )
-                    if not abs(d) <= tol:
-                        planar = False
-                        break
-            if has_normals:
-                flat = True
-                for t in range(nt):
-                    if not good[t]:
-                        continue
-                    a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]
-                    ux, uy, uz = pos[b, 0] - pos[a, 0], pos[b, 1] - pos[a, 1], pos[b, 2] - pos[a, 2]
-                    vx, vy, vz = pos[c, 0] - pos[a, 0], pos[c, 1] - pos[a, 1], pos[c, 2] - pos[a, 2]
-                    fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-                    ln = math.sqrt(fx * fx + fy * fy + fz * fz)
-                    fx, fy, fz = fx / ln, fy / ln, fz / ln
-                    for k in range(3):
-                        w = tri[t, k]
-                        mx, my, mz = normals[w, 0], normals[w, 1], normals[w, 2]
-                        m = max(math.sqrt(mx * mx + my * my + mz * mz), 1e-300)
-                        if not (mx / m) * fx + (my / m) * fy + (mz / m) * fz >= 1 - 1e-9:
-                            flat = False
-                            break
-                    if not flat:
-                        break
-        return used, good, tol, planar, flat
-
-    @numba.njit(cache=True)
-    def rows(tri, nv):  # pragma: no cover - compiled
-        """Out-neighbours per vertex (a counting sort of the directed edges); False on a loop edge."""
-        nt = tri.shape[0]
-        start = np.zeros(nv + 1, np.int64)
-        dst = np.empty(3 * nt, np.int64)
-        simple = nt > 0
-        for t in range(nt):
-            for k in range(3):
-                a, b = tri[t, k], tri[t, (k + 1) % 3]
-                if a == b:
-                    simple = False
-                start[a + 1] += 1
-        for v in range(nv):
-            start[v + 1] += start[v]
-        fill = start[:-1].copy()
-        for t in range(nt):
-            for k in range(3):
-                a = tri[t, k]
-                dst[fill[a]] = tri[t, (k + 1) % 3]
-                fill[a] += 1
-        return simple, start, dst
-
-    @numba.njit(parallel=parallel, cache=True)
-    def paired(start, dst, n_chunks):  # pragma: no cover - compiled
-        """Whether every directed edge (v, w) occurs once in v's row and its twin (w, v) once.
-
-        A row holds about 6 entries: a short row is scanned; a row longer than 32 (a fan's
-        centre) is sorted first and searched by bisection. Each edge checks that v's row holds
-        w once and that w's row holds v; w's own check makes that once."""
-        nv = start.shape[0] - 1
-        for v in range(nv):
-            if start[v + 1] - start[v] > 32:
-                dst[start[v] : start[v + 1]] = np.sort(dst[start[v] : start[v + 1]])
-        ok = np.ones(n_chunks, np.bool_)
-        for c in numba.prange(n_chunks):
-            for v in range(c * nv // n_chunks, (c + 1) * nv // n_chunks):
-                s, e = start[v], start[v + 1]
-                for i in range(s, e):
-                    w = dst[i]
-                    once = True
-                    if e - s > 32:
-                        once = i == s or dst[i - 1] != w
-                    else:
-                        for j in range(s, i):
-                            if dst[j] == w:
-                                once = False
-                                break
-                    found = False
-                    lo, hi = start[w], start[w + 1]
-                    if hi - lo > 32:
-                        while lo < hi:
-                            mid = (lo + hi) // 2
-                            if dst[mid] < v:
-                                lo = mid + 1
-                            else:
-                                hi = mid
-                        found = lo < start[w + 1] and dst[lo] == v
-                    else:
-                        for j in range(lo, hi):
-                            if dst[j] == v:
-                                found = True
-                                break
-                    if not (once and found):
-                        ok[c] = False
-                        break
-                if not ok[c]:
-                    break
-        return ok.all()
-
-    @numba.njit(inline="always", cache=True)
-    def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
-
-    @numba.njit(cache=True)
-    def weld(cells, points):  # pragma: no cover - compiled
-        m = cells.shape[0]
-        size = 1
-        while size < 2 * m:
-            size *= 2
-        table = np.full(size, -1, np.int64)
-        label = np.empty(m, np.int64)
-        first = np.empty(m, np.int64)
-        n = 0
-        for r in range(m):
-            h = np.uint64(0)
-            for c in range(3):
-                h = mix(np.uint64(cells[r, c]) ^ h)
-            slot = np.int64(h & np.uint64(size - 1))
-            while True:
-                u = table[slot]
-                if u < 0:
-                    table[slot] = n
-                    first[n] = r
-                    label[r] = n
-                    n += 1
-                    break
-                q = first[u]
-                if cells[q, 0] == cells[r, 0] and cells[q, 1] == cells[r, 1] and cells[q, 2] == cells[r, 2]:
-                    label[r] = u
-                    break
-                slot = (slot + 1) & (size - 1)
-        welded = np.zeros((n, 3))
-        for r in range(m):  # the last vertex of a cell gives its position, as numpy's assignment
-            for c in range(3):
-                welded[label[r], c] = points[r, c]
-        return label, welded
-
-    @numba.njit(inline="always", cache=True)
-    def triangle_test(points, tri, t, tol, cx, cy, cz, start, dst):  # pragma: no cover - compiled
-        """Tests (2) and (1) for triangle t (status 1: passed, 0: no area, -1: failed) and its
-        solid angle seen from the centroid (Van Oosterom & Strackee) for test (3)."""
-        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
-        ux, uy, uz = (
-            points[i1, 0] - points[i0, 0],
-            points[i1, 1] - points[i0, 1],
-            points[i1, 2] - points[i0, 2],
-        )
-        vx, vy, vz = (
-            points[i2, 0] - points[i0, 0],
-            points[i2, 1] - points[i0, 1],
-            points[i2, 2] - points[i0, 2],
-        )
-        fx, fy, fz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-        ln = math.sqrt(fx * fx + fy * fy + fz * fz)
-        status = 0
-        if ln > tol * math.sqrt(ux * ux + uy * uy + uz * uz):
-            status = 1
-            nx, ny, nz = fx / ln, fy / ln, fz / ln
-            off = nx * points[i0, 0] + ny * points[i0, 1] + nz * points[i0, 2]
-            if not (nx * cx + ny * cy + nz * cz) - off < -tol:
-                return -1, 0.0  # (2) the centroid is not strictly below this plane
-            for k in range(3):  # (1) the vertex stars
-                v = tri[t, k]
-                for e in range(start[v], start[v + 1]):
-                    w = dst[e]
-                    if w == i0 or w == i1 or w == i2:
-                        continue  # a corner of t lies on t's plane
-                    h = (points[w, 0] * nx + points[w, 1] * ny + points[w, 2] * nz) - off
-                    if h > tol:
-                        return -1, 0.0
-        ax, ay, az = points[i0, 0] - cx, points[i0, 1] - cy, points[i0, 2] - cz
-        bx, by, bz = points[i1, 0] - cx, points[i1, 1] - cy, points[i1, 2] - cz
-        dx, dy, dz = points[i2, 0] - cx, points[i2, 1] - cy, points[i2, 2] - cz
-        la = math.sqrt(ax * ax + ay * ay + az * az)
-        lb = math.sqrt(bx * bx + by * by + bz * bz)
-        ld = math.sqrt(dx * dx + dy * dy + dz * dz)
-        num = ax * (by * dz - bz * dy) + ay * (bz * dx - bx * dz) + az * (bx * dy - by * dx)
-        den = (
-            la * lb * ld
-            + (ax * bx + ay * by + az * bz) * ld
-            + (ax * dx + ay * dy + az * dz) * lb
-            + (bx * dx + by * dy + bz * dz) * la
-        )
-        return status, 2.0 * math.atan2(num, den)
-
-    @numba.njit(parallel=parallel, cache=True)
-    def convex(points, tri, used, tol, start, dst, n_chunks):  # pragma: no cover - compiled
-        """Tests (1)–(3) of :func:`_convex_surface` (``used``: the vertices of the triangles),
-        chunks of triangles in parallel; each chunk stops at its first failure and keeps its own
-        sum of solid angles, added in chunk order (the same result on any number of threads)."""
-        nv, nt = points.shape[0], tri.shape[0]
-        cx = cy = cz = 0.0
-        count = 0
-        for v in range(nv):
-            if used[v]:
-                cx += points[v, 0]
-                cy += points[v, 1]
-                cz += points[v, 2]
-                count += 1
-        cx, cy, cz = cx / count, cy / count, cz / count
-        failed = np.zeros(n_chunks, np.bool_)
-        good = np.zeros(n_chunks, np.bool_)
-        angle = np.zeros(n_chunks)
-        for c in numba.prange(n_chunks):
-            total = 0.0
-            for t in range(c * nt // n_chunks, (c + 1) * nt // n_chunks):
-                status, omega = triangle_test(points, tri, t, tol, cx, cy, cz, start, dst)
-                if status < 0:
-                    failed[c] = True
-                    break
-                if status > 0:
-                    good[c] = True
-                total += omega
-            angle[c] = total
-        if failed.any() or not good.any():
-            return False
-        winding = 0.0
-        for c in range(n_chunks):
-            winding += angle[c]
-        return abs(winding / (4.0 * math.pi) - 1.0) <= 0.25
-
-    @numba.njit(cache=True)
-    def world_bounds(pos, used, m):  # pragma: no cover - compiled
-        nv = pos.shape[0]
-        n = 0
-        for v in range(nv):
-            if used[v]:
-                n += 1
-        world = np.empty((n, 3))
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
-        j = 0
-        for v in range(nv):
-            if not used[v]:
-                continue
-            for r in range(3):
-                x = (pos[v, 0] * m[r, 0] + pos[v, 1] * m[r, 1] + pos[v, 2] * m[r, 2]) + m[r, 3]
-                world[j, r] = x
-                lo[r] = min(lo[r], x)
-                hi[r] = max(hi[r], x)
-            j += 1
-        centre = (lo + hi) / 2
-        far = 0.0
-        for j in range(n):
-            dx, dy, dz = world[j, 0] - centre[0], world[j, 1] - centre[1], world[j, 2] - centre[2]
-            far = max(far, dx * dx + dy * dy + dz * dz)
-        return world, lo, hi, math.sqrt(far)
-
-    return {
-        "object_arrays": object_arrays,
-        "rows": rows,
-        "paired": paired,
-        "weld": weld,
-        "convex": convex,
-        "world_bounds": world_bounds,
-    }
-
-
-#: Whether the compiled passes run their chunks in threads. Serial: the passes take a few
-#: milliseconds, and on a machine whose cores are busy the threads' joins cost more than that.
-_PARALLEL = False
+    names = ("object_arrays", "rows", "paired", "weld", "convex", "world_bounds")
+    return {name: getattr(m, name) for name in names}
 
 
 def _convex_surface(
@@ -573,7 +258,7 @@ def _convex_surface(
     neighbour heights and its solid angle, stopping at the first failed test. No hull is built.
     ``used`` (the vertices of the triangles, optional) saves a pass.
     """
-    k = _kernels(_PARALLEL)
+    k = _kernels()
     if k is None:
         return _convex_surface_numpy(points, triangles, tol)
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -590,13 +275,7 @@ def _convex_surface(
     if used is None:
         used = np.zeros(len(points), dtype=bool)
         used[triangles.reshape(-1)] = True
-    chunks = _chunks(len(triangles))
-    return True, bool(k["convex"](points, triangles, used, float(tol), start, dst, chunks))
-
-
-def _chunks(n: int) -> int:
-    """Work items the compiled passes split ``n`` rows or triangles into (about 4096 each)."""
-    return max(1, min(256, n // 4096))
+    return True, bool(k["convex"](points, triangles, used, float(tol), start, dst))
 
 
 def _closed_rows(k: dict, triangles: np.ndarray, n_vertices: int) -> tuple[bool, np.ndarray, np.ndarray]:
@@ -605,7 +284,7 @@ def _closed_rows(k: dict, triangles: np.ndarray, n_vertices: int) -> tuple[bool,
     simple, start, dst = k["rows"](triangles, n_vertices)
     if not simple:
         return False, start, dst
-    return bool(k["paired"](start, dst, _chunks(n_vertices))), start, dst
+    return bool(k["paired"](start, dst)), start, dst
 
 
 # --------------------------------------------------------------------------- cached facts
@@ -673,7 +352,7 @@ def _object_facts(mesh: Mesh) -> _ObjectFacts:
 
 def _analyse(pos: np.ndarray, tri: np.ndarray, normals: np.ndarray | None) -> _ObjectFacts:
     """The :class:`_ObjectFacts` of one mesh's arrays, compiled when numba imports."""
-    k = _kernels(_PARALLEL)
+    k = _kernels()
     if k is None:
         used, good, tol, planar, flat_normals = _object_arrays_numpy(pos, tri, normals)
     else:
@@ -697,7 +376,7 @@ def _mesh_facts(mesh: Mesh) -> _MeshFacts:
     if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
         return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
     linear = mesh.transform[:3, :3]
-    k = _kernels(_PARALLEL)
+    k = _kernels()
     if k is None:
         world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
         if len(world):

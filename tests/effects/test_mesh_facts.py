@@ -251,16 +251,3 @@ def test_equal_arrays_are_analysed_once_and_different_ones_apart():
     assert mf._fingerprint(dented) == mf._fingerprint(p)
     b = mf._object_facts(Mesh(dented, t, n))
     assert b is not a and a.convex and not b.convex
-
-
-@needs_numba
-def test_threaded_passes_decide_as_the_serial_ones():
-    parallel, serial = mf._kernels(True), mf._kernels(False)
-    for points, tris in (uv_sphere(160, 80)[:2], torus(60, 30), cone(300)):
-        tol = mf.coordinate_tolerance(points)
-        for k in (parallel, serial):
-            closed, start, dst = mf._closed_rows(k, tris, len(points))
-            used = np.zeros(len(points), dtype=bool)
-            used[tris.reshape(-1)] = True
-            verdict = bool(k["convex"](points, tris, used, tol, start, dst, mf._chunks(len(tris))))
-            assert (closed, verdict) == mf._convex_surface_numpy(points, tris, tol)
