@@ -37,6 +37,7 @@ MODULES = (
     "blender_compositor",
     "shadow_volume",
     "shadows_mesa",
+    "planning",
 )
 
 
@@ -74,6 +75,10 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_shadow_volume
 
         return lambda: bench_shadow_volume.run(out, repeat=repeat, quick=quick)
+    if name == "planning":
+        from benchmarks import bench_planning
+
+        return lambda: bench_planning.run(out, repeat=repeat)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
