@@ -306,3 +306,24 @@ def world_bounds(pos, used, m):  # pragma: no cover - compiled
         dx, dy, dz = world[j, 0] - centre[0], world[j, 1] - centre[1], world[j, 2] - centre[2]
         far = max(far, dx * dx + dy * dy + dz * dz)
     return world, lo, hi, math.sqrt(far)
+
+
+@numba.njit(cache=True)
+def normal_angle(normals, tri, inverse):  # pragma: no cover - compiled
+    """Largest angle between the world vertex normals (``n @ inverse``, normalised) at the two
+    ends of any triangle edge: ``arccos`` of the smallest clipped cosine (arccos decreases)."""
+    nv = normals.shape[0]
+    unit = np.empty((nv, 3))
+    for v in range(nv):
+        x = normals[v, 0] * inverse[0, 0] + normals[v, 1] * inverse[1, 0] + normals[v, 2] * inverse[2, 0]
+        y = normals[v, 0] * inverse[0, 1] + normals[v, 1] * inverse[1, 1] + normals[v, 2] * inverse[2, 1]
+        z = normals[v, 0] * inverse[0, 2] + normals[v, 1] * inverse[1, 2] + normals[v, 2] * inverse[2, 2]
+        length = max(math.sqrt(x * x + y * y + z * z), 1e-300)
+        unit[v, 0], unit[v, 1], unit[v, 2] = x / length, y / length, z / length
+    lowest = 1.0
+    for t in range(tri.shape[0]):
+        for k in range(3):
+            a, b = tri[t, k], tri[t, (k + 1) % 3]
+            c = unit[a, 0] * unit[b, 0] + unit[a, 1] * unit[b, 1] + unit[a, 2] * unit[b, 2]
+            lowest = min(lowest, max(c, -1.0))
+    return math.acos(lowest)

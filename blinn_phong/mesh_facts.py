@@ -205,7 +205,7 @@ def _kernels() -> dict[str, object] | None:
         from . import _mesh_kernels as m
     except Exception:
         return None
-    names = ("object_arrays", "rows", "paired", "weld", "convex", "world_bounds")
+    names = ("object_arrays", "rows", "paired", "weld", "convex", "world_bounds", "normal_angle")
     return {name: getattr(m, name) for name in names}
 
 
@@ -529,3 +529,18 @@ def _world_normals(mesh: Mesh) -> np.ndarray:
     """Vertex normals in world space (the inverse transpose of the linear part), as the renderer uses them."""
     normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
     return np.asarray(normals, dtype=np.float64) @ np.linalg.inv(mesh.transform[:3, :3])
+
+
+def _normal_angle(mesh: Mesh) -> float:
+    """Largest angle (radians) between the world-space vertex normals at the two ends of any
+    triangle edge: :func:`blinn_phong.calibration.max_normal_angle` of :func:`_world_normals`,
+    in one compiled pass when numba imports (the same value up to the rounding of the normals'
+    transform, a few ulps: about 10⁻⁸ rad where the normals are parallel)."""
+    k = _kernels()
+    if k is None or mesh.normals is None or len(mesh.triangles) == 0:
+        from .calibration import max_normal_angle
+
+        return max_normal_angle(_world_normals(mesh), mesh.triangles)
+    inverse = np.linalg.inv(mesh.transform[:3, :3])
+    normals = np.ascontiguousarray(mesh.normals, dtype=np.float64)
+    return float(k["normal_angle"](normals, np.ascontiguousarray(mesh.triangles, dtype=np.int64), inverse))

@@ -88,10 +88,10 @@ from .mesh_facts import (
     _may_shadow,
     _mesh_facts,
     _MeshFacts,
+    _normal_angle,
     _projected_width,
     _rects_overlap,
     _screen_rect_and_depth,
-    _world_normals,
     coordinate_tolerance,
 )
 from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
@@ -664,7 +664,7 @@ def _plan_shading(
             "phong",
             f"{choice.reason}; shininess {mesh.material.shininess:g} is beyond the calibrated {calibrated:g}",
         )
-    theta = calibration.max_normal_angle(_world_normals(mesh), mesh.triangles)
+    theta = _normal_angle(mesh)  # calibration.max_normal_angle of the world normals, compiled
     theta_max = min(m["theta_range"][1] for m in models["shading"]["methods"].values())
     if theta > theta_max:
         return Choice(

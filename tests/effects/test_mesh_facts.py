@@ -251,3 +251,32 @@ def test_equal_arrays_are_analysed_once_and_different_ones_apart():
     assert mf._fingerprint(dented) == mf._fingerprint(p)
     b = mf._object_facts(Mesh(dented, t, n))
     assert b is not a and a.convex and not b.convex
+
+
+def test_normal_angle_is_the_largest_angle_between_world_normals_of_an_edge():
+    from blinn_phong.calibration import max_normal_angle
+
+    # closed form: a quad whose two far vertices' normals lean 30° and 50° (about x and y);
+    # under a stretch by 2 along z the world normals (inverse transpose) lean atan(2·tan θ)
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]])
+    tris = np.array([[0, 1, 2], [0, 2, 3]])
+    a, b = np.radians(30.0), np.radians(50.0)
+    normals = np.array([[0, 0, 1.0], [0, 0, 1.0], [0, np.sin(a), np.cos(a)], [np.sin(b), 0, np.cos(b)]])
+    between = np.arccos(normals[2] @ normals[3])  # the diagonal 0–2 is 30°, the edge 2–3 is larger
+    assert mf._normal_angle(Mesh(points, tris, normals)) == pytest.approx(between, abs=1e-12)
+    squash = np.diag([1.0, 1.0, 2.0, 1.0])
+    leaned = np.arctan(2.0 * np.tan(b))  # normal (sin b, 0, cos b) → (sin b, 0, cos b / 2)
+    world = normals @ np.linalg.inv(squash[:3, :3])
+    world /= np.linalg.norm(world, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(world[3, 2])) == pytest.approx(np.degrees(leaned), abs=1e-9)
+    assert mf._normal_angle(Mesh(points, tris, normals, transform=squash)) == pytest.approx(
+        np.arccos(np.clip(world[2] @ world[3], -1, 1)), abs=1e-12
+    )
+    # a perturbed sphere under a shear: the compiled pass against the numpy formula
+    p, t, n = uv_sphere(30, 15)
+    n = n + np.random.default_rng(3).normal(size=n.shape) * 0.05
+    shear = np.array([[1.0, 0.4, 0, 0], [0, 1.2, 0, 0], [0.2, 0, 0.8, 0], [0, 0, 0, 1]])
+    mesh = Mesh(p, t, n, transform=shear)
+    # the transformed normals round differently in the last bits: ≤ 1e-7 rad apart (arccos
+    # near 1 turns an ulp of the cosine into about 1.5e-8 rad)
+    assert mf._normal_angle(mesh) == pytest.approx(max_normal_angle(mf._world_normals(mesh), t), abs=1e-7)
