@@ -327,3 +327,41 @@ def normal_angle(normals, tri, inverse):  # pragma: no cover - compiled
             c = unit[a, 0] * unit[b, 0] + unit[a, 1] * unit[b, 1] + unit[a, 2] * unit[b, 2]
             lowest = min(lowest, max(c, -1.0))
     return math.acos(lowest)
+
+
+@numba.njit(cache=True)
+def outside_polygon(flat, directions, margin):  # pragma: no cover - compiled
+    """Mask of the points of ``flat`` (N, 2) not strictly inside the polygon of their extreme
+    points along ``directions`` (K, 2, counter-clockwise by angle), by more than ``margin``
+    in the edge functions. Every point when the polygon has fewer than 3 distinct corners."""
+    n, m = flat.shape[0], directions.shape[0]
+    best = np.full(m, -np.inf)
+    at = np.zeros(m, np.int64)
+    for i in range(n):
+        for k in range(m):
+            h = flat[i, 0] * directions[k, 0] + flat[i, 1] * directions[k, 1]
+            if h > best[k]:
+                best[k] = h
+                at[k] = i
+    corners = np.empty((m, 2))
+    c = 0
+    for k in range(m):
+        x, y = flat[at[k], 0], flat[at[k], 1]
+        if c == 0 or x != corners[c - 1, 0] or y != corners[c - 1, 1]:
+            corners[c, 0], corners[c, 1] = x, y
+            c += 1
+    if c > 1 and corners[0, 0] == corners[c - 1, 0] and corners[0, 1] == corners[c - 1, 1]:
+        c -= 1
+    keep = np.ones(n, np.bool_)
+    if c < 3:
+        return keep
+    for i in range(n):
+        inside = True
+        for k in range(c):
+            ax, ay = corners[k, 0], corners[k, 1]
+            bx, by = corners[(k + 1) % c, 0], corners[(k + 1) % c, 1]
+            if not (bx - ax) * (flat[i, 1] - ay) - (by - ay) * (flat[i, 0] - ax) > margin:
+                inside = False
+                break
+        keep[i] = not inside
+    return keep

@@ -205,7 +205,16 @@ def _kernels() -> dict[str, object] | None:
         from . import _mesh_kernels as m
     except Exception:
         return None
-    names = ("object_arrays", "rows", "paired", "weld", "convex", "world_bounds", "normal_angle")
+    names = (
+        "object_arrays",
+        "rows",
+        "paired",
+        "weld",
+        "convex",
+        "world_bounds",
+        "normal_angle",
+        "outside_polygon",
+    )
     return {name: getattr(m, name) for name in names}
 
 
@@ -499,13 +508,30 @@ def _light_side_distance(
     return np.r_[n, d], h
 
 
+def _hull_candidates(flat: np.ndarray) -> np.ndarray:
+    """The points of ``flat`` (N, 2) that may be vertices of its convex hull (the Akl–Toussaint
+    heuristic, Inf. Process. Lett. 7, 1978, with 16 directions): the extreme points along
+    directions 22.5° apart, taken by angle, form a convex polygon inside the hull,
+    counter-clockwise; a point strictly inside it — by more than ``10⁻⁹·|p|²`` in the edge
+    functions, far above their rounding — is inside the hull and no vertex of it, so dropping
+    it leaves the hull as it is. Compiled when numba imports; every point otherwise."""
+    k = _kernels()
+    if k is None or len(flat) < 256:
+        return flat
+    angles = np.arange(16) * (np.pi / 8)
+    directions = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    margin = 1e-9 * float(np.abs(flat).max()) ** 2
+    return flat[k["outside_polygon"](np.ascontiguousarray(flat), directions, margin)]
+
+
 def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
     """Smallest extent (world units) of a mesh seen along ``direction``, the light's view.
 
     The vertices are projected on the plane across ``direction``; the minimum width of a
     planar point set is attained across one edge of its convex hull (rotating calipers,
     Toussaint 1983), so it is the smallest, over the hull's edges, of the extent of the hull
-    along the edge's normal. 0 for a pane seen edge-on.
+    along the edge's normal. 0 for a pane seen edge-on. Qhull sees only the points that may be
+    hull vertices (:func:`_hull_candidates`): the same hull from a fraction of the points.
     """
     from scipy.spatial import ConvexHull, QhullError
 
@@ -515,7 +541,7 @@ def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
     u /= np.linalg.norm(u)
     v = np.cross(d, u)
     flat = np.c_[f.world @ u, f.world @ v]
-    flat = flat - flat.mean(axis=0)
+    flat = _hull_candidates(flat - flat.mean(axis=0))
     try:
         hull = ConvexHull(flat)
     except (QhullError, ValueError):  # collinear or too few points: no area seen from the light

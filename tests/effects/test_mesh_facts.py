@@ -280,3 +280,35 @@ def test_normal_angle_is_the_largest_angle_between_world_normals_of_an_edge():
     # the transformed normals round differently in the last bits: ≤ 1e-7 rad apart (arccos
     # near 1 turns an ulp of the cosine into about 1.5e-8 rad)
     assert mf._normal_angle(mesh) == pytest.approx(max_normal_angle(mf._world_normals(mesh), t), abs=1e-7)
+
+
+@needs_numba
+@pytest.mark.parametrize("seed", range(4))
+def test_hull_candidates_keep_every_hull_vertex(seed):
+    rng = np.random.default_rng(seed)
+    flat = rng.normal(size=(3000, 2)) * rng.uniform(0.1, 10, size=2)
+    if seed % 2:  # points on and inside a circle: many on the hull
+        angle = rng.uniform(0, 2 * np.pi, size=3000)
+        radius = np.where(rng.random(3000) < 0.3, 1.0, np.sqrt(rng.random(3000)))
+        flat = np.stack([np.cos(angle), np.sin(angle)], axis=1) * radius[:, None] + 7.0
+    kept = mf._hull_candidates(flat)
+    assert len(kept) < len(flat)  # the filter does drop points
+    full, reduced = ConvexHull(flat), ConvexHull(kept)
+    expected = {tuple(p) for p in flat[full.vertices]}
+    assert {tuple(p) for p in kept[reduced.vertices]} == expected  # Qhull: the same hull vertices
+    assert reduced.volume == pytest.approx(full.volume, rel=1e-12)
+
+
+def test_projected_width_of_a_box_is_its_thinnest_side():
+    from tests.effects.geometry import box_triangles
+
+    tris = box_triangles((0.0, 0.0, 0.0), (4.0, 1.0, 0.5)).reshape(-1, 3)
+    p, t = hull_mesh(np.unique(tris, axis=0))
+    facts = mf._mesh_facts(Mesh(p, t))
+    # seen along z: a 4 × 1 rectangle, width 1; along x: 1 × 0.5, width 0.5
+    assert mf._projected_width(facts, np.array([0.0, 0.0, -1.0])) == pytest.approx(1.0, rel=1e-12)
+    assert mf._projected_width(facts, np.array([1.0, 0.0, 0.0])) == pytest.approx(0.5, rel=1e-12)
+    # a dense sphere of radius 1 seen from anywhere: width 2 (the silhouette of its vertices)
+    sp, st, sn = uv_sphere(317, 159)
+    sphere = mf._mesh_facts(Mesh(sp, st, sn))
+    assert mf._projected_width(sphere, np.array([0.3, 0.2, -1.0])) == pytest.approx(2.0, abs=1e-3)
