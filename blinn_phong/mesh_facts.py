@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -218,6 +219,20 @@ def _kernels() -> dict[str, object] | None:
     return {name: getattr(m, name) for name in names}
 
 
+#: Meshes from this many triangles use the compiled passes even when numba is not loaded yet
+#: (its start costs seconds once per process; below this the numpy reference takes
+#: milliseconds). Once numba is loaded — a render imports it — every mesh uses them.
+_COMPILED_FROM = 20_000
+
+
+def _compiled(n: int) -> dict[str, object] | None:
+    """The compiled passes for a mesh of ``n`` triangles (or points), or None for the numpy
+    reference: both decide the same (tested); the choice is only about time."""
+    if n < _COMPILED_FROM and "numba" not in sys.modules:
+        return None
+    return _kernels()
+
+
 def _convex_surface(
     points: np.ndarray, triangles: np.ndarray, tol: float, used: np.ndarray | None = None
 ) -> tuple[bool, bool]:
@@ -267,7 +282,7 @@ def _convex_surface(
     neighbour heights and its solid angle, stopping at the first failed test. No hull is built.
     ``used`` (the vertices of the triangles, optional) saves a pass.
     """
-    k = _kernels()
+    k = _compiled(len(triangles))
     if k is None:
         return _convex_surface_numpy(points, triangles, tol)
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -361,7 +376,7 @@ def _object_facts(mesh: Mesh) -> _ObjectFacts:
 
 def _analyse(pos: np.ndarray, tri: np.ndarray, normals: np.ndarray | None) -> _ObjectFacts:
     """The :class:`_ObjectFacts` of one mesh's arrays, compiled when numba imports."""
-    k = _kernels()
+    k = _compiled(len(tri))
     if k is None:
         used, good, tol, planar, flat_normals = _object_arrays_numpy(pos, tri, normals)
     else:
@@ -385,7 +400,7 @@ def _mesh_facts(mesh: Mesh) -> _MeshFacts:
     if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
         return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
     linear = mesh.transform[:3, :3]
-    k = _kernels()
+    k = _compiled(len(mesh.triangles))
     if k is None:
         world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
         if len(world):
@@ -515,7 +530,7 @@ def _hull_candidates(flat: np.ndarray) -> np.ndarray:
     counter-clockwise; a point strictly inside it — by more than ``10⁻⁹·|p|²`` in the edge
     functions, far above their rounding — is inside the hull and no vertex of it, so dropping
     it leaves the hull as it is. Compiled when numba imports; every point otherwise."""
-    k = _kernels()
+    k = _compiled(len(flat))
     if k is None or len(flat) < 256:
         return flat
     angles = np.arange(16) * (np.pi / 8)
@@ -562,7 +577,7 @@ def _normal_angle(mesh: Mesh) -> float:
     triangle edge: :func:`blinn_phong.calibration.max_normal_angle` of :func:`_world_normals`,
     in one compiled pass when numba imports (the same value up to the rounding of the normals'
     transform, a few ulps: about 10⁻⁸ rad where the normals are parallel)."""
-    k = _kernels()
+    k = _compiled(len(mesh.triangles))
     if k is None or mesh.normals is None or len(mesh.triangles) == 0:
         from .calibration import max_normal_angle
 

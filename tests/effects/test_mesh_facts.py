@@ -21,6 +21,12 @@ from blinn_phong.scene import Mesh
 needs_numba = pytest.mark.skipif(mf._kernels() is None, reason="numba is not installed")
 
 
+@pytest.fixture(autouse=True)
+def compiled_for_every_size(monkeypatch):
+    """Small meshes use the compiled passes too, whether numba is loaded yet or not."""
+    monkeypatch.setattr(mf, "_COMPILED_FROM", 0)
+
+
 def hull_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The convex hull's triangles (Qhull), wound counter-clockwise seen from outside."""
     hull = ConvexHull(points)
