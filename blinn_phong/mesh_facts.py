@@ -465,6 +465,27 @@ def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3])
 
 
+def _beyond_near_plane(facts: _MeshFacts, clip_from_world: np.ndarray) -> bool:
+    """Whether every vertex of the mesh has clip ``w > 0`` and ``z > −w`` (wholly beyond the
+    near plane). Both are linear in the world position, so when they hold at the 8 corners of
+    the bounding box they hold at every vertex inside it (the vertices are then not read);
+    otherwise the vertices are tested."""
+    w_row, near_row = clip_from_world[3], clip_from_world[2] + clip_from_world[3]
+    corners = np.array(
+        [
+            [x, y, z, 1.0]
+            for x in (facts.lo[0], facts.hi[0])
+            for y in (facts.lo[1], facts.hi[1])
+            for z in (facts.lo[2], facts.hi[2])
+        ]
+    )
+    if np.all(corners @ w_row > 0) and np.all(corners @ near_row > 0):
+        return True
+    hom = np.c_[facts.world, np.ones(len(facts.world))]
+    clip = hom @ clip_from_world.T
+    return bool(np.all(clip[:, 3] > 0) and np.all(clip[:, 2] > -clip[:, 3]))
+
+
 def _box_min(plane: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     """A lower bound of ``n·p + d`` over the box ``[lo, hi]`` (its lowest corner)."""
     n = plane[:3]

@@ -84,6 +84,7 @@ import numpy as np
 
 from . import calibration
 from .mesh_facts import (
+    _beyond_near_plane,
     _light_side_distance,
     _may_shadow,
     _mesh_facts,
@@ -353,9 +354,7 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
     if _lowest_opacity(scene, f.mesh) < 1.0:
         return None
     if scene.camera is not None and len(f.world):
-        hom = np.c_[f.world, np.ones(len(f.world))]
-        clip = hom @ (scene.camera.projection @ scene.camera.view).T
-        if np.all(clip[:, 3] > 0) and np.all(clip[:, 2] > -clip[:, 3]):
+        if _beyond_near_plane(f, scene.camera.projection @ scene.camera.view):
             return "closed and convex, wholly beyond the near plane (its inside is never seen)"
     return None
 

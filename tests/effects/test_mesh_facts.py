@@ -318,3 +318,23 @@ def test_projected_width_of_a_box_is_its_thinnest_side():
     sp, st, sn = uv_sphere(317, 159)
     sphere = mf._mesh_facts(Mesh(sp, st, sn))
     assert mf._projected_width(sphere, np.array([0.3, 0.2, -1.0])) == pytest.approx(2.0, abs=1e-3)
+
+
+def test_beyond_near_plane_matches_every_vertex_clip_test():
+    import blinn_phong as bp
+
+    p, t, n = uv_sphere(24, 12)
+    camera = bp.Camera.perspective(50.0, 1.5, 0.5, 40.0, view=bp.look_at((0, 0, 5), (0, 0, 0)))
+    clip_from_world = camera.projection @ camera.view
+    rng = np.random.default_rng(4)
+    answers = []
+    for _ in range(60):
+        move = np.eye(4)
+        move[:3, 3] = rng.uniform([-3, -3, -4], [3, 3, 5.5])
+        move[:3, :3] *= rng.uniform(0.2, 2.0)
+        facts = mf._mesh_facts(Mesh(p, t, n, transform=move))
+        clip = np.c_[facts.world, np.ones(len(facts.world))] @ clip_from_world.T
+        expected = bool(np.all(clip[:, 3] > 0) and np.all(clip[:, 2] > -clip[:, 3]))  # every vertex
+        assert mf._beyond_near_plane(facts, clip_from_world) == expected
+        answers.append(expected)
+    assert any(answers) and not all(answers)
