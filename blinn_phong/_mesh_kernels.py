@@ -124,12 +124,15 @@ def paired(start, dst):  # pragma: no cover - compiled
     """Whether every directed edge (v, w) occurs once in v's row and its twin (w, v) once.
 
     A row holds about 6 entries: a short row is scanned; a row longer than 32 (a fan's
-    centre) is sorted first and searched by bisection. Each edge checks that v's row holds
-    w once and that w's row holds v; w's own check makes that once."""
+    centre) is sorted first and searched by bisection. Every row is checked to hold each
+    neighbour once (so all directed edges are distinct); each edge (v, w) with v < w looks
+    for its twin in w's row, counting the pairs found. The mesh is closed when the pairs
+    cover every directed edge: 2·pairs = 3T (distinct edges, each in at most one pair)."""
     nv = start.shape[0] - 1
     for v in range(nv):
         if start[v + 1] - start[v] > 32:
             dst[start[v] : start[v + 1]] = np.sort(dst[start[v] : start[v + 1]])
+    pairs = 0
     for v in range(nv):
         s, e = start[v], start[v + 1]
         for i in range(s, e):
@@ -141,6 +144,8 @@ def paired(start, dst):  # pragma: no cover - compiled
                 for j in range(s, i):
                     if dst[j] == w:
                         return False
+            if w < v:
+                continue  # its pair, if any, is counted from w's row
             lo, hi = start[w], start[w + 1]
             found = False
             if hi - lo > 32:
@@ -158,7 +163,8 @@ def paired(start, dst):  # pragma: no cover - compiled
                         break
             if not found:
                 return False  # no twin (w, v)
-    return True
+            pairs += 1
+    return 2 * pairs == dst.shape[0]
 
 
 @numba.njit(inline="always", cache=True)
