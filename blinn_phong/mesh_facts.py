@@ -276,10 +276,12 @@ def _convex_surface(
     The compiled pass skips, in (1), the neighbours that are corners of ``t`` itself: they
     lie on ``t``'s plane, so (1) holds for them whatever the rounding.
 
-    Cost: linear. Building the rows is one counting pass over the 3T directed edges; the twin
-    of each edge is found by scanning its row (about 6 entries; rows longer than 32 are sorted
-    and bisected); then one pass over the triangles computing each plane once, its dozen
-    neighbour heights and its solid angle, stopping at the first failed test. No hull is built.
+    Cost: linear. Building the rows is one counting pass over the 3T directed edges; each row
+    is checked for a repeated neighbour, and the twin of each edge ``(v, w)`` with ``v < w`` is
+    found by scanning ``w``'s row (about 6 entries; rows longer than 32 are sorted and
+    bisected), the mesh being closed when those pairs cover all 3T edges; then one pass over
+    the triangles computing each plane once, its dozen neighbour heights and its solid angle,
+    stopping at the first failed test. No hull is built.
     ``used`` (the vertices of the triangles, optional) saves a pass.
     """
     k = _compiled(len(triangles))
