@@ -38,6 +38,7 @@ MODULES = (
     "shadow_volume",
     "shadows_mesa",
     "frame",
+    "planning",
 )
 
 
@@ -80,6 +81,10 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
 
         # --quick: 960×540, 16k-triangle spheres, scaling to 960×540 (frame_quick.json)
         return lambda: bench_frame.run(out, repeat=repeat, quick=quick)
+    if name == "planning":
+        from benchmarks import bench_planning
+
+        return lambda: bench_planning.run(out, repeat=repeat)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 

@@ -85,14 +85,24 @@ Fog (``plan(..., fog=Fog(...))``, as ``render`` takes it) is no choice but scale
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import calibration
-from .normals import vertex_normals
+from .mesh_facts import (
+    _beyond_near_plane,
+    _light_side_distance,
+    _may_shadow,
+    _mesh_facts,
+    _MeshFacts,
+    _normal_angle,
+    _projected_width,
+    _rects_overlap,
+    _screen_rect_and_depth,
+    coordinate_tolerance,
+)
 from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
 
 __all__ = [
@@ -161,346 +171,6 @@ class Plan:
 
     def __str__(self) -> str:
         return "\n".join(self.reasons())
-
-
-# --------------------------------------------------------------------------- geometry facts
-
-
-@dataclass(frozen=True)
-class _ObjectFacts:
-    """Facts of a mesh's object-space geometry that every invertible affine transform keeps."""
-
-    used: np.ndarray  # (V,) bool: vertex used by a triangle
-    good: np.ndarray  # (T,) bool: triangle of non-zero area
-    planar: bool  # every used vertex within the tolerance of the first good triangle's plane
-    closed: bool
-    convex: bool  # closed, every triangle on a supporting plane, counter-clockwise = outward
-    flat_normals: bool
-
-
-@dataclass(frozen=True)
-class _MeshFacts:
-    world: np.ndarray  # (U, 3) world positions of the used vertices
-    mesh: Mesh
-    n_tris: int
-    centre: np.ndarray
-    radius: float
-    planar: bool
-    plane: np.ndarray | None  # (a, b, c, d) unit normal when planar
-    closed: bool
-    convex: bool  # closed, convex and wound outwards in world space (see _convex_surface)
-    flat_normals: bool
-
-    @property
-    def tris(self) -> np.ndarray:
-        """(T, 3, 3) world triangles (computed on demand)."""
-        hom = np.c_[self.mesh.positions, np.ones(len(self.mesh.positions))]
-        return (hom @ self.mesh.transform.T)[:, :3][self.mesh.triangles]
-
-
-def coordinate_tolerance(positions: np.ndarray) -> float:
-    """Distance below which positions like ``positions`` are indistinguishable (their units).
-
-    Coordinates that are all float32 numbers were computed in float32 at best, so their
-    rounding error is float32's (ε = 2⁻²³); otherwise float64's (ε = 2⁻⁵²). A plane through
-    three such points and a point's distance to it carry errors of a few ε·|p| (|p| the
-    largest coordinate magnitude); the tolerance is ``64·ε·|p|`` — far above that rounding,
-    far below any modelled feature (1.4·10⁻¹¹ for float64 coordinates of magnitude 10³,
-    7.6·10⁻⁶ for float32 ones of magnitude 1).
-    """
-    p = np.asarray(positions, dtype=np.float64)
-    if p.size == 0:
-        return 0.0
-    single = bool(np.array_equal(p.astype(np.float32).astype(np.float64), p))
-    eps = float(np.finfo(np.float32 if single else np.float64).eps)
-    return 64.0 * eps * max(float(np.abs(p).max()), 1e-300)
-
-
-def _directed_edges(triangles: np.ndarray, n_vertices: int) -> tuple[bool, np.ndarray]:
-    """Whether every directed edge ``(i, j)`` occurs once with its twin ``(j, i)`` once; the sorted keys."""
-    a = triangles.reshape(-1)
-    b = triangles[:, [1, 2, 0]].reshape(-1)
-    n = np.int64(max(n_vertices, 1))
-    keys = np.sort(a * n + b)
-    if len(keys) == 0 or np.any(a == b) or np.any(keys[1:] == keys[:-1]):
-        return False, keys
-    twins = b * n + a
-    at = np.minimum(np.searchsorted(keys, twins), len(keys) - 1)
-    return bool(np.all(keys[at] == twins)), keys
-
-
-def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tuple[bool, bool]:
-    """``(closed, convex)`` of an indexed triangle mesh by local tests (one sort of the edges).
-
-    ``closed``: every directed edge ``(i, j)`` occurs once and its twin ``(j, i)`` once — a
-    closed, consistently wound surface. When the indexed mesh is not, vertices within ``tol``
-    of each other are welded first (a cube with 4 vertices per face is closed).
-
-    ``convex``: closed, and every triangle lies on a supporting plane of the vertex set with
-    its counter-clockwise normal pointing away from it (the surface is the boundary of the
-    convex hull, wound outwards). Tested by three facts, each within ``tol``:
-
-    1. *vertex stars*: for every triangle ``t`` and each corner ``v`` of ``t``, every
-       neighbour ``w`` of ``v`` (sharing an edge with it) lies on or below ``t``'s plane;
-    2. *star-shaped*: the centroid ``c`` of the vertices lies strictly below (by more than
-       ``tol``) every triangle's plane;
-    3. *winding number 1*: the solid angles of the triangles seen from ``c`` (Van Oosterom &
-       Strackee, IEEE Trans. Biomed. Eng. 30, 1983) add up to 4π.
-
-    Why they suffice. By (2) the central projection from ``c`` onto the unit sphere maps each
-    triangle one-to-one, preserving orientation; the surface being closed, the projection has
-    a degree, the winding number of (3), so every direction off the projected edges has
-    exactly one preimage: the surface is embedded, a radial graph around ``c``, bounding a
-    closed, connected solid ``K``. By (1), at each vertex ``v`` the plane of every triangle at
-    ``v`` supports ``Q = conv({v} ∪ neighbours(v))``, so those triangles lie on ``∂Q``; since
-    they surround ``v`` on the embedded closed surface, ``K`` coincides with ``Q`` near ``v``,
-    and so near every point of the triangles and edges at ``v``. ``K`` is therefore locally
-    convex at every point and, closed and connected, convex (Tietze–Nakajima theorem;
-    Valentine, *Convex Sets*, 1964, thm. 4.4): every triangle lies on a supporting plane of
-    ``K = conv(vertices)``. Conversely a convex closed mesh passes (1)–(3) up to rounding,
-    which ``tol`` covers (:func:`coordinate_tolerance`).
-
-    Cost: sorting the 3T directed edges, then about 18·T point–plane distances (a vertex has
-    about 6 neighbours); no hull is built.
-    """
-    closed, keys = _directed_edges(triangles, len(points))
-    if not closed:
-        cell = max(tol, 1e-300) * 4.0
-        _, weld = np.unique(np.round(points / cell).astype(np.int64), axis=0, return_inverse=True)
-        weld = np.asarray(weld).reshape(-1)
-        n_welded = int(weld.max()) + 1 if len(weld) else 0
-        if n_welded == len(points):
-            return False, False
-        welded_points = np.zeros((n_welded, 3))
-        welded_points[weld] = points
-        triangles = weld[triangles]
-        points = welded_points
-        closed, keys = _directed_edges(triangles, len(points))
-        if not closed:
-            return False, False
-    p0, p1, p2 = (points[triangles[:, k]] for k in range(3))
-    fn = np.cross(p1 - p0, p2 - p0)
-    length = np.sqrt(np.einsum("ij,ij->i", fn, fn))
-    good = length > tol * np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
-    if not good.any():
-        return True, False
-    unit = fn[good] / length[good, None]
-    base = p0[good]
-    offset = np.einsum("ij,ij->i", unit, base)
-    # (2) star-shaped around the centroid of the vertices
-    used = np.zeros(len(points), dtype=bool)
-    used[triangles.reshape(-1)] = True
-    c = points[used].mean(axis=0)
-    if not np.all(unit @ c - offset < -tol):
-        return True, False
-    # (3) winding number 1 around c
-    a, b, d = p0 - c, p1 - c, p2 - c
-    la, lb, ld = (np.sqrt(np.einsum("ij,ij->i", v, v)) for v in (a, b, d))
-    num = np.einsum("ij,ij->i", a, np.cross(b, d))
-    den = (
-        la * lb * ld
-        + np.einsum("ij,ij->i", a, b) * ld
-        + np.einsum("ij,ij->i", a, d) * lb
-        + np.einsum("ij,ij->i", b, d) * la
-    )
-    winding = float(np.sum(2.0 * np.arctan2(num, den))) / (4.0 * math.pi)
-    if abs(winding - 1.0) > 0.25:
-        return True, False
-    # (1) vertex stars: neighbours of each corner on or below the triangle's plane
-    n = np.int64(len(points))
-    src, dst = keys // n, keys % n
-    start = np.searchsorted(src, np.arange(len(points) + 1))
-    corners = triangles[good].reshape(-1)
-    if len(corners) >= _COMPILED_STARS and _star_kernel() is not None:
-        highest = _star_kernel()(points, corners, unit, offset, start, dst, tol)  # type: ignore[operator]
-        return True, bool(highest <= tol)
-    deg = start[corners + 1] - start[corners]
-    total = int(deg.sum())
-    owner = np.repeat(np.arange(len(corners)) // 3, deg)
-    first = np.repeat(start[corners] - (np.cumsum(deg) - deg), deg)
-    neighbour = dst[first + np.arange(total)]
-    height = np.einsum("ij,ij->i", points[neighbour], unit[owner]) - offset[owner]
-    return True, bool(np.all(height <= tol))
-
-
-#: Corners from which the vertex-star test runs compiled (numba), when numba imports.
-_COMPILED_STARS = 60_000
-
-
-@functools.lru_cache(maxsize=1)
-def _star_kernel() -> object | None:
-    """The vertex-star test of :func:`_convex_surface` compiled with numba (None without numba):
-    the largest height of a neighbour of a corner above its triangle's plane, stopping at the
-    first one above ``tol``. Same arithmetic as the numpy path, one pass, no gathered copies."""
-    try:
-        import numba
-    except Exception:
-        return None
-
-    @numba.njit(cache=True)
-    def highest(points, corners, unit, offset, start, dst, tol):  # pragma: no cover - compiled
-        worst = -np.inf
-        for c in range(corners.shape[0]):
-            g = c // 3
-            v = corners[c]
-            for e in range(start[v], start[v + 1]):
-                w = dst[e]
-                h = (
-                    points[w, 0] * unit[g, 0] + points[w, 1] * unit[g, 1] + points[w, 2] * unit[g, 2]
-                ) - offset[g]
-                if h > worst:
-                    worst = h
-                    if worst > tol:
-                        return worst
-        return worst
-
-    return highest
-
-
-_OBJECT_FACTS: dict[tuple[int, int, int], tuple[Mesh, _ObjectFacts]] = {}
-
-
-def _object_facts(mesh: Mesh) -> _ObjectFacts:
-    """Object-space facts of ``mesh``, cached by the identity of its arrays (Mesh arrays are not
-    to be changed in place; a new array is a new entry)."""
-    key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals))
-    hit = _OBJECT_FACTS.get(key)
-    if (
-        hit is not None
-        and hit[0].positions is mesh.positions
-        and hit[0].triangles is mesh.triangles
-        and hit[0].normals is mesh.normals
-    ):
-        return hit[1]
-    pos, tri = mesh.positions, mesh.triangles
-    used = np.zeros(len(pos), dtype=bool)
-    used[tri.reshape(-1)] = True
-    tol = coordinate_tolerance(pos[used]) if used.any() else 0.0
-    if len(tri):
-        p0 = pos[tri[:, 0]]
-        fn = np.cross(pos[tri[:, 1]] - p0, pos[tri[:, 2]] - p0)
-        fn_len = np.sqrt(np.einsum("ij,ij->i", fn, fn))
-        good = fn_len > 0
-        closed, convex = _convex_surface(pos, tri, tol)
-    else:
-        fn, fn_len, good = np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=bool)
-        closed = convex = False
-    planar = False
-    if good.any():
-        first = int(np.argmax(good))
-        n0 = fn[first] / fn_len[first]
-        planar = bool(np.all(np.abs((pos[used] - pos[tri[first, 0]]) @ n0) <= tol))
-    if mesh.normals is None or not good.any():
-        flat_normals = mesh.normals is None  # decided from planarity by the caller
-    else:
-        nrm = mesh.normals / np.maximum(np.linalg.norm(mesh.normals, axis=1, keepdims=True), 1e-300)
-        unit = fn[good] / fn_len[good, None]
-        cos = np.einsum("tkc,tc->tk", nrm[tri[good]], unit)
-        flat_normals = bool(np.all(cos >= 1 - 1e-9))
-    facts = _ObjectFacts(used, good, planar, closed, convex, flat_normals)
-    if len(_OBJECT_FACTS) >= 64:
-        _OBJECT_FACTS.pop(next(iter(_OBJECT_FACTS)))
-    _OBJECT_FACTS[key] = (mesh, facts)
-    return facts
-
-
-_WORLD_FACTS: dict[tuple[int, int, int, bytes], _MeshFacts] = {}
-
-
-def _mesh_facts(mesh: Mesh) -> _MeshFacts:
-    """World-space facts of ``mesh``, cached by its arrays' identity and its transform."""
-    obj = _object_facts(mesh)
-    key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals), mesh.transform.tobytes())
-    hit = _WORLD_FACTS.get(key)
-    if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
-        return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
-    linear = mesh.transform[:3, :3]
-    world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
-    if len(world) == 0:
-        return _MeshFacts(world, mesh, 0, np.zeros(3), 0.0, False, None, False, False, False)
-    lo, hi = world.min(axis=0), world.max(axis=0)
-    centre = (lo + hi) / 2
-    radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
-    plane = None
-    if obj.planar:  # an affine map keeps a plane: its world equation from the first good face
-        first = int(np.argmax(obj.good))
-        corner = (np.c_[mesh.positions[mesh.triangles[first]], np.ones(3)] @ mesh.transform.T)[:, :3]
-        n0 = np.cross(corner[1] - corner[0], corner[2] - corner[0])
-        n0 = n0 / np.linalg.norm(n0)
-        plane = np.r_[n0, -float(n0 @ corner[0])]
-    # an invertible affine map keeps convexity; a mirror (det < 0) turns the winding inwards
-    convex = obj.convex and float(np.linalg.det(linear)) > 0
-    flat_normals = obj.planar if mesh.normals is None else obj.flat_normals
-    facts = _MeshFacts(
-        world, mesh, len(mesh.triangles), centre, radius, obj.planar, plane, obj.closed, convex, flat_normals
-    )
-    if len(_WORLD_FACTS) >= 64:
-        _WORLD_FACTS.pop(next(iter(_WORLD_FACTS)))
-    _WORLD_FACTS[key] = facts
-    return facts
-
-
-def _screen_rect_and_depth(facts: _MeshFacts, scene: Scene) -> tuple[np.ndarray, tuple[float, float]]:
-    """NDC rectangle (x0, y0, x1, y1) and eye distance interval (−z) of a mesh."""
-    hom = np.c_[facts.world, np.ones(len(facts.world))]
-    eye = hom @ scene.camera.view.T
-    clip = eye @ scene.camera.projection.T
-    depth = (-float(eye[:, 2].max()), -float(eye[:, 2].min()))
-    if np.any(clip[:, 3] <= 0):
-        return np.array([-np.inf, -np.inf, np.inf, np.inf]), depth
-    ndc = clip[:, :2] / clip[:, 3:4]
-    return np.r_[ndc.min(axis=0), ndc.max(axis=0)], depth
-
-
-def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    return bool(a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3])
-
-
-def _may_shadow(
-    caster: _MeshFacts, receiver: _MeshFacts, light: DirectionalLight | PointLight | SpotLight
-) -> bool:
-    """Conservative: can ``caster`` lie between ``light`` and any point of ``receiver``?"""
-    if caster.planar and caster.plane is not None:
-        # a flat caster shades only what lies on its far side from the light
-        oriented, _ = _light_side_distance(caster.plane, light)
-        if float(np.min(receiver.world @ oriented[:3]) + oriented[3]) >= -_EPS * max(receiver.radius, 1.0):
-            return False
-    r = caster.radius + receiver.radius
-    if isinstance(light, DirectionalLight):
-        d = np.asarray(light.direction)  # the direction light travels
-        w = receiver.centre - caster.centre
-        along = float(w @ d)
-        if along < -r:
-            return False  # receiver entirely on the light's side of the caster
-        perp = float(np.linalg.norm(w - max(along, 0.0) * d))
-        return perp < r
-    pos = np.asarray(light.position)
-    to_c = caster.centre - pos
-    to_r = receiver.centre - pos
-    dc, dr = float(np.linalg.norm(to_c)), float(np.linalg.norm(to_r))
-    if dc <= caster.radius or dr <= receiver.radius:
-        return True  # the light is inside a bounding sphere
-    if dr + receiver.radius < dc - caster.radius:
-        return False  # receiver entirely nearer the light than the caster
-    angle = math.acos(float(np.clip(to_c @ to_r / (dc * dr), -1, 1)))
-    return angle < math.asin(min(caster.radius / dc, 1.0)) + math.asin(min(receiver.radius / dr, 1.0))
-
-
-def _light_side_distance(
-    plane: np.ndarray, light: DirectionalLight | PointLight | SpotLight
-) -> tuple[np.ndarray, float]:
-    """Plane oriented towards the light, and the light's signed distance (inf if directional)."""
-    n, d = plane[:3], plane[3]
-    if isinstance(light, DirectionalLight):
-        towards = -np.asarray(light.direction)
-        if float(n @ towards) < 0:
-            n, d = -n, -d
-        return np.r_[n, d], math.inf
-    lp = np.asarray(light.position)
-    h = float(n @ lp + d)
-    if h < 0:
-        n, d, h = -n, -d, -h
-    return np.r_[n, d], h
 
 
 # --------------------------------------------------------------------------- decisions
@@ -896,37 +566,9 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
     if _lowest_opacity(scene, f.mesh) < 1.0:
         return None
     if scene.camera is not None and len(f.world):
-        hom = np.c_[f.world, np.ones(len(f.world))]
-        clip = hom @ (scene.camera.projection @ scene.camera.view).T
-        if np.all(clip[:, 3] > 0) and np.all(clip[:, 2] > -clip[:, 3]):
+        if _beyond_near_plane(f, scene.camera.projection @ scene.camera.view):
             return "closed and convex, wholly beyond the near plane (its inside is never seen)"
     return None
-
-
-def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
-    """Smallest extent (world units) of a mesh seen along ``direction``, the light's view.
-
-    The vertices are projected on the plane across ``direction``; the minimum width of a
-    planar point set is attained across one edge of its convex hull (rotating calipers,
-    Toussaint 1983), so it is the smallest, over the hull's edges, of the extent of the hull
-    along the edge's normal. 0 for a pane seen edge-on.
-    """
-    from scipy.spatial import ConvexHull, QhullError
-
-    d = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(d, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(d, u)
-    flat = np.c_[f.world @ u, f.world @ v]
-    flat = flat - flat.mean(axis=0)
-    try:
-        hull = ConvexHull(flat)
-    except (QhullError, ValueError):  # collinear or too few points: no area seen from the light
-        return 0.0
-    corners = flat[hull.vertices]
-    along = corners @ hull.equations[:, :2].T  # (H, E): unit edge normals
-    return float(np.min(along.max(axis=0) - along.min(axis=0)))
 
 
 def _shadow_pairs(
@@ -1297,7 +939,7 @@ def _plan_shading(
             "phong",
             f"{choice.reason}; shininess {mesh.material.shininess:g} is beyond the calibrated {calibrated:g}",
         )
-    theta = calibration.max_normal_angle(_world_normals(mesh), mesh.triangles)
+    theta = _normal_angle(mesh)  # calibration.max_normal_angle of the world normals, compiled
     theta_max = min(m["theta_range"][1] for m in models["shading"]["methods"].values())
     if theta > theta_max:
         return Choice(
@@ -1329,12 +971,6 @@ def _plan_shading(
         predicted_steps=err,
         relative_cost=1.0,
     )
-
-
-def _world_normals(mesh: Mesh) -> np.ndarray:
-    """Vertex normals in world space (the inverse transpose of the linear part), as the renderer uses them."""
-    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
-    return np.asarray(normals, dtype=np.float64) @ np.linalg.inv(mesh.transform[:3, :3])
 
 
 #: The frame assumed when :func:`plan` is not told one (receiver samples for the cost models).
