@@ -893,6 +893,28 @@ def _plan_shadow(
     )
 
 
+def _coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
+    """``choice`` with its reason saying how transparent casters shadow (coloured only when ray traced)."""
+    if choice.method == "none":
+        return choice
+    from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
+
+    two_sided = scene.light_model.two_sided
+    lets_through = [
+        i
+        for i, mesh in enumerate(scene.meshes)
+        if mesh.casts_shadows and mesh_shadow_transmittance(mesh, two_sided).any()
+    ]
+    if not lets_through:
+        return choice
+    which = ", ".join(str(i) for i in lets_through)
+    if choice.method == "ray_traced":
+        return replace(choice, reason=f"{choice.reason}; coloured shadows: light crossing transparent "
+                       f"meshes {which} keeps their transmittance per RGB channel")  # fmt: skip
+    return replace(choice, reason=f"{choice.reason}; transparent meshes {which} cast full shadows "
+                   f"({choice.method} is binary; coloured shadows are ray traced)")  # fmt: skip
+
+
 def embree_available() -> bool:
     """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it.
 
@@ -1128,5 +1150,6 @@ def plan(
     facts = [_mesh_facts(mesh) for mesh in scene.meshes]
     transparency = _plan_transparency(scene, facts, tol, m)
     shadows = tuple(_plan_shadow(scene, facts, i, tol, m, frame) for i in range(len(scene.lights)))
+    shadows = tuple(_coloured_shadow_reason(scene, c) for c in shadows)
     shading = tuple(_plan_shading(scene, facts, i, tol, m) for i in range(len(scene.meshes)))
     return Plan(transparency, shadows, shading, tol)

@@ -18,6 +18,11 @@ that never build an array of all fragments:
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
   & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`. The per-point body is
   :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly.
+* :func:`fragment_surface` — per visible fragment (in parallel): its world-space point (the
+  perspective-correct barycentrics of the rasterizer applied to the world-space corners,
+  ``Σ_k b_k·v_k`` — an affine map commutes with the barycentric sum, so this is the eye-space
+  point mapped back to world space) and its triangle's world face normal, written into
+  preallocated contiguous arrays, so the look-ups and the ray set-up read them without copies.
 * :func:`hard_shadow_rays` — per receiver point (in parallel): the float32 origin, unit
   direction and ``t_max`` of its shadow ray, as ``raytrace._hard_rays_numpy`` computes them
   (offset scaled with the point's distance from the scene centre), so that Embree gets
@@ -45,6 +50,7 @@ __all__ = [
     "corner_bounds",
     "cube_maps_compiled",
     "depth_map_compiled",
+    "fragment_surface",
     "hard_shadow_rays",
     "lookup_compiled",
     "visibility_at",
@@ -561,3 +567,26 @@ def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  #
         scale = 1.0 / dist if dist > 0 else 1.0
         d32[i, 0], d32[i, 1], d32[i, 2] = dx * scale, dy * scale, dz * scale
         t32[i] = max(dist - offset[i], 0.0)
+
+
+@numba.njit(parallel=True, cache=True)
+def fragment_surface(
+    triangle, bary, triangles, world_vertices, face_normals, out_points, out_normals
+):  # pragma: no cover - compiled
+    """World-space point and face normal of each fragment, in one compiled pass.
+
+    ``triangle``: (n,) int64 triangle of each fragment; ``bary``: (n, 3) float64 its
+    perspective-correct barycentrics; ``triangles``: (T, 3) int64 vertex indices;
+    ``world_vertices``: (V, 3) float64 world positions; ``face_normals``: (T, 3) float64 unit
+    world face normals. Writes ``out_points[i] = Σ_k bary[i, k]·world_vertices[triangles[t, k]]``
+    (the formula of :func:`blinn_phong.raster.interpolate`, summed in the order k = 0, 1, 2) and
+    ``out_normals[i] = face_normals[t]``, ``t = triangle[i]``.
+    """
+    for i in numba.prange(triangle.shape[0]):
+        t = triangle[i]
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        w0, w1, w2 = bary[i, 0], bary[i, 1], bary[i, 2]
+        for k in range(3):
+            va, vb, vc = world_vertices[a, k], world_vertices[b, k], world_vertices[c, k]
+            out_points[i, k] = (w0 * va + w1 * vb) + w2 * vc
+            out_normals[i, k] = face_normals[t, k]

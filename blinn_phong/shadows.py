@@ -41,8 +41,10 @@ caster was drawn.
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import functools
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,15 +58,19 @@ __all__ = [
     "SHADOW_METHODS",
     "ShadowLookup",
     "ShadowMap",
+    "caster_transmittance",
     "light_cameras",
     "light_shadow_maps",
     "light_visibility",
+    "mesh_shadow_transmittance",
     "planar_shadow_mask",
     "planar_shadow_matrix",
     "render_shadow_map",
     "shadow_lookup",
     "shadow_map_visibility",
+    "shadow_transmittance",
     "shadow_visibility",
+    "trusted_arrays",
 ]
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
@@ -116,6 +122,21 @@ class ShadowMap:
 
 #: ids of float64 arrays already checked by the light_visibility call running in this context
 _CHECKED: contextvars.ContextVar[frozenset[int]] = contextvars.ContextVar("checked", default=frozenset())
+
+
+@contextlib.contextmanager
+def trusted_arrays(*arrays: np.ndarray) -> Iterator[None]:
+    """Inside the block the shadow functions skip the shape and finiteness checks of these arrays.
+
+    For a caller that made them itself (the frame pipeline's world points, face normals and
+    caster triangles, finite float64 arrays of the right shapes): a 1.3 M-point frame then checks
+    its points once, not once per light. Arrays not listed are checked as usual.
+    """
+    token = _CHECKED.set(_CHECKED.get() | frozenset(id(a) for a in arrays))
+    try:
+        yield
+    finally:
+        _CHECKED.reset(token)
 
 
 def _triangles(name: str, value: np.ndarray) -> np.ndarray:
@@ -642,6 +663,68 @@ def planar_shadow_mask(
     h = 1e-3 * scale
     shadowed = RayScene(flat).occluded(p + h * nrm, np.broadcast_to(-nrm, p.shape), 2 * h)
     return 1.0 - shadowed.astype(np.float64)
+
+
+def shadow_transmittance(material: object) -> np.ndarray:
+    """(3,) RGB fraction of light a surface of ``material`` lets through, for shadow rays.
+
+    By the material's transparency model (docs/transparency_models.md): an opaque material
+    (``not material.transparent``) 0; ``partial_occlusion`` — the surface covers the fraction α,
+    so ``1 − α`` of the light passes (Porter & Duff's ``over`` for the light); ``absorption`` —
+    the grey filter ``T = 1 − α`` the renderer gives it; ``emission`` — it only adds light and
+    hides nothing: 1. A material whose opacity varies over the surface (a base-colour texture, an
+    alpha clip, Kay–Greenberg) has no single transmittance: 0, a full shadow, as before coloured
+    shadows existed. Specular wash-out depends on the viewer, not the light: the base opacity counts.
+
+    Args:
+        material: a :class:`blinn_phong.scene.Material`.
+
+    Returns:
+        (3,) float64 in [0, 1].
+    """
+    if not material.transparent or material.textured or material.kay_greenberg is not None:  # type: ignore[attr-defined]
+        return np.zeros(3)
+    if material.transparency_model == "emission":  # type: ignore[attr-defined]
+        return np.ones(3)
+    return np.full(3, 1.0 - float(material.opacity))  # type: ignore[attr-defined]
+
+
+def mesh_shadow_transmittance(mesh: object, two_sided: bool) -> np.ndarray:
+    """(3,) RGB transmittance of a mesh as a shadow caster: :func:`shadow_transmittance` of its material.
+
+    Under two-sided lighting (``two_sided``) a mesh whose back material lets through other light
+    than its front one casts a full shadow (0): a shadow ray may cross either side.
+    """
+    t = shadow_transmittance(mesh.material)  # type: ignore[attr-defined]
+    back = mesh.back_material  # type: ignore[attr-defined]
+    if two_sided and back is not None and not np.array_equal(t, shadow_transmittance(back)):
+        return np.zeros(3)
+    return t
+
+
+def caster_transmittance(scene: object) -> np.ndarray | None:
+    """(T, 3) per-triangle RGB transmittance of a scene's shadow casters, or None when every caster is opaque.
+
+    Triangles of the meshes with ``casts_shadows``, in scene order (the order of the frame's
+    caster triangles), each with :func:`mesh_shadow_transmittance` of its mesh.
+
+    Args:
+        scene: a :class:`blinn_phong.scene.Scene`.
+
+    Returns:
+        (T, 3) float64 in [0, 1], or None.
+    """
+    two_sided = scene.light_model.two_sided  # type: ignore[attr-defined]
+    parts, any_light = [], False
+    for mesh in scene.meshes:  # type: ignore[attr-defined]
+        if not mesh.casts_shadows:
+            continue
+        t = mesh_shadow_transmittance(mesh, two_sided)
+        any_light = any_light or bool(np.any(t > 0))
+        parts.append(np.broadcast_to(t, (len(mesh.triangles), 3)))
+    if not any_light:
+        return None
+    return np.ascontiguousarray(np.concatenate(parts))
 
 
 #: Shadow methods :func:`light_visibility` dispatches (the planner's shadow choices).
