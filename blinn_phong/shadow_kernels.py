@@ -10,9 +10,10 @@ that never build an array of all fragments:
   §3.5.5), near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
   §2.12), the viewport transform, snapping to 1/256 texel, edge functions and the top-left
   fill rule of :mod:`blinn_phong.raster`; then per band of rows (in parallel) the
-  scan conversion keeps the smallest biased depth ``z + constant + slope·m`` per texel
-  (``glPolygonOffset(slope, ·)``). The result is a minimum, so it does not depend on the
-  order in which triangles are drawn.
+  scan conversion (each row only over the span its three edge functions allow, plus a texel
+  of margin; every texel still takes the exact edge tests) keeps the smallest biased depth
+  ``z + constant + slope·m`` per texel (``glPolygonOffset(slope, ·)``). The result is a
+  minimum, so it does not depend on the order in which triangles are drawn.
 * :func:`lookup_compiled` — per receiver point (in parallel): normal offset (Holbert 2011),
   projection into the light's clip space, the cube face of the major axis for point
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
@@ -232,9 +233,27 @@ def _scan_rows(
         exact = ex_area * area > 0 and abs(ex_area) > 1e-12
         abs_area = abs(area)
         b = bias[s]
+        bx0 = float(box[s, 0])
+        bx1 = float(box[s, 1])
         for py in range(lo, hi + 1):
             cy = py + 0.5
-            for px in range(box[s, 0], box[s, 1] + 1):
+            # the row's span: each edge function is linear in x, so its sign changes once; the
+            # span is widened by a texel on each side and every texel in it still takes the
+            # exact tests below, so the covered texels are those of the whole bounding box
+            x_lo, x_hi = bx0, bx1
+            empty = False
+            for i in range(3):
+                a = ea[s, i]
+                k = eb[s, i] * cy + ec[s, i]
+                if a > 0:
+                    x_lo = max(x_lo, math.ceil(-k / a - 0.5) - 1.0)
+                elif a < 0:
+                    x_hi = min(x_hi, math.floor(-k / a - 0.5) + 1.0)
+                elif k < 0 or (k == 0 and not etl[s, i]):
+                    empty = True
+            if empty or not x_lo <= x_hi:
+                continue
+            for px in range(int(x_lo), int(x_hi) + 1):
                 cx = px + 0.5
                 e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
                 if e0 < 0 or (e0 == 0 and not etl[s, 0]):
