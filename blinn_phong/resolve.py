@@ -363,7 +363,7 @@ def resolve_frame(
     n_keys = width * height * samples
     n_op = fragments.n_opaque
     # the shadow pass: mean over the lights (and the RGB channels of a coloured (N, L, 3) visibility)
-    vis_mean = None if visibility is None else visibility.reshape(len(visibility), -1).mean(axis=1)
+    vis_mean = None if visibility is None else visibility.mean(axis=tuple(range(1, visibility.ndim)))
     if rgba is None:
         compiled = engine != "numpy" and numba_available()
         if compiled and samples == 1 and (method == "zbuffer" or not fragments.n_transparent):

@@ -809,6 +809,20 @@ def light_visibility(
         _CHECKED.reset(token)
 
 
+def _casters_between(height: np.ndarray, plane: np.ndarray, light: np.ndarray) -> bool:
+    """True when every caster corner (signed ``height`` above ``plane``) lies on the light's side of
+    the plane and, for a positional light, below the light's own height."""
+    if len(height) == 0:
+        return False
+    side = float(plane @ light)  # > 0: the light is on the positive side (w = 0: its direction)
+    if side == 0:
+        return False
+    h = height if side > 0 else -height
+    if h.min() < 0:
+        return False
+    return bool(light[3] == 0 or h.max() < abs(side))
+
+
 def _light_visibility_checked(
     method: str,
     light: DirectionalLight | PointLight | SpotLight,
@@ -849,16 +863,36 @@ def _light_visibility_checked(
         if plane is None:
             raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
         pl = np.asarray(plane, dtype=np.float64)
-        if caster_triangles is None:
-            off_plane = np.abs(tris @ pl[:3] + pl[3]).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
-            caster_triangles = tris[off_plane]
         if isinstance(light, DirectionalLight):
             homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
         else:
             homogeneous_light = np.r_[np.asarray(light.position), 1.0]
         on_plane = np.abs(p @ pl[:3] + pl[3]) <= 1e-6 * max(np.abs(p).max(), 1.0)
         vis = np.ones(len(p))
-        if len(caster_triangles) and on_plane.any():
-            vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, p[on_plane])
+        between = False
+        if caster_triangles is None:
+            height = tris @ pl[:3] + pl[3]  # (n, 3) signed heights (times |(a, b, c)|) of the corners
+            off_plane = np.abs(height).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
+            caster_triangles = tris[off_plane]
+            between = _casters_between(height[off_plane], pl, homogeneous_light)
+        if not (len(caster_triangles) and on_plane.any()):
+            return vis
+        if between:
+            # every caster lies between the plane and the light: a point of the plane is inside a
+            # flattened caster exactly when its segment (ray) to the light crosses that caster, so
+            # the frame's one BVH answers it (cached_ray_scene, shared with every other light)
+            # instead of a new BVH of flattened triangles per light
+            from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
+
+            scene = cached_ray_scene(tris)
+            q = p[on_plane]
+            n = np.broadcast_to(pl[:3], q.shape)
+            towards = homogeneous_light[:3]
+            if homogeneous_light[3] == 0:
+                vis[on_plane] = directional_light_visibility(scene, q, n, towards, engine=engine)
+            else:
+                vis[on_plane] = point_light_visibility(scene, q, n, towards, engine=engine)
+            return vis
+        vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, p[on_plane])
         return vis
     raise ValueError(f"method must be one of {SHADOW_METHODS}, got {method!r}")
