@@ -40,8 +40,10 @@ stored depth, or a snapped vertex sits on a rounding boundary.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -113,7 +115,7 @@ def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma
     return True
 
 
-@numba.njit(cache=True)  # serial: ~100 ns a triangle, less than a parallel launch on a busy machine
+@numba.njit(cache=True, nogil=True)  # serial: ~100 ns a triangle; nogil: a cube's faces set up on threads
 def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
     # slots are filled in order (k counts them), so only the rows of drawn triangles are touched
     n = world.shape[0]
@@ -298,13 +300,28 @@ def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, et
 
 
 @numba.njit(parallel=True, cache=True)
-def _cube(world, vps, slope_bias, constant_bias, out):  # pragma: no cover - compiled
-    # the six faces of a cube map at once, one face per task (set-up and scan of a face are serial)
+def _scan_faces(
+    out, n_bands, offsets, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+):  # pragma: no cover - compiled
+    # every (face, band of rows) is one task, faces interleaved so that each thread gets a share
+    # of every face (one face may hold most of the work: the one looking at the ground)
+    n_faces = out.shape[0]
     res = out.shape[1]
-    for f in numba.prange(vps.shape[0]):
-        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], float(res), slope_bias)
-        slots = np.flatnonzero(valid)
-        _scan_rows(out[f], 0, res - 1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+    band_h = (res + n_bands - 1) // n_bands
+    for task in numba.prange(n_faces * n_bands):
+        f = task % n_faces
+        r0 = (task // n_faces) * band_h
+        r1 = min(res, r0 + band_h) - 1
+        if r0 > r1:
+            continue
+        slots = np.arange(offsets[f], offsets[f + 1])
+        _scan_rows(out[f], r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+
+
+@functools.lru_cache(maxsize=1)
+def _setup_pool() -> ThreadPoolExecutor:
+    """Threads for the per-face set-up of a cube (``_setup`` releases the GIL)."""
+    return ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="shadow-setup")
 
 
 def cube_maps_compiled(
@@ -314,7 +331,11 @@ def cube_maps_compiled(
     slope_bias: float,
     out: np.ndarray,
 ) -> np.ndarray:
-    """:func:`depth_map_compiled` for several cameras at once (a cube's six faces), one face per thread.
+    """:func:`depth_map_compiled` for several cameras at once (a cube's six faces).
+
+    Each face's triangle set-up runs on a thread of its own (the compiled set-up releases the
+    GIL); then every (face, band of rows) pair is one task of a parallel scan, so that a face
+    holding most of the work is shared by every thread.
 
     Args:
         world_triangles: (n, 3, 3) float64 world-space casters.
@@ -331,7 +352,19 @@ def cube_maps_compiled(
         out[:] = 1.0
         return out
     vps = np.ascontiguousarray(view_projections, dtype=np.float64)
-    _cube(world, vps, float(slope_bias), float(constant_bias), out)
+    res = float(out.shape[1])
+
+    def setup(f: int) -> tuple[np.ndarray, ...]:
+        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], res, float(slope_bias))
+        k = int(np.count_nonzero(valid))  # slots are filled in order: the first k are the drawn ones
+        return tuple(a[:k] for a in (bias, sx, sy, sz, ea, eb, ec, etl, box))
+
+    faces = list(_setup_pool().map(setup, range(len(vps))))
+    offsets = np.zeros(len(faces) + 1, np.int64)
+    offsets[1:] = np.cumsum([len(face[0]) for face in faces])
+    packed = [np.ascontiguousarray(np.concatenate([face[j] for face in faces])) for j in range(9)]
+    n_bands = max(1, min(out.shape[1], 4 * _threads()))
+    _scan_faces(out, n_bands, offsets, packed[0], float(constant_bias), *packed[1:])
     return out
 
 
