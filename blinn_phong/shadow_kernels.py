@@ -301,10 +301,11 @@ def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, et
 
 @numba.njit(parallel=True, cache=True)
 def _scan_faces(
-    out, n_bands, offsets, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+    out, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
 ):  # pragma: no cover - compiled
     # every (face, band of rows) is one task, faces interleaved so that each thread gets a share
-    # of every face (one face may hold most of the work: the one looking at the ground)
+    # of every face (one face may hold most of the work: the one looking at the ground); the
+    # per-face arrays come as tuples, one entry per face, so nothing is copied into one block
     n_faces = out.shape[0]
     res = out.shape[1]
     band_h = (res + n_bands - 1) // n_bands
@@ -312,10 +313,11 @@ def _scan_faces(
         f = task % n_faces
         r0 = (task // n_faces) * band_h
         r1 = min(res, r0 + band_h) - 1
-        if r0 > r1:
-            continue
-        slots = np.arange(offsets[f], offsets[f + 1])
-        _scan_rows(out[f], r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+        if r0 <= r1:
+            _scan_rows(
+                out[f], r0, r1, slots[f], bias[f], constant_bias,
+                sx[f], sy[f], sz[f], ea[f], eb[f], ec[f], etl[f], box[f],
+            )  # fmt: skip
 
 
 @functools.lru_cache(maxsize=1)
@@ -360,11 +362,10 @@ def cube_maps_compiled(
         return tuple(a[:k] for a in (bias, sx, sy, sz, ea, eb, ec, etl, box))
 
     faces = list(_setup_pool().map(setup, range(len(vps))))
-    offsets = np.zeros(len(faces) + 1, np.int64)
-    offsets[1:] = np.cumsum([len(face[0]) for face in faces])
-    packed = [np.ascontiguousarray(np.concatenate([face[j] for face in faces])) for j in range(9)]
-    n_bands = max(1, min(out.shape[1], 4 * _threads()))
-    _scan_faces(out, n_bands, offsets, packed[0], float(constant_bias), *packed[1:])
+    slots = tuple(np.arange(len(face[0]), dtype=np.int64) for face in faces)
+    per_face = [tuple(face[j] for face in faces) for j in range(9)]
+    n_bands = max(1, min(out.shape[1], 2 * _threads()))
+    _scan_faces(out, n_bands, slots, per_face[0], float(constant_bias), *per_face[1:])
     return out
 
 
