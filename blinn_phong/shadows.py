@@ -44,6 +44,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
+import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -809,6 +810,32 @@ def light_visibility(
         _CHECKED.reset(token)
 
 
+#: The last :func:`_on_plane` answer: (weak reference to the points, plane bytes, result). The
+#: lights of a frame test the same points against the same plane; the weak reference makes sure
+#: the points are the very same array, still alive (an id alone could be reused).
+_ON_PLANE: list[tuple[object, bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+
+
+def _on_plane(p: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mask, points, normals): the points within ``1e-6·max|p|`` of the plane (the receivers of
+    planar shadows), and the plane's normal for each, contiguous; reused for the frame's next light."""
+    key = plane.tobytes()
+    for ref, k, result in _ON_PLANE:
+        if k == key and ref() is p:  # type: ignore[operator]
+            return result
+    scale = max(float(-p.min()), float(p.max()), 1.0) if len(p) else 1.0
+    mask = np.abs(p @ plane[:3] + plane[3]) <= 1e-6 * scale
+    q = p[mask]
+    normals = np.empty_like(q)
+    normals[:] = plane[:3]
+    result = (mask, q, normals)
+    try:
+        _ON_PLANE[:] = [(weakref.ref(p), key, result)]
+    except TypeError:  # an array that takes no weak reference: not kept
+        _ON_PLANE.clear()
+    return result
+
+
 def _casters_between(height: np.ndarray, plane: np.ndarray, light: np.ndarray) -> bool:
     """True when every caster corner (signed ``height`` above ``plane``) lies on the light's side of
     the plane and, for a positional light, below the light's own height."""
@@ -867,7 +894,7 @@ def _light_visibility_checked(
             homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
         else:
             homogeneous_light = np.r_[np.asarray(light.position), 1.0]
-        on_plane = np.abs(p @ pl[:3] + pl[3]) <= 1e-6 * max(np.abs(p).max(), 1.0)
+        on_plane, q, q_normals = _on_plane(p, pl)
         vis = np.ones(len(p))
         between = False
         if caster_triangles is None:
@@ -885,14 +912,12 @@ def _light_visibility_checked(
             from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
 
             scene = cached_ray_scene(tris)
-            q = p[on_plane]
-            n = np.broadcast_to(pl[:3], q.shape)
             towards = homogeneous_light[:3]
             if homogeneous_light[3] == 0:
-                vis[on_plane] = directional_light_visibility(scene, q, n, towards, engine=engine)
+                vis[on_plane] = directional_light_visibility(scene, q, q_normals, towards, engine=engine)
             else:
-                vis[on_plane] = point_light_visibility(scene, q, n, towards, engine=engine)
+                vis[on_plane] = point_light_visibility(scene, q, q_normals, towards, engine=engine)
             return vis
-        vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, p[on_plane])
+        vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, q)
         return vis
     raise ValueError(f"method must be one of {SHADOW_METHODS}, got {method!r}")
