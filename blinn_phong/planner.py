@@ -92,6 +92,7 @@ __all__ = [
     "Choice",
     "MapGeometry",
     "Plan",
+    "coloured_shadow_reason",
     "coordinate_tolerance",
     "embree_available",
     "plan",
@@ -893,8 +894,18 @@ def _plan_shadow(
     )
 
 
-def _coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
-    """``choice`` with its reason saying how transparent casters shadow (coloured only when ray traced)."""
+def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
+    """``choice`` with its reason saying how transparent casters shadow (coloured only when ray traced).
+
+    Args:
+        scene: the scene planned for.
+        choice: one light's shadow choice.
+
+    Returns:
+        ``choice`` unchanged when its method is ``none`` or no caster lets light through
+        (:func:`blinn_phong.shadows.mesh_shadow_transmittance`); else with "; coloured shadows: …"
+        (``ray_traced``) or "; transparent meshes … cast full shadows" (the binary methods) appended.
+    """
     if choice.method == "none":
         return choice
     from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
@@ -1150,6 +1161,6 @@ def plan(
     facts = [_mesh_facts(mesh) for mesh in scene.meshes]
     transparency = _plan_transparency(scene, facts, tol, m)
     shadows = tuple(_plan_shadow(scene, facts, i, tol, m, frame) for i in range(len(scene.lights)))
-    shadows = tuple(_coloured_shadow_reason(scene, c) for c in shadows)
+    shadows = tuple(coloured_shadow_reason(scene, c) for c in shadows)
     shading = tuple(_plan_shading(scene, facts, i, tol, m) for i in range(len(scene.meshes)))
     return Plan(transparency, shadows, shading, tol)
