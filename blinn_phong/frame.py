@@ -16,7 +16,7 @@ import numpy as np
 from blinn_phong._checks import colour3, number
 from blinn_phong.fog import FOG_MODES
 from blinn_phong.oit import TRANSPARENCY_METHODS
-from blinn_phong.planner import Choice, Plan, embree_available, plan
+from blinn_phong.planner import Choice, Plan, coloured_shadow_reason, embree_available, plan
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS
 
@@ -320,6 +320,11 @@ def frame_plan(
         s_choices = tuple(
             _shadow_choice(light, options, c)
             for light, options, c in zip(scene.lights, per_light, planned.shadows, strict=True)
+        )
+        # a method set by the caller: say how transparent casters shadow with it (coloured if ray traced)
+        s_choices = tuple(
+            c if c.method == p.method else coloured_shadow_reason(scene, c)
+            for c, p in zip(s_choices, planned.shadows, strict=True)
         )
 
     if shading == "auto":

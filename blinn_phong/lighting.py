@@ -190,8 +190,9 @@ def _points_and_normals(points: object, normals: object) -> tuple[np.ndarray, np
 
 
 def _visibility(visibility: object, count: int, n_lights: int) -> np.ndarray:
-    """``visibility`` as an (N, L) float64 array of values in [0, 1], or raise."""
-    vis = float_array(visibility, "visibility", (count, n_lights))
+    """``visibility`` as an (N, L) or per-channel (N, L, 3) float64 array of values in [0, 1], or raise."""
+    per_channel = np.ndim(visibility) == 3  # (N, L, 3): coloured shadows, one factor per RGB channel
+    vis = float_array(visibility, "visibility", (count, n_lights, 3) if per_channel else (count, n_lights))
     outside = int(np.count_nonzero((vis < 0) | (vis > 1)))
     if outside:
         raise ValueError(
@@ -226,7 +227,8 @@ def shade(
         model: the specular form and viewer model (``specular``, ``local_viewer``);
             defaults to :class:`~blinn_phong.scene.LightModel` ().
         visibility: optional (N, L) factors in [0, 1] multiplying each light's diffuse
-            and specular terms (1 = lit; e.g. from a shadow test). L = ``len(lights)``.
+            and specular terms (1 = lit; e.g. from a shadow test), or (N, L, 3) one factor
+            per RGB channel (coloured shadows through transparent casters). L = ``len(lights)``.
         per_light: also return the (N, L, 3) per-light diffuse and specular terms.
         engine: ``"numpy"`` (reference), ``"numba"`` (compiled; not with ``per_light``),
             or ``"auto"`` (numba when it imports and ``per_light`` is False).
@@ -293,8 +295,9 @@ def shade(
             dpl[:, i] = d_i
             spl[:, i] = s_i
         if visibility is not None:
-            d_i = d_i * vis[:, i : i + 1]
-            s_i = s_i * vis[:, i : i + 1]
+            w_i = vis[:, i] if vis.ndim == 3 else vis[:, i : i + 1]  # (N, 3) per channel, or (N, 1)
+            d_i = d_i * w_i
+            s_i = s_i * w_i
         diffuse += d_i
         specular += s_i
     return ShadingTerms(ambient, diffuse, specular, alpha, dpl, spl)
@@ -497,7 +500,7 @@ def _shade_compiled(
         lights.specular,
         bool(model.local_viewer),
         model.specular == "blinn",
-        np.zeros((0, 0)) if vis is None else np.ascontiguousarray(vis),
+        np.zeros((0, 0, 1)) if vis is None else np.ascontiguousarray(vis.reshape(len(vis), len(lights), -1)),
         ambient,
         diffuse,
         specular,
@@ -544,6 +547,7 @@ def _kernel() -> object:  # a numba dispatcher
         count = p.shape[0]
         n_lights = pos.shape[0]
         has_vis = vis.shape[0] == count and vis.shape[1] == n_lights and count > 0
+        last = vis.shape[2] - 1  # vis is (N, L, K), K = 1 or 3: channel c reads index c if K == 3 else 0
         for q in numba.prange(count):
             px, py, pz = p[q, 0], p[q, 1], p[q, 2]
             nx, ny, nz = n[q, 0], n[q, 1], n[q, 2]
@@ -567,13 +571,15 @@ def _kernel() -> object:  # a numba dispatcher
                 if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
                     continue  # _reflection gives exactly 0 here
                 fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
-                w = vis[q, i] if has_vis else 1.0
-                dr += fd * (d_cm[0] * l_dif[i, 0]) * w
-                dg += fd * (d_cm[1] * l_dif[i, 1]) * w
-                db += fd * (d_cm[2] * l_dif[i, 2]) * w
-                sr += fs * (s_cm[0] * l_spe[i, 0]) * w
-                sg += fs * (s_cm[1] * l_spe[i, 1]) * w
-                sb += fs * (s_cm[2] * l_spe[i, 2]) * w
+                wr = vis[q, i, 0] if has_vis else 1.0
+                wg = vis[q, i, min(1, last)] if has_vis else 1.0
+                wb = vis[q, i, last] if has_vis else 1.0
+                dr += fd * (d_cm[0] * l_dif[i, 0]) * wr
+                dg += fd * (d_cm[1] * l_dif[i, 1]) * wg
+                db += fd * (d_cm[2] * l_dif[i, 2]) * wb
+                sr += fs * (s_cm[0] * l_spe[i, 0]) * wr
+                sg += fs * (s_cm[1] * l_spe[i, 1]) * wg
+                sb += fs * (s_cm[2] * l_spe[i, 2]) * wb
             out_amb[q, 0], out_amb[q, 1], out_amb[q, 2] = ar, ag, ab
             out_dif[q, 0], out_dif[q, 1], out_dif[q, 2] = dr, dg, db
             out_spe[q, 0], out_spe[q, 1], out_spe[q, 2] = sr, sg, sb

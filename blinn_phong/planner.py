@@ -110,6 +110,7 @@ __all__ = [
     "Choice",
     "MapGeometry",
     "Plan",
+    "coloured_shadow_reason",
     "coordinate_tolerance",
     "embree_available",
     "plan",
@@ -754,6 +755,38 @@ def _plan_shadow(
     )
 
 
+def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
+    """``choice`` with its reason saying how transparent casters shadow (coloured only when ray traced).
+
+    Args:
+        scene: the scene planned for.
+        choice: one light's shadow choice.
+
+    Returns:
+        ``choice`` unchanged when its method is ``none`` or no caster lets light through
+        (:func:`blinn_phong.shadows.mesh_shadow_transmittance`); else with "; coloured shadows: …"
+        (``ray_traced``) or "; transparent meshes … cast full shadows" (the binary methods) appended.
+    """
+    if choice.method == "none":
+        return choice
+    from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
+
+    two_sided = scene.light_model.two_sided
+    lets_through = [
+        i
+        for i, mesh in enumerate(scene.meshes)
+        if mesh.casts_shadows and mesh_shadow_transmittance(mesh, two_sided).any()
+    ]
+    if not lets_through:
+        return choice
+    which = ", ".join(str(i) for i in lets_through)
+    if choice.method == "ray_traced":
+        return replace(choice, reason=f"{choice.reason}; coloured shadows: light crossing transparent "
+                       f"meshes {which} keeps their transmittance per RGB channel")  # fmt: skip
+    return replace(choice, reason=f"{choice.reason}; transparent meshes {which} cast full shadows "
+                   f"({choice.method} is binary; coloured shadows are ray traced)")  # fmt: skip
+
+
 def embree_available() -> bool:
     """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it.
 
@@ -1063,6 +1096,7 @@ def plan(
     shadows = tuple(
         _plan_shadow(scene, facts, i, tol, m, frame, factors, fogged) for i in range(len(scene.lights))
     )
+    shadows = tuple(coloured_shadow_reason(scene, c) for c in shadows)
     shading = tuple(_plan_shading(scene, facts, i, tol, m, frame) for i in range(len(scene.meshes)))
     return Plan(transparency, shadows, shading, tol, _plan_fog(fog, fogged, m, frame, facts))
 

@@ -362,7 +362,8 @@ def resolve_frame(
     width, height, samples = f.width, f.height, f.samples
     n_keys = width * height * samples
     n_op = fragments.n_opaque
-    vis_mean = None if visibility is None else visibility.mean(axis=1)
+    # the shadow pass: mean over the lights (and the RGB channels of a coloured (N, L, 3) visibility)
+    vis_mean = None if visibility is None else visibility.mean(axis=tuple(range(1, visibility.ndim)))
     if rgba is None:
         compiled = engine != "numpy" and numba_available()
         if compiled and samples == 1 and (method == "zbuffer" or not fragments.n_transparent):
