@@ -653,6 +653,14 @@ def _plan_shadow(
         )
     receivers = {b for _, b in pairs}
     casters = {a for a, _ in pairs}
+    see_through = _see_through_casters(scene, casters)
+    if see_through and embree_available():
+        return Choice(
+            "ray_traced",
+            f"meshes {', '.join(map(str, see_through))} cast shadows and let light through: ray-traced "
+            "shadows are the exact method (planar, shadow-map and shadow-volume shadows are binary)",
+            predicted_steps=0.0,
+        )
     planes = [facts[b].plane for b in receivers]
     if all(facts[b].planar for b in receivers) and not (receivers & casters):
         base = planes[0]
@@ -753,6 +761,19 @@ def _plan_shadow(
         f"the light ({feature:.3g} of a {span:.3g} span) is predicted faster for {frame.receivers} "
         "receiver samples",
     )
+
+
+def _see_through_casters(scene: Scene, casters: set[int]) -> list[int]:
+    """The casters among ``casters`` that let some light through (coloured shadows when ray traced).
+
+    Such a caster's shadow is the light times its transmittance per RGB channel
+    (:func:`blinn_phong.shadows.mesh_shadow_transmittance`); only ray tracing carries it, so the
+    binary methods differ from it by up to the light's whole contribution times the transmittance.
+    """
+    from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
+
+    two_sided = scene.light_model.two_sided
+    return sorted(a for a in casters if mesh_shadow_transmittance(scene.meshes[a], two_sided).any())
 
 
 def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:

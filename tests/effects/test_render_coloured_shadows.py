@@ -170,3 +170,21 @@ def test_engines_agree_with_coloured_shadows():
     np.testing.assert_allclose(ra.passes["shadow"], rb.passes["shadow"], atol=1e-6)
     # the shadow pass is the mean over lights and channels of the light that arrives
     np.testing.assert_allclose(ra.passes["shadow"][_pixel(0.0, 0.0)], [0.65 * 0.5], rtol=1e-6)
+
+
+@needs_embree
+def test_planner_traces_rays_through_see_through_casters():
+    """At tolerance 0 the plan is exact: a transparent pane over a floor used to plan projected
+    (planar) shadows — binary, so the floor under the pane went black; the plan now traces rays,
+    and the default render gives the closed form unshadowed × (1 − α)."""
+    scene = bp.Scene([_quad(-2, 2, -2, 2, 0.0, FLOOR), _pane(0.35)], SUN, CAMERA, ambient=(0, 0, 0))
+    choice = bp.plan(scene).shadows[0]
+    assert choice.method == "ray_traced"
+    assert "meshes 1 cast shadows and let light through" in choice.reason
+    result = bp.render(scene, SIZE, SIZE, transparency="a_buffer")
+    shadowed = result.rgba[_pixel(0.0, 0.0)][:3].astype(np.float64)
+    lit = result.rgba[_pixel(1.6, 0.0)][:3].astype(np.float64)
+    np.testing.assert_allclose(shadowed / lit, [0.65] * 3, rtol=1e-6)
+    # the same geometry with an opaque pane: the projected shadows stay exact and are kept
+    opaque = bp.Scene([_quad(-2, 2, -2, 2, 0.0, FLOOR), _pane(1.0)], SUN, CAMERA, ambient=(0, 0, 0))
+    assert bp.plan(opaque).shadows[0].method == "planar"
