@@ -22,11 +22,21 @@ Per receiver point ``p`` (a visible sample), with the camera's view and projecti
   here nothing is clipped but the near plane, which is what ``GL_DEPTH_CLAMP`` (or Everitt &
   Kilgard's infinite projection) gives the stencil buffer.
 
-``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). ``stencil="auto"`` uses
-z-fail everywhere: the planner's random scenes include one (an open pane lying inside a
-closed slab, under a spot light) where z-pass leaves 119 of 1966 lit samples in shadow even
-though :func:`zpass_is_safe` holds, while z-fail agrees with Embree on every sample; until
-that case is understood z-pass runs only when asked for (``stencil="zpass"``).
+``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). Whatever the method,
+``zfail − zpass = w(q_p)``, the number of volumes containing the point ``q_p`` where the camera
+ray through ``p`` crosses the near plane: every face is counted by exactly one of the two.
+
+z-pass here draws the **light caps** (Heidmann drew the sides only): a receiver hidden behind
+a caster — a layer the A-buffer shades, a surface behind a transparent caster, the far side
+of a two-sided object — has the caster's lit faces between it and the eye, and without them
+its count is off by the cap's own count (the planner's random scenes found it: a closed box
+under two-sided lighting, an open pane inside a closed slab under spot lights, 119 of 1966
+samples wrong; tests/failures/test_shadow_volume_failures.py). The dark cap at infinity is
+never in front of a finite point (its window depth ``(f+n)/(f−n)`` exceeds every finite
+point's), so z-pass still skips it — and z-pass skips nothing else z-fail draws.
+``stencil="auto"`` (:func:`choose_stencil`) picks z-pass where it is provably exact — every
+receiver inside the near rectangle and :func:`zpass_is_safe` (no volume reaches it), so
+``w(q_p) = 0`` — and z-fail elsewhere.
 
 Geometry
 --------
@@ -98,6 +108,7 @@ __all__ = [
     "STENCIL_METHODS",
     "Topology",
     "analyse_topology",
+    "choose_stencil",
     "shadow_volume_triangles",
     "shadow_volume_visibility",
     "silhouette_edges",
@@ -506,7 +517,7 @@ def shadow_volume_triangles(
     world_triangles: np.ndarray | Topology,
     light: DirectionalLight | PointLight | SpotLight,
     *,
-    caps: bool = True,
+    caps: bool | str = True,
     extent: float | None = None,
     force_silhouette: bool = False,
 ) -> np.ndarray:
@@ -519,7 +530,10 @@ def shadow_volume_triangles(
     Args:
         world_triangles: (n, 3, 3) world-space triangles, or a :class:`Topology` of them.
         light: the light.
-        caps: include light and dark caps (z-fail needs them; z-pass does not draw them).
+        caps: ``True`` — light and dark caps (z-fail needs both); ``"light"`` — the light caps
+            only (z-pass: a light cap lies in front of every receiver hidden behind a caster's
+            lit faces, while a dark cap at infinity is never in front of a finite point);
+            ``False`` — no caps (Heidmann's z-pass, right only for receivers no caster hides).
         extent: None — extrude to infinity (w = 0); else the world distance of the far end.
         force_silhouette: treat open components as if closed too (silhouette extrusion only):
             wrong for open meshes, kept to measure their leak.
@@ -528,6 +542,9 @@ def shadow_volume_triangles(
         (m, 3, 4) float64 homogeneous world-space triangles, counter-clockwise seen from
         outside the volume.
     """
+    if caps not in (True, False, "light"):
+        raise ValueError(f"caps: expected True, False or 'light', got {caps!r}")
+    light_cap, dark_cap = (True, False) if isinstance(caps, str) else (bool(caps), bool(caps))
     topo = world_triangles if isinstance(world_triangles, Topology) else analyse_topology(world_triangles)
     if force_silhouette:
         topo = Topology(
@@ -553,11 +570,10 @@ def shadow_volume_triangles(
     # side quad (a, b, b∞, a∞): outward for an edge a→b of a face that faces the light
     parts.append(np.stack([hv[b], hv[a], far[a]], axis=1))
     parts.append(np.stack([hv[b], far[a], far[b]], axis=1))
-    if caps:
-        light_cap = topo.triangles[closed & lit]
-        dark_cap = topo.triangles[closed & ~lit]
-        parts.append(hv[light_cap])
-        parts.append(far[dark_cap])
+    if light_cap:
+        parts.append(hv[topo.triangles[closed & lit]])
+    if dark_cap:
+        parts.append(far[topo.triangles[closed & ~lit]])
     # open components: every triangle its own two-sided sliver, oriented to face the light
     single = topo.valid & ~closed & (facing != 0)
     f = topo.triangles[single]
@@ -566,8 +582,9 @@ def shadow_volume_triangles(
         ea, eb = f[:, i], f[:, j]
         parts.append(np.stack([hv[eb], hv[ea], far[ea]], axis=1))
         parts.append(np.stack([hv[eb], far[ea], far[eb]], axis=1))
-    if caps:
+    if light_cap:
         parts.append(hv[f])
+    if dark_cap:
         parts.append(far[f[:, ::-1]])
     return np.concatenate(parts).reshape(-1, 3, 4)
 
@@ -1157,9 +1174,9 @@ def shadow_volume_visibility(
             normal towards the light's side before it is counted.
         camera: the camera whose samples the points are; None — a view that sees every point
             (fine for z-fail; z-pass is only valid for a camera outside every volume).
-        stencil: ``"auto"`` (z-fail, see the module docstring), ``"zfail"`` (robust) or
-            ``"zpass"`` (valid only while the camera is outside every volume and the near
-            plane cuts none).
+        stencil: ``"auto"`` (z-pass where :func:`choose_stencil` proves it exact, else
+            z-fail), ``"zfail"`` (robust) or ``"zpass"`` (valid only while the camera is
+            outside every volume and the near plane cuts none).
         offset: world units, ≥ 0.
         engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
 
@@ -1198,7 +1215,59 @@ def shadow_volume_visibility(
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
     if stencil == "auto":
-        stencil = "zfail"  # exact wherever tested; z-pass failed one "safe" scene (module docstring)
-    volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)
+        stencil = choose_stencil(light, tris, view, proj, q)[0]
+    # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
+    # when the volumes end at a finite distance (orthographic cameras), the dark caps too
+    caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
+    volume = shadow_volume_triangles(tris, light, caps=caps, extent=extent)
     counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
     return (counts == 0).astype(np.float64)
+
+
+def choose_stencil(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+    points: np.ndarray,
+) -> tuple[str, str]:
+    """The counting method ``stencil="auto"`` uses, and why: z-pass where it is provably exact.
+
+    z-pass (with the light caps drawn) is short by exactly ``w(q_p)``, the number of volumes
+    containing the point ``q_p`` where the camera ray of receiver p crosses the near plane
+    (module docstring). It is therefore exact when (a) every receiver projects inside the
+    near rectangle (``|x_ndc|, |y_ndc| ≤ 1``), so every ``q_p`` lies on that rectangle, and
+    (b) :func:`zpass_is_safe` proves no caster meets the convex hull of the rectangle and the
+    light, so no point of the rectangle lies in a volume. Elsewhere z-fail is used; it is exact
+    for any camera.
+
+    Args:
+        light: the light.
+        world_triangles: (n, 3, 3) the casters, world space.
+        view: 4×4 world → eye matrix.
+        projection: 4×4 eye → clip matrix (OpenGL conventions).
+        points: (m, 3) world-space receivers (as they will be counted).
+
+    Returns:
+        ``("zpass" | "zfail", reason)``.
+    """
+    p = _points("points", points)
+    vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    if len(p):
+        pc = p @ vp[:, :3].T + vp[:, 3]
+        w = pc[:, 3]
+        if not np.all(w > 0):
+            return "zfail", "a receiver lies behind the camera"
+        spread = np.maximum(np.abs(pc[:, 0]), np.abs(pc[:, 1]))
+        if not np.all(spread <= w):
+            reach = float((spread / w).max())
+            return "zfail", f"a receiver projects outside the near rectangle (|ndc| up to {reach:.3g})"
+    if not zpass_is_safe(light, world_triangles, view, projection):
+        return (
+            "zfail",
+            "a caster meets the hull of the near rectangle and the light: the near plane may cut a volume",
+        )
+    return (
+        "zpass",
+        "no caster meets the hull of the near rectangle and the light: no volume reaches the near plane",
+    )
