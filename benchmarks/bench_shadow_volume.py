@@ -51,6 +51,7 @@ def _samples(scene: Scene, width: int, height: int) -> tuple[np.ndarray, np.ndar
 def _cold(fn):
     def call():
         sv._TOPOLOGY_CACHE.clear()
+        sv._DERIVED_CACHE.clear()
         return fn()
 
     return call
@@ -128,6 +129,8 @@ def frame(width: int, height: int, repeat: int) -> dict:
         def call():
             if cold:
                 sv._TOPOLOGY_CACHE.clear()
+                sv._DERIVED_CACHE.clear()
+        sv._DERIVED_CACHE.clear()
             stages[shadows] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return call

@@ -210,14 +210,31 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
             (),
             np.zeros((0, 3), np.int64),
         )
-    key = hashlib.blake2b(tris.tobytes(), digest_size=16).digest()
+    return _topology_with_key(tris)[0]
+
+
+def _topology_with_key(tris: np.ndarray) -> tuple[Topology, bytes]:
+    """The (cached) topology of checked float64 triangles and the digest it is cached by."""
+    key = hashlib.blake2b(np.ascontiguousarray(tris).data, digest_size=16).digest()
     if key in _TOPOLOGY_CACHE:
-        return _TOPOLOGY_CACHE[key]
+        return _TOPOLOGY_CACHE[key], key
+    if len(tris) == 0:
+        e = np.zeros(0, np.int64)
+        empty = (
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            e.astype(bool),
+            e,
+            e.astype(bool),
+            (),
+            np.zeros((0, 3), np.int64),
+        )
+        return Topology(*empty), key
     topology = _analyse(tris)
     if len(_TOPOLOGY_CACHE) >= 2:
         _TOPOLOGY_CACHE.pop(next(iter(_TOPOLOGY_CACHE)))
     _TOPOLOGY_CACHE[key] = topology
-    return topology
+    return topology, key
 
 
 #: The last topologies analysed, by a digest of the triangles (a frame asks once per light).
@@ -739,10 +756,8 @@ def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], 
     )
 
 
-def _grid(
-    px: np.ndarray, py: np.ndarray
-) -> tuple[tuple[float, float, float, float, int, int], np.ndarray, np.ndarray]:
-    """A screen grid over the receivers (about two per cell): (grid, cell_start, order)."""
+def _grid_params(px: np.ndarray, py: np.ndarray) -> tuple[float, float, float, float, int, int]:
+    """A screen grid over the receivers (about ``_TILE_POINTS`` per tile): (xmin, ymin, cw, ch, nx, ny)."""
     m = len(px)
     xmin, xmax = float(px.min()), float(px.max())
     ymin, ymax = float(py.min()), float(py.max())
@@ -751,12 +766,20 @@ def _grid(
     nx = int(min(4096, max(1, round(math.sqrt(cells * spanx / spany)))))
     ny = int(min(4096, max(1, round(cells / nx))))
     cw, ch = spanx / nx * (1 + 1e-9), spany / ny * (1 + 1e-9)
+    return xmin, ymin, cw, ch, nx, ny
+
+
+def _bin_numpy(
+    px: np.ndarray, py: np.ndarray, grid: tuple[float, float, float, float, int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Receivers sorted by tile (stable): (cell_start, order)."""
+    xmin, ymin, cw, ch, nx, ny = grid
     cx = np.clip(((px - xmin) / cw).astype(np.int64), 0, nx - 1)
     cy = np.clip(((py - ymin) / ch).astype(np.int64), 0, ny - 1)
     cell = cy * nx + cx
     order = np.argsort(cell, kind="stable")
     cell_start = np.searchsorted(cell[order], np.arange(nx * ny + 1))
-    return (xmin, ymin, cw, ch, nx, ny), cell_start.astype(np.int64), order.astype(np.int64)
+    return cell_start.astype(np.int64), order.astype(np.int64)
 
 
 def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool) -> np.ndarray:
@@ -827,18 +850,15 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         py,
         pz,
         cell_start,
+        zlo,
+        zhi,
         zfail,
     ):  # pragma: no cover - compiled
-        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c)
+        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c);
+        # zlo/zhi: each tile's receiver depth range
         n_cells = nx * ny
         counts = np.zeros(px.shape[0], np.int64)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
-        zlo = np.full(n_cells, np.inf)
-        zhi = np.full(n_cells, -np.inf)
-        for cell in range(n_cells):
-            for k in range(cell_start[cell], cell_start[cell + 1]):
-                zlo[cell] = min(zlo[cell], pz[k])
-                zhi[cell] = max(zhi[cell], pz[k])
         band_h = (ny + n_bands - 1) // n_bands
         for band in numba.prange(n_bands):
             r0 = band * band_h
@@ -968,6 +988,246 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
     return count
 
 
+# --------------------------------------------------------------------------- compiled set-up
+#
+# The numba engine runs the per-receiver and per-volume-triangle set-up compiled (one pass
+# each, no large temporaries); every expression below is written out in the same order as its
+# numpy twin (:func:`_project_numpy`, :func:`_transform`, :func:`_setup`), without fused
+# multiply-adds, so both engines produce bit-identical set-ups and therefore identical counts.
+
+
+def _transform(vol: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """(m, 3, 4) homogeneous world → clip coordinates, summed in a fixed order (as compiled)."""
+    return (
+        (vol[..., 0, None] * vp[:, 0] + vol[..., 1, None] * vp[:, 1]) + vol[..., 2, None] * vp[:, 2]
+    ) + vol[..., 3, None] * vp[:, 3]
+
+
+def _offset_numpy(
+    p: np.ndarray, n: np.ndarray, light_vec: np.ndarray, directional: bool, offset: float
+) -> np.ndarray:
+    """Each receiver moved ``offset`` along its normal towards the light's side (as compiled)."""
+    if directional:
+        t0, t1, t2 = -light_vec[0], -light_vec[1], -light_vec[2]
+    else:
+        t0, t1, t2 = light_vec[0] - p[:, 0], light_vec[1] - p[:, 1], light_vec[2] - p[:, 2]
+    dot = (n[:, 0] * t0 + n[:, 1] * t1) + n[:, 2] * t2
+    side = np.where(dot >= 0, 1.0, -1.0)
+    length = np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2])
+    k = side * offset / np.maximum(length, 1e-300)
+    return p + n * k[:, None]
+
+
+def _project_numpy(q: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Window (normalised-device) x, y, z and clip w of world points (as compiled)."""
+    c = [((q[:, 0] * vp[r, 0] + q[:, 1] * vp[r, 1]) + q[:, 2] * vp[r, 2]) + vp[r, 3] for r in range(4)]
+    return c[0] / c[3], c[1] / c[3], c[2] / c[3], c[3]
+
+
+@functools.lru_cache(maxsize=1)
+def _fast_kernels() -> tuple[object, ...]:
+    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up and
+    the final scatter of counts to visibility."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
+        m = p.shape[0]
+        px = np.empty(m)
+        py = np.empty(m)
+        pz = np.empty(m)
+        pw = np.empty(m)
+        for i in numba.prange(m):
+            q0 = p[i, 0]
+            q1 = p[i, 1]
+            q2 = p[i, 2]
+            if moved:
+                n0 = n[i, 0]
+                n1 = n[i, 1]
+                n2 = n[i, 2]
+                if directional:
+                    t0 = -light_vec[0]
+                    t1 = -light_vec[1]
+                    t2 = -light_vec[2]
+                else:
+                    t0 = light_vec[0] - q0
+                    t1 = light_vec[1] - q1
+                    t2 = light_vec[2] - q2
+                dot = (n0 * t0 + n1 * t1) + n2 * t2
+                side = 1.0 if dot >= 0 else -1.0
+                length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+                k = side * offset / max(length, 1e-300)
+                q0 = q0 + n0 * k
+                q1 = q1 + n1 * k
+                q2 = q2 + n2 * k
+            c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
+            c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
+            c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
+            c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
+            px[i] = c0 / c3
+            py[i] = c1 / c3
+            pz[i] = c2 / c3
+            pw[i] = c3
+        return px, py, pz, pw
+
+    @numba.njit(cache=True)
+    def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Stable counting sort of the receivers by tile; per tile the depth range."""
+        m = px.shape[0]
+        n_cells = nx * ny
+        cell = np.empty(m, np.int64)
+        cell_start = np.zeros(n_cells + 1, np.int64)
+        for i in range(m):
+            cx = min(max(np.int64((px[i] - xmin) / cw), 0), nx - 1)
+            cy = min(max(np.int64((py[i] - ymin) / ch), 0), ny - 1)
+            c = cy * nx + cx
+            cell[i] = c
+            cell_start[c + 1] += 1
+        for c in range(n_cells):
+            cell_start[c + 1] += cell_start[c]
+        fill = cell_start[:n_cells].copy()
+        order = np.empty(m, np.int64)
+        sx = np.empty(m)
+        sy = np.empty(m)
+        sz = np.empty(m)
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        for i in range(m):
+            c = cell[i]
+            k = fill[c]
+            fill[c] = k + 1
+            order[k] = i
+            sx[k] = px[i]
+            sy[k] = py[i]
+            z = pz[i]
+            sz[k] = z
+            zlo[c] = min(zlo[c], z)
+            zhi[c] = max(zhi[c], z)
+        return order, cell_start, sx, sy, sz, zlo, zhi
+
+    @numba.njit(parallel=True, cache=True)
+    def setup(clip, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per clip-space triangle the fields of :class:`_Setup` (see :func:`_setup`); a
+        triangle that crosses the near plane or the guard band (when ``check``) is flagged in
+        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area."""
+        s = clip.shape[0]
+        ex = np.empty((s, 3))
+        ey = np.empty((s, 3))
+        edx = np.empty((s, 3))
+        edy = np.empty((s, 3))
+        esign = np.empty((s, 3))
+        etie = np.zeros((s, 3), np.bool_)
+        z0 = np.zeros(s)
+        x0 = np.zeros(s)
+        y0 = np.zeros(s)
+        gx = np.zeros(s)
+        gy = np.zeros(s)
+        front = np.zeros(s, np.int64)
+        cx0 = np.ones(s, np.int64)
+        cx1 = np.zeros(s, np.int64)
+        cy0 = np.ones(s, np.int64)
+        cy1 = np.zeros(s, np.int64)
+        bx0 = np.zeros(s)
+        bx1 = np.zeros(s)
+        by0 = np.zeros(s)
+        by1 = np.zeros(s)
+        todo = np.zeros(s, np.bool_)
+        for t in numba.prange(s):
+            if check:
+                out = False
+                for v in range(3):
+                    xc = clip[t, v, 0]
+                    yc = clip[t, v, 1]
+                    zc = clip[t, v, 2]
+                    wc = clip[t, v, 3]
+                    gw = guard * wc
+                    if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
+                        out = True
+                if out:
+                    todo[t] = True
+                    continue
+            if not (clip[t, 0, 3] > 0 and clip[t, 1, 3] > 0 and clip[t, 2, 3] > 0):
+                continue
+            xa = clip[t, 0, 0] / clip[t, 0, 3]
+            xb = clip[t, 1, 0] / clip[t, 1, 3]
+            xc_ = clip[t, 2, 0] / clip[t, 2, 3]
+            ya = clip[t, 0, 1] / clip[t, 0, 3]
+            yb = clip[t, 1, 1] / clip[t, 1, 3]
+            yc_ = clip[t, 2, 1] / clip[t, 2, 3]
+            za = clip[t, 0, 2] / clip[t, 0, 3]
+            zb = clip[t, 1, 2] / clip[t, 1, 3]
+            zc_ = clip[t, 2, 2] / clip[t, 2, 3]
+            area = (xb - xa) * (yc_ - ya) - (xc_ - xa) * (yb - ya)
+            if area == 0 or not np.isfinite(area):
+                continue
+            sgn = 1.0 if area > 0 else -1.0
+            for i in range(3):
+                if i == 0:
+                    xp, yp, xq, yq = xa, ya, xb, yb
+                elif i == 1:
+                    xp, yp, xq, yq = xb, yb, xc_, yc_
+                else:
+                    xp, yp, xq, yq = xc_, yc_, xa, ya
+                canonical = (xp < xq) or (xp == xq and yp < yq)
+                if canonical:
+                    sx, sy, tx, ty = xp, yp, xq, yq
+                else:
+                    sx, sy, tx, ty = xq, yq, xp, yp
+                ex[t, i] = sx
+                ey[t, i] = sy
+                edx[t, i] = tx - sx
+                edy[t, i] = ty - sy
+                es = sgn * (1.0 if canonical else -1.0)
+                esign[t, i] = es
+                ddx = -edy[t, i] * es
+                ddy = edx[t, i] * es
+                etie[t, i] = ddx > 0 or (ddx == 0 and ddy > 0)
+            gx[t] = ((zb - za) * (yc_ - ya) - (zc_ - za) * (yb - ya)) / area
+            gy[t] = ((xb - xa) * (zc_ - za) - (xc_ - xa) * (zb - za)) / area
+            z0[t] = za
+            x0[t] = xa
+            y0[t] = ya
+            front[t] = 1 if area > 0 else -1
+            lo_x = min(xa, xb, xc_)
+            hi_x = max(xa, xb, xc_)
+            lo_y = min(ya, yb, yc_)
+            hi_y = max(ya, yb, yc_)
+            fx0 = np.floor((lo_x - xmin) / cw)
+            fx1 = np.floor((hi_x - xmin) / cw)
+            fy0 = np.floor((lo_y - ymin) / ch)
+            fy1 = np.floor((hi_y - ymin) / ch)
+            cx0[t] = np.int64(min(max(fx0, 0.0), float(nx)))
+            cx1[t] = np.int64(min(max(fx1, -1.0), float(nx - 1)))
+            cy0[t] = np.int64(min(max(fy0, 0.0), float(ny)))
+            cy1[t] = np.int64(min(max(fy1, -1.0), float(ny - 1)))
+            pad_x = 1e-9 * (max(abs(xa), abs(xb), abs(xc_)) + 1.0)
+            pad_y = 1e-9 * (max(abs(ya), abs(yb), abs(yc_)) + 1.0)
+            bx0[t] = lo_x - pad_x
+            bx1[t] = hi_x + pad_x
+            by0[t] = lo_y - pad_y
+            by1[t] = hi_y + pad_y
+        return (
+            ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front,
+            cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
+        )  # fmt: skip
+
+    @numba.njit(parallel=True, cache=True)
+    def lit(order, sorted_counts):  # pragma: no cover - compiled
+        out = np.empty(order.shape[0])
+        for k in numba.prange(order.shape[0]):
+            out[order[k]] = 1.0 if sorted_counts[k] == 0 else 0.0
+        return out
+
+    @numba.njit(parallel=True, cache=True)
+    def scatter(order, sorted_counts):  # pragma: no cover - compiled
+        out = np.empty(order.shape[0], np.int64)
+        for k in numba.prange(order.shape[0]):
+            out[order[k]] = sorted_counts[k]
+        return out
+
+    return project, bin_points, setup, lit, scatter
+
+
 def _use_numba(engine: str) -> bool:
     if engine not in _ENGINES:
         raise ValueError(f"engine: expected one of {_ENGINES}, got {engine!r}")
@@ -1016,59 +1276,54 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
-    pc = p @ vp[:, :3].T + vp[:, 3]
-    if not np.all(pc[:, 3] > 0):
-        bad = int(np.count_nonzero(pc[:, 3] <= 0))
+    if numba_path:
+        px, py, pz, pw = _fast_kernels()[0](p, p, np.zeros(3), False, 0.0, False, vp)
+    else:
+        px, py, pz, pw = _project_numpy(p, vp)
+    if not np.all(pw > 0):
+        bad = int(np.count_nonzero(~(pw > 0)))
         raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
-    px, py, pz = pc[:, 0] / pc[:, 3], pc[:, 1] / pc[:, 3], pc[:, 2] / pc[:, 3]
-    grid, cell_start, order = _grid(px, py)
-    clip = vol @ vp.T
+    return _count(vol, vp, px, py, pz, stencil == "zfail", numba_path)
+
+
+def _count(
+    vol: np.ndarray,
+    vp: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+    pz: np.ndarray,
+    zfail: bool,
+    numba_path: bool,
+    visibility: bool = False,
+) -> np.ndarray:
+    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers."""
+    grid = _grid_params(px, py)
+    xmin, ymin, cw, ch, nx, ny = grid
     guard = 2.0 * max(float(np.abs(px).max()), float(np.abs(py).max()), 1.0) + 1.0
-    st = _setup(clip, grid, guard)
-    zfail = stencil == "zfail"
-    nx, ny = grid[4], grid[5]
+    clip = _transform(vol, vp)
     if not numba_path:
-        return _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+        st = _setup(clip, grid, guard)
+        cell_start, order = _bin_numpy(px, py, grid)
+        counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+        return (counts == 0).astype(np.float64) if visibility else counts
+    _, bin_points, setup, lit, scatter = _fast_kernels()
+    fields = setup(clip, True, guard, xmin, ymin, cw, ch, nx, ny)
+    todo = fields[-1]
+    if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
+        cut = setup(_clip(clip[todo], guard), False, guard, xmin, ymin, cw, ch, nx, ny)
+        fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
+    st = _Setup(*fields[:-1])
+    order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     parallel = len(px) >= _PARALLEL_RECEIVERS
     n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1))) if parallel else 1
     sorted_counts = _kernel(parallel)(
-        n_bands,
-        ny,
-        nx,
-        grid[0],
-        grid[1],
-        grid[2],
-        grid[3],
-        st.cx0,
-        st.cx1,
-        st.cy0,
-        st.cy1,
-        st.ex,
-        st.ey,
-        st.edx,
-        st.edy,
-        st.esign,
-        st.etie,
-        st.z0,
-        st.x0,
-        st.y0,
-        st.gx,
-        st.gy,
-        st.front,
-        st.bx0,
-        st.bx1,
-        st.by0,
-        st.by1,
-        px[order],
-        py[order],
-        pz[order],
-        cell_start,
-        zfail,
-    )
-    counts = np.empty(len(px), np.int64)
-    counts[order] = sorted_counts
-    return counts
+        n_bands, ny, nx, xmin, ymin, cw, ch,
+        st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
+        st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
+        sx, sy, sz, cell_start, zlo, zhi, zfail,
+    )  # fmt: skip
+    return lit(order, sorted_counts) if visibility else scatter(order, sorted_counts)
 
 
 def zpass_is_safe(
@@ -1198,30 +1453,86 @@ def shadow_volume_visibility(
     _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
         return np.ones(len(p))
-    to_light = np.broadcast_to(-light_vec, p.shape) if directional else light_vec - p
-    length = np.sqrt(np.einsum("ij,ij->i", n, n))
-    side = np.sign(np.einsum("ij,ij->i", n, to_light))
-    side[side == 0] = 1.0
-    q = p + n * (side * offset / np.maximum(length, 1e-300))[:, None]
+    numba_path = _use_numba(engine)
+    q = None
     if camera is None:
+        q = _offset_numpy(p, n, light_vec, directional, float(offset))
         view, proj = _default_camera(q, tris)
     else:
         view, proj = camera.view, camera.projection
     orthographic = np.allclose(proj[3], [0.0, 0.0, 0.0, 1.0])
     extent = None
     if orthographic:  # w would be 0 at infinity: extrude past every receiver and caster instead
+        q = _offset_numpy(p, n, light_vec, directional, float(offset)) if q is None else q
         pts = np.concatenate([q, tris.reshape(-1, 3)])
         span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
+    vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    if numba_path:  # offset and projection in one compiled pass (the same expressions)
+        px, py, pz, pw = _fast_kernels()[0](p, n, light_vec, directional, float(offset), True, vp)
+    else:
+        q = _offset_numpy(p, n, light_vec, directional, float(offset)) if q is None else q
+        px, py, pz, pw = _project_numpy(q, vp)
+    if not np.all(pw > 0):
+        bad = int(np.count_nonzero(~(pw > 0)))
+        raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
+    topo, key = _topology_with_key(tris)
     if stencil == "auto":
-        stencil = choose_stencil(light, tris, view, proj, q)[0]
+        stencil = _choose(light, tris, key, view, proj, px, py)[0]
     # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
     # when the volumes end at a finite distance (orthographic cameras), the dark caps too
     caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
-    volume = shadow_volume_triangles(tris, light, caps=caps, extent=extent)
-    counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
-    return (counts == 0).astype(np.float64)
+    light_key = (type(light).__name__, light_vec.tobytes(), caps, extent)
+    volume = _cached(
+        ("volume", key, light_key), lambda: shadow_volume_triangles(topo, light, caps=caps, extent=extent)
+    )
+    return _count(volume, vp, px, py, pz, stencil == "zfail", numba_path, visibility=True)
+
+
+#: Per-frame reuse: volumes and near-plane proofs by (topology digest, light, ...), a few entries.
+_DERIVED_CACHE: dict[tuple, object] = {}
+
+
+def _cached(key: tuple, make: object) -> object:
+    if key in _DERIVED_CACHE:
+        return _DERIVED_CACHE[key]
+    value = make()  # type: ignore[operator]
+    if len(_DERIVED_CACHE) >= 8:
+        _DERIVED_CACHE.pop(next(iter(_DERIVED_CACHE)))
+    _DERIVED_CACHE[key] = value
+    return value
+
+
+def _choose(
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    key: bytes,
+    view: np.ndarray,
+    projection: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+) -> tuple[str, str]:
+    """:func:`choose_stencil` on projected receivers (normalised-device x, y)."""
+    if len(px):
+        reach = max(float(np.abs(px).max()), float(np.abs(py).max()))
+        if not reach <= 1.0:
+            return "zfail", f"a receiver projects outside the near rectangle (|ndc| up to {reach:.3g})"
+    light_vec, _ = _light(light)
+    safe = _cached(
+        ("zpass_is_safe", key, type(light).__name__, light_vec.tobytes(), np.asarray(view, float).tobytes(),
+         np.asarray(projection, float).tobytes()),
+        lambda: zpass_is_safe(light, tris, view, projection),
+    )  # fmt: skip
+    if not safe:
+        return (
+            "zfail",
+            "a caster meets the hull of the near rectangle and the light: the near plane may cut a volume",
+        )
+    return (
+        "zpass",
+        "no caster meets the hull of the near rectangle and the light: no volume reaches the near plane",
+    )
 
 
 def choose_stencil(
@@ -1252,22 +1563,9 @@ def choose_stencil(
         ``("zpass" | "zfail", reason)``.
     """
     p = _points("points", points)
+    tris = _triangles("world_triangles", world_triangles)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
-    if len(p):
-        pc = p @ vp[:, :3].T + vp[:, 3]
-        w = pc[:, 3]
-        if not np.all(w > 0):
-            return "zfail", "a receiver lies behind the camera"
-        spread = np.maximum(np.abs(pc[:, 0]), np.abs(pc[:, 1]))
-        if not np.all(spread <= w):
-            reach = float((spread / w).max())
-            return "zfail", f"a receiver projects outside the near rectangle (|ndc| up to {reach:.3g})"
-    if not zpass_is_safe(light, world_triangles, view, projection):
-        return (
-            "zfail",
-            "a caster meets the hull of the near rectangle and the light: the near plane may cut a volume",
-        )
-    return (
-        "zpass",
-        "no caster meets the hull of the near rectangle and the light: no volume reaches the near plane",
-    )
+    px, py, _, pw = _project_numpy(p, vp)
+    if not np.all(pw > 0):
+        return "zfail", "a receiver lies behind the camera"
+    return _choose(light, tris, _topology_with_key(tris)[1], view, projection, px, py)
