@@ -130,7 +130,6 @@ def frame(width: int, height: int, repeat: int) -> dict:
             if cold:
                 sv._TOPOLOGY_CACHE.clear()
                 sv._DERIVED_CACHE.clear()
-        sv._DERIVED_CACHE.clear()
             stages[shadows] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return call
