@@ -135,11 +135,12 @@ def _triangles(name: str, value: object) -> np.ndarray:
     return tris.astype(np.float64, copy=False)
 
 
-def _points(name: str, value: object) -> np.ndarray:
+def _points(name: str, value: object, check_finite: bool = True) -> np.ndarray:
+    """(n, 3) float64; ``check_finite=False`` leaves the NaN/Inf check to :func:`_projected`."""
     arr = np.asarray(value)
     if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name}: expected a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if check_finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: expected finite coordinates, got NaN or Inf")
     return arr.astype(np.float64, copy=False)
 
@@ -213,9 +214,22 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     return _topology_with_key(tris)[0]
 
 
+def _digest(tris: np.ndarray) -> bytes:
+    """A 128-bit content digest of a float64 array (the cache key of its topology): BLAKE2b, or
+    with numba four interleaved splitmix64 lanes per 64-bit half, seeded differently (a cache
+    key against accidental collisions, not an adversary; it is several times faster)."""
+    flat = np.ascontiguousarray(tris).reshape(-1)
+    from .fast import numba_available
+
+    if not numba_available():
+        return hashlib.blake2b(flat.data, digest_size=16).digest()
+    lanes = _hash_kernels()[3](flat.view(np.uint64))
+    return b"%d:" % len(flat) + lanes.tobytes()
+
+
 def _topology_with_key(tris: np.ndarray) -> tuple[Topology, bytes]:
     """The (cached) topology of checked float64 triangles and the digest it is cached by."""
-    key = hashlib.blake2b(np.ascontiguousarray(tris).data, digest_size=16).digest()
+    key = _digest(tris)
     if key in _TOPOLOGY_CACHE:
         return _TOPOLOGY_CACHE[key], key
     if len(tris) == 0:
@@ -242,9 +256,9 @@ _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 
 @functools.lru_cache(maxsize=1)
-def _hash_kernels() -> tuple[object, object, object]:
-    """Compiled hash-table welding, edge pairing (linear probing) and union-find: same results as
-    the numpy sorts and pointer jumping."""
+def _hash_kernels() -> tuple[object, object, object, object]:
+    """Compiled hash-table welding, edge pairing (linear probing) and union-find (same results as
+    the numpy sorts and pointer jumping), and the content digest of :func:`_digest`."""
     import numba
 
     @numba.njit(inline="always", cache=True)
@@ -344,7 +358,24 @@ def _hash_kernels() -> tuple[object, object, object]:
             parent[i] = parent[parent[i]]
         return parent
 
-    return weld, pair, union_find
+    @numba.njit(cache=True)
+    def digest(bits):  # pragma: no cover - compiled
+        out = np.empty(8, np.uint64)
+        for lane in range(8):
+            out[lane] = mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
+        m = bits.shape[0]
+        full = m - m % 4
+        for i in range(0, full, 4):
+            for lane in range(4):
+                v = bits[i + lane]
+                out[lane] = mix(out[lane] ^ v)
+                out[lane + 4] = mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
+        for i in range(full, m):
+            out[0] = mix(out[0] ^ bits[i])
+            out[4] = mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
+        return out
+
+    return weld, pair, union_find, digest
 
 
 def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -609,11 +640,19 @@ def shadow_volume_triangles(
 # --------------------------------------------------------------------------- counting
 
 
+def _plane_distance(clip: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """``plane · v`` for (..., 4) clip coordinates, summed in a fixed order (as compiled: no fused
+    multiply-add, so both engines clip the same faces at the same points)."""
+    return ((clip[..., 0] * plane[0] + clip[..., 1] * plane[1]) + clip[..., 2] * plane[2]) + clip[
+        ..., 3
+    ] * plane[3]
+
+
 def _clip_plane(clip: np.ndarray, plane: np.ndarray) -> np.ndarray:
     """Clip (S, 3, 4) clip-space triangles to ``plane · v ≥ 0``, keeping winding. New vertices are
     interpolated from the lexicographically first endpoint, so an edge shared by two triangles is
     cut at bit-identical points."""
-    dist = clip @ plane
+    dist = _plane_distance(clip, plane)
     inside = dist >= 0
     n_in = inside.sum(axis=1)
     out = [clip[n_in == 3]]
@@ -655,7 +694,9 @@ def _clip(clip: np.ndarray, guard: float) -> np.ndarray:
     planes = np.array(
         [(0, 0, 1, 1), (-1, 0, 0, guard), (1, 0, 0, guard), (0, -1, 0, guard), (0, 1, 0, guard)], np.float64
     )
-    inside = ((clip @ planes.T) >= 0).all(axis=(1, 2))  # most faces need no clipping at all
+    inside = np.ones(len(clip), bool)  # most faces need no clipping at all
+    for plane in planes:
+        inside &= (_plane_distance(clip, plane) >= 0).all(axis=1)
     cut = clip[~inside]
     for plane in planes:
         cut = _clip_plane(cut, plane)
@@ -756,11 +797,12 @@ def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], 
     )
 
 
-def _grid_params(px: np.ndarray, py: np.ndarray) -> tuple[float, float, float, float, int, int]:
-    """A screen grid over the receivers (about ``_TILE_POINTS`` per tile): (xmin, ymin, cw, ch, nx, ny)."""
-    m = len(px)
-    xmin, xmax = float(px.min()), float(px.max())
-    ymin, ymax = float(py.min()), float(py.max())
+def _grid_params(
+    m: int, bounds: tuple[float, float, float, float]
+) -> tuple[float, float, float, float, int, int]:
+    """A screen grid over ``m`` receivers within ``bounds`` = (xmin, xmax, ymin, ymax), about
+    ``_TILE_POINTS`` per tile: (xmin, ymin, cw, ch, nx, ny)."""
+    xmin, xmax, ymin, ymax = bounds
     spanx, spany = max(xmax - xmin, 1e-12), max(ymax - ymin, 1e-12)
     cells = max(1, m // _TILE_POINTS)
     nx = int(min(4096, max(1, round(math.sqrt(cells * spanx / spany)))))
@@ -1030,6 +1072,39 @@ def _fast_kernels() -> tuple[object, ...]:
     the final scatter of counts to visibility."""
     import numba
 
+    @numba.njit(inline="always")
+    def project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw):  # pragma: no cover
+        q0 = p[i, 0]
+        q1 = p[i, 1]
+        q2 = p[i, 2]
+        if moved:
+            n0 = n[i, 0]
+            n1 = n[i, 1]
+            n2 = n[i, 2]
+            if directional:
+                t0 = -light_vec[0]
+                t1 = -light_vec[1]
+                t2 = -light_vec[2]
+            else:
+                t0 = light_vec[0] - q0
+                t1 = light_vec[1] - q1
+                t2 = light_vec[2] - q2
+            dot = (n0 * t0 + n1 * t1) + n2 * t2
+            side = 1.0 if dot >= 0 else -1.0
+            length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+            k = side * offset / max(length, 1e-300)
+            q0 = q0 + n0 * k
+            q1 = q1 + n1 * k
+            q2 = q2 + n2 * k
+        c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
+        c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
+        c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
+        c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
+        px[i] = c0 / c3
+        py[i] = c1 / c3
+        pz[i] = c2 / c3
+        pw[i] = c3
+
     @numba.njit(parallel=True, cache=True)
     def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
         m = p.shape[0]
@@ -1037,38 +1112,35 @@ def _fast_kernels() -> tuple[object, ...]:
         py = np.empty(m)
         pz = np.empty(m)
         pw = np.empty(m)
-        for i in numba.prange(m):
-            q0 = p[i, 0]
-            q1 = p[i, 1]
-            q2 = p[i, 2]
-            if moved:
-                n0 = n[i, 0]
-                n1 = n[i, 1]
-                n2 = n[i, 2]
-                if directional:
-                    t0 = -light_vec[0]
-                    t1 = -light_vec[1]
-                    t2 = -light_vec[2]
-                else:
-                    t0 = light_vec[0] - q0
-                    t1 = light_vec[1] - q1
-                    t2 = light_vec[2] - q2
-                dot = (n0 * t0 + n1 * t1) + n2 * t2
-                side = 1.0 if dot >= 0 else -1.0
-                length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
-                k = side * offset / max(length, 1e-300)
-                q0 = q0 + n0 * k
-                q1 = q1 + n1 * k
-                q2 = q2 + n2 * k
-            c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
-            c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
-            c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
-            c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
-            px[i] = c0 / c3
-            py[i] = c1 / c3
-            pz[i] = c2 / c3
-            pw[i] = c3
-        return px, py, pz, pw
+        n_chunks = 64
+        # per chunk: min/max of x and y, min of w, and 1 if an input was not finite
+        stats = np.empty((n_chunks, 6))
+        size = (m + n_chunks - 1) // n_chunks
+        for chunk in numba.prange(n_chunks):
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            for i in range(chunk * size, min(m, (chunk + 1) * size)):
+                if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+                    bad = 1.0
+                if moved and not (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2])):
+                    bad = 1.0
+                project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
+                xlo = min(xlo, px[i])
+                xhi = max(xhi, px[i])
+                ylo = min(ylo, py[i])
+                yhi = max(yhi, py[i])
+                wlo = min(wlo, pw[i])
+            stats[chunk, 0] = xlo
+            stats[chunk, 1] = xhi
+            stats[chunk, 2] = ylo
+            stats[chunk, 3] = yhi
+            stats[chunk, 4] = wlo
+            stats[chunk, 5] = bad
+        return px, py, pz, pw, stats
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
@@ -1105,12 +1177,21 @@ def _fast_kernels() -> tuple[object, ...]:
             zhi[c] = max(zhi[c], z)
         return order, cell_start, sx, sy, sz, zlo, zhi
 
+    @numba.njit(inline="always")
+    def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
+        if transform:  # as _transform sums it
+            return ((src[t, v, 0] * vp[r, 0] + src[t, v, 1] * vp[r, 1]) + src[t, v, 2] * vp[r, 2]) + src[
+                t, v, 3
+            ] * vp[r, 3]
+        return src[t, v, r]
+
     @numba.njit(parallel=True, cache=True)
-    def setup(clip, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
-        """Per clip-space triangle the fields of :class:`_Setup` (see :func:`_setup`); a
-        triangle that crosses the near plane or the guard band (when ``check``) is flagged in
+    def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
+        ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
+        a triangle that crosses the near plane or the guard band (when ``check``) is flagged in
         ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area."""
-        s = clip.shape[0]
+        s = src.shape[0]
         ex = np.empty((s, 3))
         ey = np.empty((s, 3))
         edx = np.empty((s, 3))
@@ -1133,30 +1214,44 @@ def _fast_kernels() -> tuple[object, ...]:
         by1 = np.zeros(s)
         todo = np.zeros(s, np.bool_)
         for t in numba.prange(s):
+            c00 = component(src, vp, transform, t, 0, 0)
+            c01 = component(src, vp, transform, t, 0, 1)
+            c02 = component(src, vp, transform, t, 0, 2)
+            c03 = component(src, vp, transform, t, 0, 3)
+            c10 = component(src, vp, transform, t, 1, 0)
+            c11 = component(src, vp, transform, t, 1, 1)
+            c12 = component(src, vp, transform, t, 1, 2)
+            c13 = component(src, vp, transform, t, 1, 3)
+            c20 = component(src, vp, transform, t, 2, 0)
+            c21 = component(src, vp, transform, t, 2, 1)
+            c22 = component(src, vp, transform, t, 2, 2)
+            c23 = component(src, vp, transform, t, 2, 3)
             if check:
                 out = False
                 for v in range(3):
-                    xc = clip[t, v, 0]
-                    yc = clip[t, v, 1]
-                    zc = clip[t, v, 2]
-                    wc = clip[t, v, 3]
+                    if v == 0:
+                        xc, yc, zc, wc = c00, c01, c02, c03
+                    elif v == 1:
+                        xc, yc, zc, wc = c10, c11, c12, c13
+                    else:
+                        xc, yc, zc, wc = c20, c21, c22, c23
                     gw = guard * wc
                     if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
                         out = True
                 if out:
                     todo[t] = True
                     continue
-            if not (clip[t, 0, 3] > 0 and clip[t, 1, 3] > 0 and clip[t, 2, 3] > 0):
+            if not (c03 > 0 and c13 > 0 and c23 > 0):
                 continue
-            xa = clip[t, 0, 0] / clip[t, 0, 3]
-            xb = clip[t, 1, 0] / clip[t, 1, 3]
-            xc_ = clip[t, 2, 0] / clip[t, 2, 3]
-            ya = clip[t, 0, 1] / clip[t, 0, 3]
-            yb = clip[t, 1, 1] / clip[t, 1, 3]
-            yc_ = clip[t, 2, 1] / clip[t, 2, 3]
-            za = clip[t, 0, 2] / clip[t, 0, 3]
-            zb = clip[t, 1, 2] / clip[t, 1, 3]
-            zc_ = clip[t, 2, 2] / clip[t, 2, 3]
+            xa = c00 / c03
+            xb = c10 / c13
+            xc_ = c20 / c23
+            ya = c01 / c03
+            yb = c11 / c13
+            yc_ = c21 / c23
+            za = c02 / c03
+            zb = c12 / c13
+            zc_ = c22 / c23
             area = (xb - xa) * (yc_ - ya) - (xc_ - xa) * (yb - ya)
             if area == 0 or not np.isfinite(area):
                 continue
@@ -1276,14 +1371,46 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
+    px, py, pz, bounds = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
+    return _count(vol, vp, px, py, pz, bounds, stencil == "zfail", numba_path)
+
+
+def _projected(
+    p: np.ndarray,
+    n: np.ndarray,
+    light_vec: np.ndarray,
+    directional: bool,
+    offset: float,
+    moved: bool,
+    vp: np.ndarray,
+    numba_path: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float, float, float]]:
+    """Receivers (moved ``offset`` towards the light's side when ``moved``) in normalised-device
+    coordinates, and their (xmin, xmax, ymin, ymax); raises if a receiver is behind the camera
+    or a point or normal is not finite."""
     if numba_path:
-        px, py, pz, pw = _fast_kernels()[0](p, p, np.zeros(3), False, 0.0, False, vp)
+        px, py, pz, _, stats = _fast_kernels()[0](p, n, light_vec, directional, offset, moved, vp)
+        bad = bool(stats[:, 5].any())
+        w_ok = bool(stats[:, 4].min() > 0)
+        bounds = (
+            float(stats[:, 0].min()),
+            float(stats[:, 1].max()),
+            float(stats[:, 2].min()),
+            float(stats[:, 3].max()),
+        )
     else:
-        px, py, pz, pw = _project_numpy(p, vp)
-    if not np.all(pw > 0):
-        bad = int(np.count_nonzero(~(pw > 0)))
-        raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
-    return _count(vol, vp, px, py, pz, stencil == "zfail", numba_path)
+        bad = not (np.all(np.isfinite(p)) and (not moved or np.all(np.isfinite(n))))
+        q = _offset_numpy(p, n, light_vec, directional, offset) if moved else p
+        px, py, pz, pw = _project_numpy(q, vp)
+        w_ok = bool(np.all(pw > 0))
+        bounds = (
+            (float(px.min()), float(px.max()), float(py.min()), float(py.max())) if len(px) else (0.0,) * 4
+        )
+    if bad:
+        raise ValueError("points/normals: expected finite coordinates, got NaN or Inf")
+    if not w_ok:
+        raise ValueError(f"points: some of the {len(p)} receivers lie behind the camera (clip w <= 0)")
+    return px, py, pz, bounds
 
 
 def _count(
@@ -1292,25 +1419,27 @@ def _count(
     px: np.ndarray,
     py: np.ndarray,
     pz: np.ndarray,
+    bounds: tuple[float, float, float, float],
     zfail: bool,
     numba_path: bool,
     visibility: bool = False,
 ) -> np.ndarray:
-    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers."""
-    grid = _grid_params(px, py)
+    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers
+    whose (xmin, xmax, ymin, ymax) are ``bounds``."""
+    grid = _grid_params(len(px), bounds)
     xmin, ymin, cw, ch, nx, ny = grid
-    guard = 2.0 * max(float(np.abs(px).max()), float(np.abs(py).max()), 1.0) + 1.0
-    clip = _transform(vol, vp)
+    guard = 2.0 * max(*(abs(b) for b in bounds), 1.0) + 1.0
     if not numba_path:
-        st = _setup(clip, grid, guard)
+        st = _setup(_transform(vol, vp), grid, guard)
         cell_start, order = _bin_numpy(px, py, grid)
         counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
         return (counts == 0).astype(np.float64) if visibility else counts
     _, bin_points, setup, lit, scatter = _fast_kernels()
-    fields = setup(clip, True, guard, xmin, ymin, cw, ch, nx, ny)
+    fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
     todo = fields[-1]
     if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
-        cut = setup(_clip(clip[todo], guard), False, guard, xmin, ymin, cw, ch, nx, ny)
+        cut = _clip(_transform(vol[todo], vp), guard)
+        cut = setup(cut, vp, False, False, guard, xmin, ymin, cw, ch, nx, ny)
         fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
     st = _Setup(*fields[:-1])
     order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
@@ -1438,8 +1567,8 @@ def shadow_volume_visibility(
     Returns:
         (m,) float64 in {0, 1}.
     """
-    p = _points("points", points)
-    n = _points("normals", normals)
+    p = _points("points", points, check_finite=False)  # checked while they are projected
+    n = _points("normals", normals, check_finite=False)
     if n.shape != p.shape:
         raise ValueError(f"normals: expected the shape of points {p.shape}, got {n.shape}")
     if not (isinstance(offset, int | float) and math.isfinite(offset) and offset >= 0):
@@ -1452,6 +1581,8 @@ def shadow_volume_visibility(
         raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
     _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
+        _points("points", p)
+        _points("normals", n)
         return np.ones(len(p))
     numba_path = _use_numba(engine)
     q = None
@@ -1469,17 +1600,11 @@ def shadow_volume_visibility(
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
     vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
-    if numba_path:  # offset and projection in one compiled pass (the same expressions)
-        px, py, pz, pw = _fast_kernels()[0](p, n, light_vec, directional, float(offset), True, vp)
-    else:
-        q = _offset_numpy(p, n, light_vec, directional, float(offset)) if q is None else q
-        px, py, pz, pw = _project_numpy(q, vp)
-    if not np.all(pw > 0):
-        bad = int(np.count_nonzero(~(pw > 0)))
-        raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
+    # offset and projection in one compiled pass (the numpy engine: the same expressions)
+    px, py, pz, bounds = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path)
     topo, key = _topology_with_key(tris)
     if stencil == "auto":
-        stencil = _choose(light, tris, key, view, proj, px, py)[0]
+        stencil = _choose(light, tris, key, view, proj, bounds)[0]
     # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
     # when the volumes end at a finite distance (orthographic cameras), the dark caps too
     caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
@@ -1487,7 +1612,7 @@ def shadow_volume_visibility(
     volume = _cached(
         ("volume", key, light_key), lambda: shadow_volume_triangles(topo, light, caps=caps, extent=extent)
     )
-    return _count(volume, vp, px, py, pz, stencil == "zfail", numba_path, visibility=True)
+    return _count(volume, vp, px, py, pz, bounds, stencil == "zfail", numba_path, visibility=True)
 
 
 #: Per-frame reuse: volumes and near-plane proofs by (topology digest, light, ...), a few entries.
@@ -1510,12 +1635,12 @@ def _choose(
     key: bytes,
     view: np.ndarray,
     projection: np.ndarray,
-    px: np.ndarray,
-    py: np.ndarray,
+    bounds: tuple[float, ...],
 ) -> tuple[str, str]:
-    """:func:`choose_stencil` on projected receivers (normalised-device x, y)."""
-    if len(px):
-        reach = max(float(np.abs(px).max()), float(np.abs(py).max()))
+    """:func:`choose_stencil` for receivers whose normalised-device (xmin, xmax, ymin, ymax) are
+    ``bounds`` (empty: no receivers)."""
+    if bounds:
+        reach = max(abs(b) for b in bounds)
         if not reach <= 1.0:
             return "zfail", f"a receiver projects outside the near rectangle (|ndc| up to {reach:.3g})"
     light_vec, _ = _light(light)
@@ -1568,4 +1693,5 @@ def choose_stencil(
     px, py, _, pw = _project_numpy(p, vp)
     if not np.all(pw > 0):
         return "zfail", "a receiver lies behind the camera"
-    return _choose(light, tris, _topology_with_key(tris)[1], view, projection, px, py)
+    bounds = (float(px.min()), float(px.max()), float(py.min()), float(py.max())) if len(px) else ()
+    return _choose(light, tris, _topology_with_key(tris)[1], view, projection, bounds)
