@@ -97,7 +97,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,7 +118,7 @@ __all__ = [
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
-_TILE_POINTS = 16  # receivers per screen tile, on average
+_TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
 
 
@@ -901,16 +900,18 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         n_cells = nx * ny
         counts = np.zeros(px.shape[0], np.int64)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
-        band_h = (ny + n_bands - 1) // n_bands
+        # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
+        # gets a share of the busy rows whatever the threads' static split of the bands
         for band in numba.prange(n_bands):
-            r0 = band * band_h
-            r1 = min(ny, r0 + band_h) - 1
             for t in range(front.shape[0]):
-                lo = max(cy0[t], r0)
-                hi = min(cy1[t], r1)
-                if lo > hi or cx0[t] > cx1[t]:
+                if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
                     continue
-                for row in range(lo, hi + 1):
+                if n_bands == 1:
+                    lo = cy0[t]
+                else:  # the first row >= cy0 of this band
+                    d = band - cy0[t] % n_bands
+                    lo = cy0[t] + (d + n_bands if d < 0 else d)
+                for row in range(lo, cy1[t] + 1, n_bands):
                     # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
                     sy0 = ymin + row * ch - 1e-9 * ch
                     sy1 = ymin + (row + 1) * ch + 1e-9 * ch
@@ -1021,7 +1022,7 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                                     counts[p] -= front[t]
                             elif depth < pz[p]:
                                 counts[p] += front[t]
-            for row in range(r0, r1 + 1):
+            for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
                         counts[k] += whole[cell]
@@ -1323,6 +1324,13 @@ def _fast_kernels() -> tuple[object, ...]:
     return project, bin_points, setup, lit, scatter
 
 
+def _threads() -> int:
+    """Threads a compiled parallel loop runs on (numba's setting)."""
+    import numba
+
+    return max(1, int(numba.get_num_threads()))
+
+
 def _use_numba(engine: str) -> bool:
     if engine not in _ENGINES:
         raise ValueError(f"engine: expected one of {_ENGINES}, got {engine!r}")
@@ -1445,7 +1453,7 @@ def _count(
     order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     parallel = len(px) >= _PARALLEL_RECEIVERS
-    n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1))) if parallel else 1
+    n_bands = min(ny, _threads()) if parallel else 1
     sorted_counts = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
