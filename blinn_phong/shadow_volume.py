@@ -1067,8 +1067,8 @@ def _project_numpy(q: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return c[0] / c[3], c[1] / c[3], c[2] / c[3], c[3]
 
 
-@functools.lru_cache(maxsize=1)
-def _fast_kernels() -> tuple[object, ...]:
+@functools.lru_cache(maxsize=2)
+def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
     """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up and
     the final scatter of counts to visibility."""
     import numba
@@ -1106,7 +1106,7 @@ def _fast_kernels() -> tuple[object, ...]:
         pz[i] = c2 / c3
         pw[i] = c3
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=parallel, cache=True)
     def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
         m = p.shape[0]
         px = np.empty(m)
@@ -1192,7 +1192,7 @@ def _fast_kernels() -> tuple[object, ...]:
             ] * vp[r, 3]
         return src[t, v, r]
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=parallel, cache=True)
     def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
         """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
         ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
@@ -1313,14 +1313,14 @@ def _fast_kernels() -> tuple[object, ...]:
             cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
         )  # fmt: skip
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=parallel, cache=True)
     def lit(order, sorted_counts):  # pragma: no cover - compiled
         out = np.empty(order.shape[0])
         for k in numba.prange(order.shape[0]):
             out[order[k]] = 1.0 if sorted_counts[k] == 0 else 0.0
         return out
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=parallel, cache=True)
     def scatter(order, sorted_counts):  # pragma: no cover - compiled
         out = np.empty(order.shape[0], np.int64)
         for k in numba.prange(order.shape[0]):
@@ -1403,7 +1403,9 @@ def _projected(
     coordinates, and their (xmin, xmax, ymin, ymax); raises if a receiver is behind the camera
     or a point or normal is not finite."""
     if numba_path:
-        px, py, pz, _, stats = _fast_kernels()[0](p, n, light_vec, directional, offset, moved, vp)
+        # small jobs run serially: a parallel region costs more than it saves on a busy machine
+        kernels = _fast_kernels(len(p) >= _PARALLEL_RECEIVERS)
+        px, py, pz, _, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
         bad = bool(stats[:, 5].any())
         w_ok = bool(stats[:, 4].min() > 0)
         bounds = (
@@ -1448,7 +1450,8 @@ def _count(
         cell_start, order = _bin_numpy(px, py, grid)
         counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
         return (counts == 0).astype(np.float64) if visibility else counts
-    _, bin_points, setup, lit, scatter = _fast_kernels()
+    parallel = len(px) >= _PARALLEL_RECEIVERS
+    _, bin_points, setup, lit, scatter = _fast_kernels(parallel)
     fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
     todo = fields[-1]
     if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
@@ -1458,7 +1461,6 @@ def _count(
     st = _Setup(*fields[:-1])
     order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
-    parallel = len(px) >= _PARALLEL_RECEIVERS
     n_bands = min(ny, _threads()) if parallel else 1
     sorted_counts = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
