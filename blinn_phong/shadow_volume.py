@@ -80,10 +80,15 @@ triangles sharing an edge give exactly opposite values and, with a fixed tie-bre
 (perturbation towards +x, then +y), a point on a shared edge belongs to exactly one of them —
 and whose depth, interpolated linearly in screen space (OpenGL 4.6 §14.6.1), is nearer than the
 receiver's (z-pass; ``GL_LESS`` passes) or not nearer (z-fail; the depth test fails). Facing is
-the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid; the
-compiled kernel (numba) processes horizontal bands of that grid in parallel, each band owning its
-receivers (no write races); the numpy engine is the readable reference. Counts are integers and
-both engines evaluate the same floating-point expressions, so they agree exactly.
+the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid. With
+numba every step is compiled (receiver projection, a counting sort into tiles, volume-triangle
+set-up, counting, the scatter back); the counting kernel gives each thread interleaved rows of
+tiles, each row owning its receivers (no write races), and jobs under ``_PARALLEL_RECEIVERS``
+run on one thread. The numpy engine is the readable reference. Counts are integers and both
+engines evaluate the same floating-point expressions in the same order (written out, no fused
+multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached by a
+digest of the casters and the light (a frame's lights share one topology; the next frame
+reuses the volumes).
 
 Self-shadowing without depth invariance: a real stencil pass relies on a surface and its own
 light cap giving bit-identical depths (the cap then fails ``GL_LESS`` and lies "behind"). Here
