@@ -1644,7 +1644,7 @@ def _cached(key: tuple, make: object) -> object:
     if key in _DERIVED_CACHE:
         return _DERIVED_CACHE[key]
     value = make()  # type: ignore[operator]
-    if len(_DERIVED_CACHE) >= 8:
+    if len(_DERIVED_CACHE) >= 6:  # a frame of two lights needs four entries
         _DERIVED_CACHE.pop(next(iter(_DERIVED_CACHE)))
     _DERIVED_CACHE[key] = value
     return value
