@@ -97,6 +97,7 @@ CASES: dict[str, tuple[bool, dict[str, object]]] = {
     "fog": (False, {"shadows": "none", "fog": bp.Fog("exp", (0.5, 0.6, 0.7), density=0.05)}),
     "shadow_map": (False, {"shadows": bp.ShadowOptions("shadow_map", resolution=1024)}),
     "ray_traced": (False, {"shadows": "ray_traced"}),
+    "shadow_volume": (False, {"shadows": "shadow_volume"}),
 }
 
 
