@@ -265,11 +265,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
     the numpy sorts and pointer jumping), and the content digest of :func:`_digest`."""
     import numba
 
-    @numba.njit(inline="always", cache=True)
-    def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
     @numba.njit(cache=True)
     def weld(bits):  # pragma: no cover - compiled
@@ -284,7 +280,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         for r in range(m):
             h = np.uint64(0)
             for c in range(3):
-                h = mix(bits[r, c] ^ h)
+                h = vh.mix(bits[r, c] ^ h)
             slot = np.int64(h & np.uint64(size - 1))
             while True:
                 u = table[slot]
@@ -312,7 +308,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         count = np.zeros(m, np.int64)  # indexed by the first occurrence
         first_of = np.empty(m, np.int64)
         for e in range(m):
-            slot = np.int64(mix(np.uint64(key[e])) & np.uint64(size - 1))
+            slot = np.int64(vh.mix(np.uint64(key[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -330,7 +326,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         twin_first = np.full(m, -1, np.int64)
         for e in range(m):
             own[e] = count[first_of[e]]
-            slot = np.int64(mix(np.uint64(twin[e])) & np.uint64(size - 1))
+            slot = np.int64(vh.mix(np.uint64(twin[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -366,17 +362,17 @@ def _hash_kernels() -> tuple[object, object, object, object]:
     def digest(bits):  # pragma: no cover - compiled
         out = np.empty(8, np.uint64)
         for lane in range(8):
-            out[lane] = mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
+            out[lane] = vh.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
         m = bits.shape[0]
         full = m - m % 4
         for i in range(0, full, 4):
             for lane in range(4):
                 v = bits[i + lane]
-                out[lane] = mix(out[lane] ^ v)
-                out[lane + 4] = mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
+                out[lane] = vh.mix(out[lane] ^ v)
+                out[lane + 4] = vh.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
         for i in range(full, m):
-            out[0] = mix(out[0] ^ bits[i])
-            out[4] = mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
+            out[0] = vh.mix(out[0] ^ bits[i])
+            out[4] = vh.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
         return out
 
     return weld, pair, union_find, digest
@@ -1078,38 +1074,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
     the final scatter of counts to visibility."""
     import numba
 
-    @numba.njit(inline="always")
-    def project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw):  # pragma: no cover
-        q0 = p[i, 0]
-        q1 = p[i, 1]
-        q2 = p[i, 2]
-        if moved:
-            n0 = n[i, 0]
-            n1 = n[i, 1]
-            n2 = n[i, 2]
-            if directional:
-                t0 = -light_vec[0]
-                t1 = -light_vec[1]
-                t2 = -light_vec[2]
-            else:
-                t0 = light_vec[0] - q0
-                t1 = light_vec[1] - q1
-                t2 = light_vec[2] - q2
-            dot = (n0 * t0 + n1 * t1) + n2 * t2
-            side = 1.0 if dot >= 0 else -1.0
-            length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
-            k = side * offset / max(length, 1e-300)
-            q0 = q0 + n0 * k
-            q1 = q1 + n1 * k
-            q2 = q2 + n2 * k
-        c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
-        c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
-        c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
-        c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
-        px[i] = c0 / c3
-        py[i] = c1 / c3
-        pz[i] = c2 / c3
-        pw[i] = c3
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
     @numba.njit(parallel=parallel, cache=True)
     def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
@@ -1134,7 +1099,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                     bad = 1.0
                 if moved and not (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2])):
                     bad = 1.0
-                project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
+                vh.project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
                 xlo = min(xlo, px[i])
                 xhi = max(xhi, px[i])
                 ylo = min(ylo, py[i])
@@ -1189,14 +1154,6 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             zhi[c] = max(zhi[c], z)
         return order, cell_start, sx, sy, sz, zlo, zhi
 
-    @numba.njit(inline="always")
-    def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
-        if transform:  # as _transform sums it
-            return ((src[t, v, 0] * vp[r, 0] + src[t, v, 1] * vp[r, 1]) + src[t, v, 2] * vp[r, 2]) + src[
-                t, v, 3
-            ] * vp[r, 3]
-        return src[t, v, r]
-
     @numba.njit(parallel=parallel, cache=True)
     def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
         """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
@@ -1226,18 +1183,18 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         by1 = np.zeros(s)
         todo = np.zeros(s, np.bool_)
         for t in numba.prange(s):
-            c00 = component(src, vp, transform, t, 0, 0)
-            c01 = component(src, vp, transform, t, 0, 1)
-            c02 = component(src, vp, transform, t, 0, 2)
-            c03 = component(src, vp, transform, t, 0, 3)
-            c10 = component(src, vp, transform, t, 1, 0)
-            c11 = component(src, vp, transform, t, 1, 1)
-            c12 = component(src, vp, transform, t, 1, 2)
-            c13 = component(src, vp, transform, t, 1, 3)
-            c20 = component(src, vp, transform, t, 2, 0)
-            c21 = component(src, vp, transform, t, 2, 1)
-            c22 = component(src, vp, transform, t, 2, 2)
-            c23 = component(src, vp, transform, t, 2, 3)
+            c00 = vh.component(src, vp, transform, t, 0, 0)
+            c01 = vh.component(src, vp, transform, t, 0, 1)
+            c02 = vh.component(src, vp, transform, t, 0, 2)
+            c03 = vh.component(src, vp, transform, t, 0, 3)
+            c10 = vh.component(src, vp, transform, t, 1, 0)
+            c11 = vh.component(src, vp, transform, t, 1, 1)
+            c12 = vh.component(src, vp, transform, t, 1, 2)
+            c13 = vh.component(src, vp, transform, t, 1, 3)
+            c20 = vh.component(src, vp, transform, t, 2, 0)
+            c21 = vh.component(src, vp, transform, t, 2, 1)
+            c22 = vh.component(src, vp, transform, t, 2, 2)
+            c23 = vh.component(src, vp, transform, t, 2, 3)
             if check:
                 out = False
                 for v in range(3):
