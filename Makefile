@@ -10,7 +10,10 @@ LOCK42 := requirements/blender42.lock
 VENV45 := .venv-blender45
 LOCK45 := requirements/blender45.lock
 # Blender 5.2 LTS embeds Python 3.13 and numpy 2 (bpy 5.2.3 on the package index).
-PYTHON313 ?= python3.13
+# The first working 3.13 among python3.13 on PATH and pyenv's installed 3.13s (pyenv's shim fails
+# unless 3.13 is a selected version).
+PYTHON313 ?= $(shell for p in python3.13 $$(pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13; do \
+	"$$p" -c 'import sys; assert sys.version_info[:2] == (3, 13)' >/dev/null 2>&1 && { echo "$$p"; break; }; done)
 VENV52 := .venv-blender52
 LOCK52 := requirements/blender52.lock
 OUT ?= out
@@ -20,7 +23,7 @@ OUT ?= out
 $(VENV)/.synced: $(LOCK)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet uv==0.13.8
-	$(UV) pip sync --quiet --python $(PY) $(LOCK)
+	$(UV) pip sync --quiet --compile-bytecode --python $(PY) $(LOCK)
 	touch $@
 
 setup: $(VENV)/.synced
@@ -78,7 +81,7 @@ scenes: $(VENV42)/.synced
 $(VENV42)/.synced: $(LOCK42)
 	test -x $(VENV42)/bin/python || $(PYTHON) -m venv $(VENV42)
 	$(VENV42)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV42)/bin/uv pip sync --quiet --python $(VENV42)/bin/python $(LOCK42)
+	$(VENV42)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV42)/bin/python $(LOCK42)
 	touch $@
 
 # The Blender tests again, on Blender 4.2 LTS.
@@ -88,7 +91,7 @@ test-blender42: $(VENV42)/.synced
 $(VENV45)/.synced: $(LOCK45)
 	test -x $(VENV45)/bin/python || $(PYTHON) -m venv $(VENV45)
 	$(VENV45)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV45)/bin/uv pip sync --quiet --python $(VENV45)/bin/python $(LOCK45)
+	$(VENV45)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV45)/bin/python $(LOCK45)
 	touch $@
 
 # The Blender tests again, on Blender 4.5 LTS.
@@ -98,7 +101,7 @@ test-blender45: $(VENV45)/.synced
 $(VENV52)/.synced: $(LOCK52)
 	test -x $(VENV52)/bin/python || $(PYTHON313) -m venv $(VENV52)
 	$(VENV52)/bin/python -m pip install --quiet uv==0.13.8
-	$(VENV52)/bin/uv pip sync --quiet --python $(VENV52)/bin/python $(LOCK52)
+	$(VENV52)/bin/uv pip sync --quiet --compile-bytecode --python $(VENV52)/bin/python $(LOCK52)
 	touch $@
 
 # Blender 5.2 LTS (Python 3.13, numpy 2): the Blender tests, then the core tests on numpy 2.

@@ -37,6 +37,8 @@ MODULES = (
     "blender_compositor",
     "shadow_volume",
     "shadows_mesa",
+    "frame",
+    "planning",
 )
 
 
@@ -74,6 +76,15 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_shadow_volume
 
         return lambda: bench_shadow_volume.run(out, repeat=repeat, quick=quick)
+    if name == "frame":
+        from benchmarks import bench_frame
+
+        # --quick: 960×540, 16k-triangle spheres, scaling to 960×540 (frame_quick.json)
+        return lambda: bench_frame.run(out, repeat=repeat, quick=quick)
+    if name == "planning":
+        from benchmarks import bench_planning
+
+        return lambda: bench_planning.run(out, repeat=repeat)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
@@ -139,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick and {"shading", "shadows", "transparency"} <= set(selected) - set(failures):
         from benchmarks import error_models
 
-        path = error_models.save(error_models.fit({"families": results}))
+        path = error_models.save(error_models.fit_results(out, results))
         print(f"calibration {path}")
     if args.charts is not None:
         from benchmarks.charts import draw_all

@@ -17,8 +17,8 @@ Usage::
 
     .venv/bin/python -m benchmarks.bench_effects [--out benchmarks/results] [--repeat 3] [--size 256]
 
-Writes ``effects.json`` to ``--out``, then runs :mod:`benchmarks.bench_frame` (the whole frame
-with each effect against the plain frame, ``frame.json``).
+Writes ``effects.json`` to ``--out``. The whole frame with each effect against the plain frame
+(``frame.json``) is :mod:`benchmarks.bench_frame` (``python -m benchmarks --only frame``).
 """
 
 from __future__ import annotations
@@ -341,10 +341,6 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 3, size: int = 256) -> dict
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out / "effects.json", result, indent=2)
-    # The whole frame with each effect against the plain frame (frame.json; see benchmarks.bench_frame).
-    from benchmarks import bench_frame
-
-    bench_frame.run(out, repeat=repeat, quick=size < 256)
     return result
 
 

@@ -24,10 +24,13 @@ Peak memory: each row is rendered once more in a fresh process (after a small wa
 loads the compiled kernels) and reports its peak resident set (``VmHWM``), with the warm-up's as
 the baseline.
 
-Scaling: the plain, A-buffer and fog frames against the number of pixels (480×270 … 3840×2160,
-65k-triangle spheres) and against the number of triangles (spheres of 64×32 … 512×256
-segments, 960×540), time and peak memory; each series runs in one fresh process in increasing
-size, so each point's peak RSS is its own.
+Scaling (:func:`scaling_series`): every row above and the shadow-volume frame
+(``shadows="shadow_volume"``, :data:`SCALING_CASES`) against the number of pixels (480×270 …
+3840×2160, 65k-triangle spheres) and against the number of triangles (spheres of 64×32 …
+512×256 segments, 960×540), time and peak memory; each series runs in one fresh process in
+increasing size, so each point's peak RSS is its own. The plain and A-buffer points also count
+their fragments (:func:`_census`): rasterized (every covered sample of every triangle) against
+kept by the visibility stage, and the bytes of each.
 
 Usage::
 
@@ -35,7 +38,9 @@ Usage::
         [--no-scaling] [--mesa] [--charts docs]
 
 ``--no-scaling`` measures the table only and keeps the scaling series of the ``frame.json``
-already in ``--out`` (marked ``scaling_measured: false``).
+already in ``--out`` (marked ``scaling_measured: false``). ``--quick`` writes
+``frame_quick.json`` instead, so a quick run never replaces the full measurement
+(``python -m benchmarks --only frame`` runs this module; ``--quick`` passes on).
 
 Writes ``frame.json`` to ``--out``; :func:`draw` makes ``frame_scaling.png``
 (:func:`benchmarks.charts.draw_all` calls it when ``frame.json`` is in the results directory).
@@ -58,7 +63,17 @@ import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, save_figure, time_interleaved, write_json
 from blinn_phong.primitives import grid_plane, uv_sphere
 
-__all__ = ["CASES", "draw", "issue_scene", "main", "mesa_peer", "run", "small_sphere_scene"]
+__all__ = [
+    "CASES",
+    "SCALING_CASES",
+    "draw",
+    "issue_scene",
+    "main",
+    "mesa_peer",
+    "run",
+    "scaling_series",
+    "small_sphere_scene",
+]
 
 
 def issue_scene(segments: int = 256, rings: int = 128, transparent: bool = False) -> bp.Scene:
@@ -94,6 +109,7 @@ CASES: dict[str, tuple[bool, dict[str, object]]] = {
     "fog": (False, {"shadows": "none", "fog": bp.Fog("exp", (0.5, 0.6, 0.7), density=0.05)}),
     "shadow_map": (False, {"shadows": bp.ShadowOptions("shadow_map", resolution=1024)}),
     "ray_traced": (False, {"shadows": "ray_traced"}),
+    "shadow_volume": (False, {"shadows": "shadow_volume"}),
 }
 
 
@@ -118,45 +134,118 @@ def _peak_rss_bytes() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
+#: Row name → (transparent sphere?, render() options) of the scaling series: every row of
+#: :data:`CASES` and the shadow-volume frame (hard shadows from both lights by z-fail volumes).
+SCALING_CASES: dict[str, tuple[bool, dict[str, object]]] = {
+    **CASES,
+    "shadow_volume": (False, {"shadows": "shadow_volume"}),
+}
+
+#: Series whose points also count fragments (rasterized, kept, bytes): the opaque path and the A-buffer.
+CENSUS_CASES = ("plain", "a_buffer")
+
+
+def _census(scene: bp.Scene, width: int, height: int) -> dict[str, int]:
+    """Fragments of a frame: rasterized (all, and of transparent meshes) against kept by the visibility stage.
+
+    ``kept_*`` and ``kept_bytes`` are what :func:`blinn_phong.visibility.frame_fragments` holds
+    (the nearest opaque fragment per sample and the transparent ones in front of it);
+    ``rasterized_bytes`` is what an array of every rasterized fragment would take at the same
+    bytes per fragment.
+    """
+    from blinn_phong.prepared import prepare_scene
+    from blinn_phong.resolve import side_tables
+    from blinn_phong.visibility import frame_fragments, rasterized_count
+
+    prepared = prepare_scene(scene)
+    _, side_opaque = side_tables(scene)
+    two_sided = scene.light_model.two_sided
+
+    def opaque(triangle: np.ndarray, front_facing: np.ndarray) -> np.ndarray:  # as render_frame's
+        back = ~front_facing if two_sided else False
+        return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
+
+    visible = frame_fragments(prepared.clip, prepared.triangles, width, height, opaque=opaque, engine="numba")
+    n_keys = width * height
+    per_fragment = (visible.nbytes - 16 * n_keys - 8) / max(1, len(visible.fragments))
+    transparent_mesh = np.array([m.material.transparent for m in scene.meshes])
+    see_through = prepared.triangles[transparent_mesh[prepared.triangle_mesh]]
+    counts = {
+        "rasterized": rasterized_count(prepared.clip, prepared.triangles, width, height),
+        "rasterized_transparent": rasterized_count(prepared.clip, see_through, width, height),
+        "kept_opaque": visible.n_opaque,
+        "kept_transparent": visible.n_transparent,
+        "kept_bytes": visible.nbytes,
+    }
+    counts["rasterized_bytes"] = round(counts["rasterized"] * per_fragment) + 16 * n_keys + 8
+    return counts
+
+
 def _child(case: str, points: list[tuple[int, int, int]]) -> list[dict[str, object]]:
     """Renders in this (fresh) process, in the given order: seconds, stage times, peak RSS.
 
     The peak resident set only grows, so points are given in increasing size: each one's peak is its own
-    (the smaller renders before it need less).
+    (the smaller renders before it need less). Cases of :data:`CENSUS_CASES` also count their
+    fragments (:func:`_census`, after the peak is read).
     """
     out = []
     for width, height, segments in points:
-        transparent, options = CASES[case]
+        transparent, options = SCALING_CASES[case]
         scene = issue_scene(segments, segments // 2, transparent)
         bp.render(scene, 64, 36, **options)  # type: ignore[arg-type]  # loads the compiled kernels
         baseline = _peak_rss_bytes()
         start, cpu = time.perf_counter(), time.process_time()
         result = bp.render(scene, width, height, **options)  # type: ignore[arg-type]
         seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
-        out.append(
-            {
-                "case": case,
-                "width": width,
-                "height": height,
-                "pixels": width * height,
-                "triangles": result.stats.triangles,
-                "seconds": seconds,
-                "cpu_seconds": cpu,
-                "stages": result.stats.seconds,
-                "shaded": result.stats.shaded,
-                "baseline_rss_bytes": baseline,
-                "peak_rss_bytes": _peak_rss_bytes(),
-                "plan": result.plan.transparency.method if result.plan else None,
-            }
-        )
+        point = {
+            "case": case,
+            "width": width,
+            "height": height,
+            "pixels": width * height,
+            "triangles": result.stats.triangles,
+            "seconds": seconds,
+            "cpu_seconds": cpu,
+            "stages": result.stats.seconds,
+            "shaded": result.stats.shaded,
+            "baseline_rss_bytes": baseline,
+            "peak_rss_bytes": _peak_rss_bytes(),
+            "plan": result.plan.transparency.method if result.plan else None,
+            "shadow_plan": [c.method for c in result.plan.shadows] if result.plan else None,
+        }
         del result
+        if case in CENSUS_CASES:
+            point["fragments"] = _census(scene, width, height)
+        out.append(point)
     return out
 
 
 def _in_fresh_process(case: str, points: list[tuple[int, int, int]]) -> list[dict[str, object]]:
+    """:func:`_child` in a new interpreter (its own peak RSS), returning its points."""
     cmd = [sys.executable, "-m", "benchmarks.bench_frame", "--child", case, json.dumps(points)]
     done = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def scaling_series(segments: int, quick: bool = False) -> dict[str, list[dict]]:
+    """Time and peak RSS of every :data:`SCALING_CASES` row against pixels and against triangles.
+
+    Pixels: 480×270 … 3840×2160 with ``segments``-segment spheres (``quick``: 240×135 and
+    480×270); triangles: spheres of 64×32 … 512×256 segments at 960×540 (``quick``: 32×16 and
+    64×32 at 240×135, plain and A-buffer only). Each series runs in one fresh process, in
+    increasing size (a few seconds of start-up each).
+    """
+    if quick:
+        sizes, tessellations, fixed = [(240, 135), (480, 270)], [32, 64], (240, 135)
+    else:
+        sizes = [(480, 270), (960, 540), (1920, 1080), (3840, 2160)]
+        tessellations, fixed = [64, 128, 256, 512], (960, 540)
+    series: dict[str, list[dict]] = {"pixels": [], "triangles": []}
+    for case in SCALING_CASES:
+        print(f"   scaling {case}", flush=True)
+        series["pixels"] += _in_fresh_process(case, [(w, h, segments) for w, h in sizes])
+        if not quick or case in CENSUS_CASES:  # quick: the triangle series of two cases only
+            series["triangles"] += _in_fresh_process(case, [(*fixed, s) for s in tessellations])
+    return series
 
 
 #: The small scene of the fixed per-frame costs: a 64-segment UV sphere at 640×360.
@@ -272,14 +361,10 @@ def run(
                 "shaded": memory["shaded"],
             }
         )
-    sizes = [(480, 270), (960, 540), (1920, 1080)] + ([] if quick else [(3840, 2160)])
-    tessellations = [64, 128, 256] + ([] if quick else [512])
     series: dict[str, list[dict]] = {"pixels": [], "triangles": []}
-    previous = Path(out_dir) / "frame.json"
+    previous = Path(out_dir) / ("frame_quick.json" if quick else "frame.json")
     if scaling:
-        for case in ("plain", "a_buffer", "fog"):
-            series["pixels"] += _in_fresh_process(case, [(w, h, segments) for w, h in sizes])
-            series["triangles"] += _in_fresh_process(case, [(960, 540, s) for s in tessellations])
+        series = scaling_series(segments, quick)
     elif previous.exists():
         series = json.loads(previous.read_text()).get("scaling", series)
     peer = mesa_peer(repeat) if mesa else None
@@ -294,44 +379,123 @@ def run(
         "scaling_measured": scaling,
         "scaling": series,
     }
-    write_json(Path(out_dir) / "frame.json", data)
+    write_json(previous, data)  # a quick run never replaces the full measurement
     return data
 
 
+#: Line style per scaling case: (colour, marker, dash).
+_STYLE = {
+    "plain": ("black", "o", "-"),
+    "default": ("tab:gray", "x", "--"),
+    "shadow_map": ("tab:blue", "s", "-"),
+    "ray_traced": ("tab:orange", "^", "-"),
+    "shadow_volume": ("tab:green", "v", "-"),
+    "a_buffer": ("tab:red", "D", "-"),
+    "draw_last": ("tab:purple", "<", ":"),
+    "weighted_blended": ("tab:brown", ">", ":"),
+    "fog": ("tab:cyan", "P", "--"),
+}
+
+
 def draw(data: dict, out_dir: str | Path) -> list[Path]:
-    """``frame_scaling.png``: time and peak RSS against pixels and against triangles, per effect."""
+    """``frame_scaling.png``: time and peak RSS against pixels and against triangles, one line per effect,
+    and the A-buffer's fragments (rasterized, kept) and bytes against pixels."""
     from benchmarks.charts import DPI, plt
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5))
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
+    scaling = data["scaling"]
+    cases = [c for c in _STYLE if any(p["case"] == c for p in scaling["pixels"] + scaling["triangles"])]
+    cases += sorted({p["case"] for p in scaling["pixels"]} - set(cases))
     for col, key in enumerate(("pixels", "triangles")):
-        points = data["scaling"][key]
-        for case, marker in (("plain", "o"), ("a_buffer", "s"), ("fog", "^")):
-            mine = sorted((p for p in points if p["case"] == case), key=lambda p: p[key])
+        for case in cases:
+            mine = sorted((p for p in scaling[key] if p["case"] == case), key=lambda p: p[key])
+            if not mine:
+                continue
+            colour, marker, dash = _STYLE.get(case, (None, ".", "-"))
             x = [p[key] for p in mine]
-            (line,) = axes[0, col].plot(x, [p["seconds"] for p in mine], marker + "-", label=f"{case} (wall)")
-            axes[0, col].plot(
-                x,
-                [p["cpu_seconds"] for p in mine],
-                marker + "--",
-                color=line.get_color(),
-                label=f"{case} (CPU)",
-            )
-            axes[1, col].plot(x, [p["peak_rss_bytes"] / 2**30 for p in mine], marker + "-", label=case)
-        fixed = "65k-triangle spheres" if key == "pixels" else "960×540"
-        for row, label in ((0, "seconds (one render; CPU: all threads)"), (1, "peak RSS, GiB")):
+            style = {"color": colour, "marker": marker, "linestyle": dash, "label": case, "markersize": 4}
+            axes[0, col].plot(x, [p["seconds"] for p in mine], **style)
+            axes[1, col].plot(x, [p["peak_rss_bytes"] / 1e9 for p in mine], **style)
+        sizes = sorted({(p["width"], p["height"]) for p in scaling[key]})
+        fixed = (
+            f"{max((p['triangles'] for p in scaling[key]), default=0):,} triangles"
+            if key == "pixels"
+            else "×".join(map(str, sizes[0]))
+            if sizes
+            else ""
+        )
+        for row, label in ((0, "seconds, one render (wall)"), (1, "peak RSS, GB (10⁹ bytes)")):
             ax = axes[row, col]
             ax.set_xscale("log")
             ax.set_xlabel(f"{key} ({fixed})", fontsize=8)
             ax.set_ylabel(label, fontsize=8)
             ax.grid(True, which="both", alpha=0.25)
-            ax.legend(fontsize=7)
+            ax.tick_params(labelsize=7)
         axes[0, col].set_yscale("log")
-    fig.suptitle(
-        "Frame pipeline scaling: plain z-buffer, A-buffer (one sphere at opacity 0.5), exp fog", fontsize=10
+        axes[1, col].axhline(2.0, color="red", linewidth=0.8, alpha=0.5)
+    census = sorted(
+        (p for p in scaling["pixels"] if p["case"] == "a_buffer" and "fragments" in p),
+        key=lambda p: p["pixels"],
     )
-    fig.tight_layout()
+    ax = axes[0, 2]
+    if census:
+        x = [p["pixels"] for p in census]
+        for field, label, style in (
+            ("rasterized", "rasterized, all meshes", "k-o"),
+            ("rasterized_transparent", "rasterized, transparent sphere", "r--D"),
+            ("kept_opaque", "kept: nearest opaque", "b-s"),
+            ("kept_transparent", "kept: transparent in front", "r-D"),
+        ):
+            ax.plot(x, [p["fragments"][field] for p in census], style, label=label, markersize=4)
+        ax.set_yscale("log")
+    ax.set_title("A-buffer: fragments rasterized vs kept", fontsize=9)
+    ax.set_ylabel("fragments", fontsize=8)
+    ax = axes[1, 2]
+    if census:
+        ax.plot(
+            x,
+            [p["fragments"]["rasterized_bytes"] / 1e9 for p in census],
+            "k-o",
+            label="all rasterized fragments (not built)",
+            markersize=4,
+        )
+        ax.plot(
+            x,
+            [p["fragments"]["kept_bytes"] / 1e9 for p in census],
+            "r-D",
+            label="kept fragments + per-sample lists",
+            markersize=4,
+        )
+        plain = {p["pixels"]: p["peak_rss_bytes"] for p in scaling["pixels"] if p["case"] == "plain"}
+        extra = [
+            (p["pixels"], p["peak_rss_bytes"] - plain[p["pixels"]]) for p in census if p["pixels"] in plain
+        ]
+        ax.plot(
+            [e[0] for e in extra],
+            [e[1] / 1e9 for e in extra],
+            "r:",
+            label="peak RSS: A-buffer frame − plain frame",
+        )
+    ax.set_title("A-buffer: bytes", fontsize=9)
+    ax.set_ylabel("GB", fontsize=8)
+    for ax in axes[:, 2]:
+        ax.set_xscale("log")
+        ax.set_xlabel("pixels", fontsize=8)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.suptitle(
+        "Frame pipeline scaling per effect (two spheres over a plane, 2 lights; A-buffer/draw-last/weighted "
+        "blended: one sphere at opacity 0.5); red line: 2 GB\n"
+        "times: one render per point, each series in its own process on a shared machine — compare slopes, "
+        "and ratios only within the interleaved table",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
     path = save_figure(fig, out / "frame_scaling.png", dpi=DPI)  # atomic: a failed save keeps the old chart
     plt.close(fig)
     return [path]

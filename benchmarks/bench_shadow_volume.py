@@ -12,9 +12,12 @@ Three measurements, each a ratio between methods timed interleaved in the same r
   directional and a point light, 1920×1080; ``--quick``: 480×270): ``render`` with
   ``shadows="none"`` (the plain compiled frame), ``"shadow_volume"`` and ``"ray_traced"``; frame
   times, their ratios to the plain frame, and the shadow stage alone against the plain frame.
-* ``crossover`` — one sphere over a plane under a point light: shadow volumes (cold) against Embree
-  (scene build + rays) as the sphere's triangle count and the number of samples grow; where the
-  ratio crosses 1 is where ray tracing starts to win.
+* ``crossover`` — one sphere over a plane under a point light: shadow volumes against Embree as the
+  sphere's triangle count and the number of samples grow, both *warm* (each method's per-caster
+  cache kept: adjacency, volumes and near-plane proof; the BVH — what the next frame of an
+  unchanged scene costs) and *cold* (both caches cleared before every call: adjacency and volume
+  building against the BVH build, a new scene); where a ratio crosses 1 is where ray tracing
+  starts to win.
 
 Writes ``shadow_volume.json``.
 """
@@ -51,6 +54,17 @@ def _samples(scene: Scene, width: int, height: int) -> tuple[np.ndarray, np.ndar
 def _cold(fn):
     def call():
         sv._TOPOLOGY_CACHE.clear()
+        sv._DERIVED_CACHE.clear()
+        return fn()
+
+    return call
+
+
+def _cold_embree(fn):
+    from blinn_phong import raytrace
+
+    def call():
+        raytrace._SCENE_CACHE.clear()
         return fn()
 
     return call
@@ -76,6 +90,7 @@ def same_scenes(size: int, repeat: int) -> list[dict]:
             "shadow_volume_zfail_cold": _cold(volume("zfail")),
             "shadow_volume_zpass_cold": _cold(volume("zpass")),
             "shadow_volume_zfail_warm": volume("zfail"),
+            "shadow_volume_auto_warm": volume("auto"),
         }
         for res in (1024, 2048):
             methods[f"shadow_map_{res}"] = lambda light=light, res=res: light_visibility(
@@ -128,6 +143,7 @@ def frame(width: int, height: int, repeat: int) -> dict:
         def call():
             if cold:
                 sv._TOPOLOGY_CACHE.clear()
+                sv._DERIVED_CACHE.clear()
             stages[shadows] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return call
@@ -155,7 +171,7 @@ def frame(width: int, height: int, repeat: int) -> dict:
 
 
 def crossover(repeat: int, quick: bool) -> list[dict]:
-    """Shadow volumes (cold) against Embree as triangles and samples grow: one sphere over a plane."""
+    """Shadow volumes against Embree, warm and cold, as triangles and samples grow (one sphere, a plane)."""
     light = PointLight((1.5, -1.0, 5.0))
     camera = Camera.perspective(45.0, 16 / 9, 0.5, 50.0, view=look_at((0, -6, 4), (0, 0, 0.7), (0, 0, 1)))
     segment_list = (16, 64, 256) if quick else (16, 32, 64, 128, 256, 512)
@@ -179,24 +195,31 @@ def crossover(repeat: int, quick: bool) -> list[dict]:
         for width, height in sizes:
             points, normals = _samples(scene, width, height)
             args = (light, tris, points, normals)
+            def traced(args=args):
+                return light_visibility("ray_traced", *args)
+
+            def volume(args=args):
+                return light_visibility("shadow_volume", *args, camera=camera)
+
             methods = {
-                "ray_traced": lambda args=args: light_visibility("ray_traced", *args),
-                "shadow_volume": _cold(
-                    lambda args=args: light_visibility("shadow_volume", *args, camera=camera)
-                ),
+                "ray_traced": traced,
+                "shadow_volume": volume,
+                "ray_traced_cold": _cold_embree(traced),
+                "shadow_volume_cold": _cold(volume),
             }
             times = time_interleaved(methods, repeat=repeat)
             row = {
                 "triangles": len(tris),
                 "size": [width, height],
                 "samples": len(points),
-                "ray_traced_s": times["ray_traced"]["median_s"],
-                "shadow_volume_s": times["shadow_volume"]["median_s"],
+                **{f"{name}_s": times[name]["median_s"] for name in methods},
             }
             row["ratio"] = row["shadow_volume_s"] / row["ray_traced_s"]
+            row["ratio_cold"] = row["shadow_volume_cold_s"] / row["ray_traced_cold_s"]
             out.append(row)
             print(
-                f"crossover {len(tris):7d} tris {width}×{height}: volumes/Embree = {row['ratio']:.2f}",
+                f"crossover {len(tris):7d} tris {width}×{height}: volumes/Embree warm {row['ratio']:.2f}, "
+                f"cold {row['ratio_cold']:.2f}",
                 flush=True,
             )
     return out
@@ -229,11 +252,19 @@ def chart(result: dict, path: str | os.PathLike) -> Path:
     sizes = sorted({tuple(r["size"]) for r in result["crossover"]})
     for size in sizes:
         rows = [r for r in result["crossover"] if tuple(r["size"]) == size]
-        right.plot(
+        line = right.plot(
             [r["triangles"] for r in rows],
             [r["ratio"] for r in rows],
             marker="o",
-            label=f"{size[0]}×{size[1]}",
+            label=f"{size[0]}×{size[1]} warm",
+        )
+        right.plot(
+            [r["triangles"] for r in rows],
+            [r["ratio_cold"] for r in rows],
+            marker="s",
+            ls="--",
+            color=line[0].get_color(),
+            label=f"{size[0]}×{size[1]} cold",
         )
     right.axhline(1.0, color="grey", lw=0.8)
     right.set_xscale("log")

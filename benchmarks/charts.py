@@ -423,10 +423,12 @@ def draw_all(results: dict[str, dict], out_dir: Path, results_dir: Path | None =
         if family in _DRAW:
             paths += _DRAW[family](data, Path(out_dir))
     paths += peers_chart(results, results_dir, Path(out_dir))
-    if results_dir is not None and (Path(results_dir) / "frame.json").exists():  # benchmarks.bench_frame
+    frames = [Path(results_dir) / n for n in ("frame.json", "frame_quick.json")] if results_dir else []
+    frames = [f for f in frames if f.exists()]
+    if frames:  # benchmarks.bench_frame (the full measurement when there is one)
         import json
 
         from benchmarks.bench_frame import draw
 
-        paths += draw(json.loads((Path(results_dir) / "frame.json").read_text()), Path(out_dir))
+        paths += draw(json.loads(frames[0].read_text()), Path(out_dir))
     return paths

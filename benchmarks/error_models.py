@@ -15,18 +15,25 @@ module). Each model and the error metric it predicts, in 8-bit steps:
   seen from the light, both as the planner computes them, ``R`` resolution); ``c`` the
   largest ratio on the calibration scene. Cost relative to ray tracing: ``t₀ + t₂·R²`` at
   the calibration scene's receiver count, and the frame-aware
-  ``(m₀ + m₂·R² + m_N·N)/(b₀·τ + b_N·N)`` fitted (least squares, in seconds) to the times
-  measured at several receiver counts ``N`` (``τ``: the scene's triangle count relative to
-  the calibration scene's, for the ray tracer's scene build).
+  ``(m₀ + m₂·R² + m_N·N + m_T·T)/(b₀ + b_N·N + b_T·T)`` fitted (non-negative least squares,
+  in seconds, fastest rounds) to the times measured at several receiver counts ``N`` and two
+  triangle counts ``T`` (rasterizing the map; building the ray tracer's BVH).
 * ``shading`` — interior max error of flat/Gouraud/Phong against per-pixel shading of the
   exact surface, a power law ``a·θ^b`` of the largest angle between adjacent vertex
   normals fitted in log space; ``a`` is the upper envelope (the fit times its largest
   residual factor) and :data:`SHADING_MARGIN` is stored with it. Calibrated at shininess 40.
+* ``frame_cost`` — the frame-aware costs from whole ``render()`` timings (the ``frame_costs``
+  family): process CPU seconds of a frame per transparency method, per shading method and
+  with fog, ``x₀ + x_S·S + x_T·T`` (depth peeling ``+ x_k·k·S``; ``S`` samples
+  ``width·height·samples``, ``T`` triangles); non-negative least squares on unit-norm columns.
 * ``shadow_volume`` — no error model (exact, like ray tracing); its cost against Embree ray
   tracing, both in seconds, ``v₀ + v_T·T + v_N·N`` and ``r₀ + r_T·T + r_N·N`` for ``T``
   triangles and ``N`` receiver samples, least squares (unit-norm columns, non-negative) on the
   ``crossover`` rows of ``benchmarks/results/shadow_volume.json``
-  (:mod:`benchmarks.bench_shadow_volume`: both methods timed in the same run).
+  (:mod:`benchmarks.bench_shadow_volume`: both methods timed in the same run). Where the rows
+  have cold timings (``*_cold_s``: the volumes' per-mesh caches cleared and Embree's BVH built
+  in the timed call) those are fitted, since a frame of a new scene pays both, as the other
+  shadow cost models assume.
 """
 
 from __future__ import annotations
@@ -41,7 +48,17 @@ from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
 from blinn_phong.planner import MapGeometry
 from compositing._atomic import write_json_atomic
 
-__all__ = ["CALIBRATION_PATH", "SHADING_MARGIN", "fit", "load", "main", "save", "shadow_volume_cost_design"]
+__all__ = [
+    "CALIBRATION_PATH",
+    "SHADING_MARGIN",
+    "fit",
+    "fit_results",
+    "frame_cost_designs",
+    "load",
+    "main",
+    "save",
+    "shadow_volume_cost_design",
+]
 
 #: Safety factor on the shading envelope for scenes other than the calibration sphere (other
 #: lights, views, shininess ≤ 40): the fit has one light and one view, so its largest
@@ -83,13 +100,13 @@ def _fit_depth_peeling(data: dict) -> dict:
 
 
 def frame_cost_design(rows: list[dict]) -> np.ndarray:
-    """Design matrix of the frame-aware shadow cost fit: ``[1, N]`` for ray tracing rows,
-    ``[1, R², N]`` for shadow-map rows (``N`` receivers, ``R`` resolution)."""
+    """Design matrix of the frame-aware shadow cost fit: ``[1, N, T]`` for ray tracing rows,
+    ``[1, R², N, T]`` for shadow-map rows (``N`` receivers, ``R`` resolution, ``T`` triangles)."""
+    n = [r["receivers"] for r in rows]
+    t = [r["triangles"] for r in rows]
     if rows and rows[0]["method"] == "ray_traced":
-        return np.c_[np.ones(len(rows)), [r["receivers"] for r in rows]].astype(float)
-    return np.c_[
-        np.ones(len(rows)), [r["resolution"] ** 2 for r in rows], [r["receivers"] for r in rows]
-    ].astype(float)
+        return np.c_[np.ones(len(rows)), n, t].astype(float)
+    return np.c_[np.ones(len(rows)), [r["resolution"] ** 2 for r in rows], n, t].astype(float)
 
 
 def _scaled_lstsq(design: np.ndarray, y: list[float]) -> np.ndarray:
@@ -129,21 +146,22 @@ def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
         "t2": float(t2),
     }
     rows = data.get("frame_cost")
-    if rows:
-        # seconds: ray tracing b0 + bn·N, a map m0 + m2·R² + mn·N (least squares, non-negative)
+    if rows and "triangles" in rows[0]:
+        # seconds (fastest round): ray tracing b0 + bn·N + bt·T, a map m0 + m2·R² + mn·N + mt·T
         rt = [r for r in rows if r["method"] == "ray_traced"]
         sm = [r for r in rows if r["method"] == "shadow_map"]
-        b = _scaled_lstsq(frame_cost_design(rt), [r["median_s"] for r in rt])
-        m = _scaled_lstsq(frame_cost_design(sm), [r["median_s"] for r in sm])
-        b, m = np.maximum(b, 0.0), np.maximum(m, 0.0)
+        b = _nonnegative_lstsq(frame_cost_design(rt), [r["min_s"] for r in rt])
+        m = _nonnegative_lstsq(frame_cost_design(sm), [r["min_s"] for r in sm])
         model.update(
             {
-                "cost": "ratio ~= (m0 + m2 * R**2 + mn * N) / (b0 * T / triangles + bn * N)",
+                "cost": "ratio ~= (m0 + m2 * R**2 + mn * N + mt * T) / (b0 + bn * N + bt * T)",
                 "m0": float(m[0]),
                 "m2": float(m[1]),
                 "mn": float(m[2]),
+                "mt": float(m[3]),
                 "b0": float(b[0]),
                 "bn": float(b[1]),
+                "bt": float(b[2]),
                 "receivers": int(data["points"]),
                 "triangles": geometry.triangles,
             }
@@ -184,12 +202,14 @@ def shadow_volume_cost_design(rows: list[dict]) -> np.ndarray:
 def _fit_shadow_volume(data: dict) -> dict:
     rows = data["crossover"]
     design = shadow_volume_cost_design(rows)
-    v = np.maximum(_scaled_lstsq(design, [r["shadow_volume_s"] for r in rows]), 0.0)
-    r = np.maximum(_scaled_lstsq(design, [r["ray_traced_s"] for r in rows]), 0.0)
+    cold = all("shadow_volume_cold_s" in r and "ray_traced_cold_s" in r for r in rows)
+    suffix = "_cold_s" if cold else "_s"
+    v = np.maximum(_scaled_lstsq(design, [r["shadow_volume" + suffix] for r in rows]), 0.0)
+    r = np.maximum(_scaled_lstsq(design, [r["ray_traced" + suffix] for r in rows]), 0.0)
     return {
         "error": "exact (hard shadows, like ray tracing)",
         "cost": "seconds ~= v0 + vt * T + vn * N (volumes), r0 + rt * T + rn * N (Embree), "
-        "T triangles, N receiver samples",
+        "T triangles, N receiver samples" + (" (cold: caches and BVH built in the frame)" if cold else ""),
         "v0": float(v[0]),
         "vt": float(v[1]),
         "vn": float(v[2]),
@@ -198,6 +218,50 @@ def _fit_shadow_volume(data: dict) -> dict:
         "rn": float(r[2]),
         "cases": len(rows),
     }
+
+
+def _nonnegative_lstsq(design: np.ndarray, y: list[float]) -> np.ndarray:
+    """Non-negative least squares (Lawson–Hanson, ``scipy.optimize.nnls``) on unit-norm columns,
+    then unscaled: a cost is a sum of non-negative terms."""
+    from scipy.optimize import nnls
+
+    scale = np.sqrt((design * design).sum(axis=0))
+    scale = np.where(scale > 0, scale, 1.0)
+    coef, _ = nnls(design / scale, np.asarray(y, float))
+    return coef / scale
+
+
+def frame_cost_designs(rows: list[dict]) -> dict[str, np.ndarray]:
+    """Design matrices of the frame-aware cost fits (``frame_costs`` rows), by model key:
+    ``transparency/<method>`` and ``frame/<variant>`` ``[1, S, T]`` (``depth_peeling``:
+    ``[1, S, T, k·S]``; ``S`` samples, ``T`` triangles, ``k`` peeled layers)."""
+    out: dict[str, np.ndarray] = {}
+    groups = [("transparency", m) for m in ("a_buffer", "draw_last", "sort_objects", "depth_peeling")]
+    groups += [("frame", v) for v in ("phong", "gouraud", "flat", "fog")]
+    for kind, name in groups:
+        sel = [r for r in rows if r["kind"] == kind and r["method"] == name]
+        cols = [np.ones(len(sel)), [r["samples"] for r in sel], [r["triangles"] for r in sel]]
+        if name == "depth_peeling":
+            cols.append([r["layers"] * r["samples"] for r in sel])
+        out[f"{kind}/{name}"] = np.c_[tuple(cols)].astype(float)
+    return out
+
+
+def _fit_frame_cost(data: dict) -> dict:
+    rows = data["rows"]
+    model: dict[str, object] = {
+        "cost": "process CPU seconds of a whole render() frame ~= x0 + xs * S + xt * T (+ xk * k * S for "
+        "depth peeling), per transparency method and per shading method / fog; S samples, T triangles",
+        "transparency": {},
+        "frame": {},
+        "samples_median": int(np.median([r["samples"] for r in rows])),
+        "cases": len(rows),
+    }
+    for key, design in frame_cost_designs(rows).items():
+        kind, name = key.split("/")
+        y = [r["cpu_s"] for r in rows if r["kind"] == kind and r["method"] == name]
+        model[kind][name] = [float(v) for v in _nonnegative_lstsq(design, y)]  # type: ignore[index]
+    return model
 
 
 def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
@@ -218,6 +282,8 @@ def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
         models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
+    if "frame_costs" in families:
+        models["frame_cost"] = _fit_frame_cost(families["frame_costs"])
     if volumes is not None and volumes.get("crossover"):
         models["shadow_volume"] = _fit_shadow_volume(volumes)
     return models
@@ -229,12 +295,21 @@ def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
     return path
 
 
+def fit_results(results: Path, families: dict | None = None) -> dict:
+    """Fit every model to the measurements in the directory ``results``: ``tradeoffs.json`` (or the
+    given ``families``) and, when present, ``shadow_volume.json`` (the exact shadow methods' costs,
+    measured by :mod:`benchmarks.bench_shadow_volume`)."""
+    volumes_path = Path(results) / "shadow_volume.json"
+    volumes = json.loads(volumes_path.read_text()) if volumes_path.exists() else None
+    if families is None:
+        families = json.loads((Path(results) / "tradeoffs.json").read_text())["families"]
+    return fit({"families": families}, volumes)
+
+
 def main() -> None:
     """Fit the models to ``benchmarks/results/tradeoffs.json`` and ``shadow_volume.json`` and write
     ``blinn_phong/calibration.json``."""
-    results = Path(__file__).resolve().parent / "results"
-    volumes = json.loads((results / "shadow_volume.json").read_text())
-    path = save(fit(json.loads((results / "tradeoffs.json").read_text()), volumes))
+    path = save(fit_results(Path(__file__).resolve().parent / "results"))
     print(f"wrote {path}")
 
 

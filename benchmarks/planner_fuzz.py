@@ -48,6 +48,7 @@ from blinn_phong.render import prepare_scene
 __all__ = [
     "TOLERANCES",
     "check",
+    "planned_render",
     "planning_time",
     "random_scene",
     "silhouette_tie_mask",
@@ -237,8 +238,46 @@ def silhouette_tie_mask(scene: bp.Scene, size: int, rel_depth: float = 1e-5) -> 
     return mask.reshape(size, size)
 
 
-def check(scene: bp.Scene, tolerance: float, size: int = 40, exact: np.ndarray | None = None) -> dict:
+def planned_render(
+    scene: bp.Scene, tolerance: float, size: int, plan_frame: tuple[int, int] | None
+) -> object:
+    """``render(scene, size, size, tolerance=tolerance)``, or — with ``plan_frame`` ``(width, height)``
+    — the plan ``plan(scene, tolerance, width=, height=)`` makes for that frame, rendered at
+    ``size²`` with every choice passed to ``render`` (transparency and its layers, each light's
+    method and parameters, each mesh's shading). The promise does not depend on the frame; the
+    cost models do, and at a few hundred pixels they find no approximation worth its error."""
+    if plan_frame is None:
+        return bp.render(scene, size, size, tolerance=tolerance, shading="auto")
+    from blinn_phong.frame import scene_with_planned_shading
+
+    p = bp.plan(scene, tolerance, width=plan_frame[0], height=plan_frame[1])
+    shadows = [
+        bp.ShadowOptions(c.method, resolution=c.params.get("resolution"), plane=c.params.get("plane"))
+        for c in p.shadows
+    ]
+    return bp.render(
+        scene_with_planned_shading(scene, p, "auto"),
+        size,
+        size,
+        tolerance=tolerance,
+        transparency=p.transparency.method,
+        layers=p.transparency.params.get("layers"),
+        shadows=shadows,
+        shading="auto",
+    )
+
+
+def check(
+    scene: bp.Scene,
+    tolerance: float,
+    size: int = 40,
+    exact: np.ndarray | None = None,
+    plan_frame: tuple[int, int] | None = (640, 480),
+) -> dict:
     """Render ``scene`` following the plan at ``tolerance`` and with exact methods; measure.
+
+    The plan is made for ``plan_frame`` (default 640×480, :data:`blinn_phong.planner.DEFAULT_FRAME`;
+    None: the rendered frame) and rendered at ``size²`` (:func:`planned_render`).
 
     Returns a dict: ``max_steps`` (the largest per-pixel error outside terminator and
     silhouette-tie pixels), ``terminator_pixels``, ``silhouette_tie_pixels``, ``exceeded``
@@ -249,7 +288,7 @@ def check(scene: bp.Scene, tolerance: float, size: int = 40, exact: np.ndarray |
         exact = bp.render(
             scene, size, size, transparency="a_buffer", shadows="ray_traced", shading="phong"
         ).rgba
-    planned = bp.render(scene, size, size, tolerance=tolerance, shading="auto")
+    planned = planned_render(scene, tolerance, size, plan_frame)
     diff = 255.0 * np.abs(planned.rgba.astype(np.float64) - exact.astype(np.float64)).max(axis=-1)
     term = terminator_mask(scene, size)
     ties = silhouette_tie_mask(scene, size)
@@ -306,10 +345,12 @@ def planning_time(repeat: int = 5) -> dict:
     """Seconds to plan a 100 172-triangle UV sphere (317×159) over a floor under a sun, against a
     plain z-buffer frame of it at 640×360 measured in the same run (the peer).
 
-    ``cold``: new mesh arrays every call (the convexity test runs); ``warm``: the same arrays
+    ``cold``: new mesh arrays every call and every cached fact forgotten (the convexity test
+    runs; equal arrays would otherwise be recognised by content); ``warm``: the same arrays
     (the object-space facts are cached by array identity, as for repeated renders of a scene).
     """
     from benchmarks._util import time_interleaved
+    from blinn_phong.mesh_facts import _clear_caches
 
     p, t, n = uv_sphere(317, 159)
     floor = bp.Mesh(*_box(np.array([3.0, 3.0, 0.05])), material=bp.Material(diffuse=(0.6, 0.6, 0.6)))
@@ -326,7 +367,7 @@ def planning_time(repeat: int = 5) -> dict:
     warm_scene = scene(False)
     times = time_interleaved(
         {
-            "cold": lambda: bp.plan(scene(True)),
+            "cold": lambda: (_clear_caches(), bp.plan(scene(True))),
             "warm": lambda: bp.plan(warm_scene),
             "frame 640x360": lambda: bp.render(warm_scene, 640, 360, shadows="none"),
         },

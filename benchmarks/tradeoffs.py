@@ -24,6 +24,9 @@ Families (key: what varies → reference):
   (float32), Pillow ``alpha_composite`` (straight unorm8).
 * ``scaling`` — render time against pixel count and triangle count, with Mesa's GLSL
   renderer at the same sizes.
+* ``frame_costs`` — whole ``render()`` calls per transparency method, shading method and
+  with fog at two frame sizes each, stage times kept: the data of the planner's frame-aware
+  cost models (no error measured; :func:`frame_costs`).
 
 Every family returns a JSON-ready dict ``{"family", "reference", "cases": [...], ...}``;
 each case has ``method``, its parameters, ``median_s``, ``ratio_to_<peer>`` and the error
@@ -32,6 +35,7 @@ metrics.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
@@ -49,6 +53,7 @@ __all__ = [
     "FAMILIES",
     "antialiasing",
     "compositing_precision",
+    "frame_costs",
     "mesa_available",
     "scaling",
     "shading",
@@ -225,10 +230,11 @@ def _box(centre: tuple[float, float, float], half: tuple[float, float, float]) -
     return bp.Mesh(corners, tris, material=bp.Material(diffuse=(0.3, 0.3, 0.9)))
 
 
-def shadow_scene() -> bp.Scene:
-    """A ground plane (z = 0), a sphere floating over it and a box standing on it."""
+def shadow_scene(segments: int = 48) -> bp.Scene:
+    """A ground plane (z = 0), a sphere (``segments`` × ``segments/2``) floating over it and a box
+    standing on it."""
     gp, gt, gn = grid_plane(1, 1, (8.0, 8.0))
-    sp, st, sn = uv_sphere(48, 24, 0.7)
+    sp, st, sn = uv_sphere(segments, segments // 2, 0.7)
     lift = np.eye(4)
     lift[:3, 3] = (0.0, 0.0, 1.4)
     meshes = [
@@ -331,42 +337,54 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
 def shadow_frame_cost(
     scene: bp.Scene, points: np.ndarray, normals: np.ndarray, *, quick: bool = False, repeat: int = 3
 ) -> list[dict]:
-    """Seconds of Embree ray tracing and of nearest-texel shadow maps (bias 1e-4 + 2·slope) for
-    several receiver counts ``N`` (the visible points, repeated or cut) and resolutions ``R``:
-    the data of the frame-aware cost model (:func:`blinn_phong.calibration.shadow_map_cost`)."""
+    """Seconds of Embree ray tracing (its BVH built in every call) and of nearest-texel shadow maps
+    (bias 1e-4 + 2·slope) for several receiver counts ``N`` (the visible points, repeated or cut),
+    resolutions ``R`` and two triangle counts ``T`` (the scene, and the same with a 192-segment
+    sphere): the data of the frame-aware cost model
+    (:func:`blinn_phong.calibration.shadow_map_cost`), fitted to the fastest round (``min_s``)."""
     from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
     from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
 
     light = scene.lights[0]
-    tris, _ = world_triangles(scene)
     to_light = -np.asarray(light.direction, float)
     counts = (4_000, 64_000) if quick else (4_000, 16_000, 64_000, 256_000)
     resolutions = (64, 512) if quick else (64, 256, 1024)
     rows = []
-    for n in counts:
-        pick = np.arange(n) % len(points)
-        p, nrm = points[pick], normals[pick]
-        runs: dict[str, Callable[[], object]] = {
-            "ray_traced": lambda p=p, nrm=nrm: directional_light_visibility(RayScene(tris), p, nrm, to_light)
-        }
-        for res in resolutions:
-
-            def run(res=res, p=p, nrm=nrm) -> np.ndarray:
-                maps = light_shadow_maps(light, tris, res, constant_bias=1e-4, slope_bias=2.0)
-                return shadow_map_visibility(light, maps, p, nrm, kernel="nearest")
-
-            runs[f"map {res}"] = run
-        times = time_interleaved(runs, repeat=repeat)
-        rows.append({"receivers": n, "method": "ray_traced", "median_s": times["ray_traced"]["median_s"]})
-        rows += [
-            {
-                "receivers": n,
-                "method": "shadow_map",
-                "resolution": res,
-                "median_s": times[f"map {res}"]["median_s"],
+    # the calibration scene and the same with a 192-segment sphere: the triangle terms
+    for tris in (world_triangles(scene)[0], world_triangles(shadow_scene(192))[0]):
+        for n in counts:
+            pick = np.arange(n) % len(points)
+            p, nrm = points[pick], normals[pick]
+            runs: dict[str, Callable[[], object]] = {
+                "ray_traced": lambda p=p, nrm=nrm, tris=tris: directional_light_visibility(
+                    RayScene(tris), p, nrm, to_light
+                )
             }
-            for res in resolutions
-        ]
+            for res in resolutions:
+
+                def run(res=res, p=p, nrm=nrm, tris=tris) -> np.ndarray:
+                    maps = light_shadow_maps(light, tris, res, constant_bias=1e-4, slope_bias=2.0)
+                    return shadow_map_visibility(light, maps, p, nrm, kernel="nearest")
+
+                runs[f"map {res}"] = run
+            times = time_interleaved(runs, repeat=repeat)
+            common = {"receivers": n, "triangles": len(tris)}
+            rows.append(
+                {
+                    **common,
+                    "method": "ray_traced",
+                    **{k: times["ray_traced"][k] for k in ("median_s", "min_s")},
+                }
+            )
+            rows += [
+                {
+                    **common,
+                    "method": "shadow_map",
+                    "resolution": res,
+                    **{k: times[f"map {res}"][k] for k in ("median_s", "min_s")},
+                }
+                for res in resolutions
+            ]
     return rows
 
 
@@ -660,6 +678,149 @@ def scaling(quick: bool = False, repeat: int = 3) -> dict:
     }
 
 
+# --------------------------------------------------------------------------- frame costs
+
+
+def timed_renders(
+    runs: dict[str, Callable[[], bp.RenderResult]], repeat: int = 5
+) -> dict[str, dict[str, float]]:
+    """Seconds of whole ``render()`` calls and of each stage (``RenderStats.seconds``), interleaved
+    round-robin after one untimed call each (:func:`benchmarks._util.time_interleaved`'s scheme):
+    ``<stage>_s`` the smallest over the rounds (on a shared machine the least disturbed run:
+    contention only adds time), ``<stage>_median_s`` the median; ``total`` is the whole call's
+    wall time and ``cpu`` its process CPU time (every thread; unlike wall time it does not
+    grow when other processes preempt this one)."""
+    import statistics
+    import time
+
+    for fn in runs.values():
+        fn()
+    stages: dict[str, dict[str, list[float]]] = {name: {"total": [], "cpu": []} for name in runs}
+    for _ in range(repeat):
+        for name, fn in runs.items():
+            start, cpu = time.perf_counter(), time.process_time()
+            result = fn()
+            stages[name]["total"].append(time.perf_counter() - start)
+            stages[name]["cpu"].append(time.process_time() - cpu)
+            for stage, sec in result.stats.seconds.items():
+                stages[name].setdefault(stage, []).append(sec)
+    out: dict[str, dict[str, float]] = {}
+    for name, table in stages.items():
+        out[name] = {}
+        for stage, v in table.items():
+            out[name][f"{stage}_s"] = min(v)
+            out[name][f"{stage}_median_s"] = statistics.median(v)
+    return out
+
+
+#: Transparency methods timed per frame by :func:`frame_costs` (``depth_peeling`` with these layers).
+FRAME_COST_PEEL = (1, 2, 4)
+
+
+def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
+    """``render()`` timings for the frame-aware cost models of the planner
+    (:func:`blinn_phong.calibration.resolve_cost`, :func:`blinn_phong.calibration.frame_seconds`).
+
+    Transparency rows: the transparency calibration scene (:func:`layered_scene`, 4 and 12
+    layers) and the frame benchmark's scene with its transparent sphere
+    (:func:`benchmarks.bench_frame.issue_scene`, 96 × 48 segments), each at two sizes, rendered
+    with the A-buffer, draw-last, sorted objects and depth peeling (1, 2, 4 layers), no shadows:
+    the whole frame's process CPU time (the fits' data; the methods differ in the
+    ``resolve_samples`` stage only, whose wall times are kept but, a few milliseconds, are
+    swamped by preemption on a loaded machine), wall time and stage times. Opaque rows:
+    :func:`sphere_scene` and the frame benchmark's opaque scene at two sizes (one with 2×2
+    samples), Phong, Gouraud, flat and Phong with exp fog: the whole frame (CPU and wall). Every method of a
+    frame is timed in the same interleaved rounds; the fits use the fastest round of each
+    (:func:`timed_renders`), the medians are kept.
+    """
+    from benchmarks.bench_frame import issue_scene
+
+    small = quick
+    transparent_frames = [
+        ("layered 4", layered_scene(4, 0.5), 96, 96, 1),
+        ("layered 4", layered_scene(4, 0.5), 192, 192, 1),
+        ("layered 12", layered_scene(12, 0.5), 96, 96, 1),
+        ("layered 12", layered_scene(12, 0.5), 192, 192, 1),
+        ("issue transparent", issue_scene(48 if small else 96, 24 if small else 48, True), 320, 180, 1),
+        ("issue transparent", issue_scene(48 if small else 96, 24 if small else 48, True), 640, 360, 1),
+    ]
+    opaque_frames = [
+        ("sphere 32", sphere_scene(32), 128, 128, 1),
+        ("sphere 32", sphere_scene(32), 256, 256, 1),
+        ("issue", issue_scene(48 if small else 96, 24 if small else 48), 320, 180, 1),
+        ("issue", issue_scene(48 if small else 96, 24 if small else 48), 320, 180, 2),
+        ("issue", issue_scene(48 if small else 96, 24 if small else 48), 640, 360, 1),
+    ]
+    rows = []
+    for name, scene, w, h, k in transparent_frames:
+        frame = functools.partial(bp.render, scene, w, h, samples=k * k, shadows="none")
+        runs: dict[str, Callable[[], bp.RenderResult]] = {
+            method: functools.partial(frame, transparency=method)
+            for method in ("a_buffer", "draw_last", "sort_objects")
+        }
+        for layers in FRAME_COST_PEEL:
+            runs[f"depth_peeling {layers}"] = functools.partial(
+                frame, transparency="depth_peeling", layers=layers
+            )
+        times = timed_renders(runs, repeat)
+        for label, t in times.items():
+            method, _, layers = label.partition(" ")
+            rows.append(
+                {
+                    "kind": "transparency",
+                    "scene": name,
+                    "method": method,
+                    **({"layers": int(layers)} if layers else {}),
+                    "width": w,
+                    "height": h,
+                    "samples_per_axis": k,
+                    "samples": w * h * k * k,
+                    "triangles": sum(len(m.triangles) for m in scene.meshes),
+                    "resolve_s": t["resolve_samples_s"],
+                    "resolve_median_s": t["resolve_samples_median_s"],
+                    "total_s": t["total_s"],
+                    "total_median_s": t["total_median_s"],
+                    "cpu_s": t["cpu_s"],
+                    "cpu_median_s": t["cpu_median_s"],
+                    "ratio_to_a_buffer": t["cpu_s"] / times["a_buffer"]["cpu_s"],
+                }
+            )
+    fog = bp.Fog("exp", (0.5, 0.6, 0.7), density=0.05)
+    for name, scene, w, h, k in opaque_frames:
+        frame = functools.partial(bp.render, scene, w, h, samples=k * k, shadows="none")
+        runs = {
+            shading: functools.partial(frame, shading=shading) for shading in ("phong", "gouraud", "flat")
+        }
+        runs["fog"] = functools.partial(frame, shading="phong", fog=fog)
+        times = timed_renders(runs, repeat)
+        for variant, t in times.items():
+            rows.append(
+                {
+                    "kind": "frame",
+                    "scene": name,
+                    "method": variant,
+                    "width": w,
+                    "height": h,
+                    "samples_per_axis": k,
+                    "samples": w * h * k * k,
+                    "triangles": sum(len(m.triangles) for m in scene.meshes),
+                    "total_s": t["total_s"],
+                    "total_median_s": t["total_median_s"],
+                    "cpu_s": t["cpu_s"],
+                    "cpu_median_s": t["cpu_median_s"],
+                    "ratio_to_phong": t["cpu_s"] / times["phong"]["cpu_s"],
+                }
+            )
+    return {
+        "family": "frame_costs",
+        "title": "Frame costs: transparency resolve, shading and fog in whole render() calls",
+        "scene": "layered quads, the frame benchmark's scene (transparent and opaque), a sphere; "
+        "two sizes each",
+        "reference": "a_buffer (transparency), phong (shading, fog)",
+        "rows": rows,
+    }
+
+
 #: Family name → measurement function ``(quick, repeat) -> dict``.
 FAMILIES: dict[str, Callable[..., dict]] = {
     "shading": shading,
@@ -668,4 +829,5 @@ FAMILIES: dict[str, Callable[..., dict]] = {
     "transparency": transparency,
     "compositing": compositing_precision,
     "scaling": scaling,
+    "frame_costs": frame_costs,
 }

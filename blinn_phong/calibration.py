@@ -15,7 +15,8 @@ Models (each states the error metric it predicts):
   contribution is scaled by the transmittance of the first ``k``), so the error is at most
   ``255·c·B·(1 − α_min)^k`` steps; ``c`` is the largest measured/bound ratio over the
   calibration cases (≤ 1 when the bound holds); predictions use ``max(c, 1)``, the bound
-  itself, since other scenes reach it. Cost: ``t₀ + t₁·k`` times the A-buffer's.
+  itself, since other scenes reach it. Cost: the frame fit's ratio (``frame_cost`` below;
+  without it ``t₀ + t₁·k`` times the A-buffer's, the resolver alone).
 * ``shadow_map`` — mean error of light visibility over the visible points facing the light
   (misclassified share × 255), nearest-texel lookup with bias ``1e-4 + 2·slope``. A
   shadow's edge band is one texel (``D/R`` for a map of resolution ``R`` covering a span
@@ -25,12 +26,18 @@ Models (each states the error metric it predicts):
   misplaced edge, so under the per-pixel tolerance a map is chosen only where the light's
   whole shadowed contribution fits; the mean model picks no resolution, it is reported.
   Calibrated with a directional light. Cost relative to Embree ray tracing for ``N``
-  receiver points: ``(m₀ + m₂·R² + m_N·N)/(b₀ + b_N·N)`` (:func:`shadow_map_cost`).
+  receiver points and ``T`` triangles: ``(m₀ + m₂·R² + m_N·N + m_T·T)/(b₀ + b_N·N + b_T·T)``
+  (:func:`shadow_map_cost`).
 * ``shading`` — max error on interior pixels of a curved mesh against per-pixel shading of
   the exact surface, per method, as a power law ``a·θ^b`` of the angle ``θ`` between the
   vertex normals at the ends of an edge (``2π/segments`` for a UV sphere), the upper
   envelope of a log-space least-squares fit, times a safety ``margin``. Calibrated at
   shininess 40: valid for shininess ≤ ``shininess_calibrated``. Cost: ``ratio_to_phong``.
+* ``frame_cost`` — the frame-aware costs: process CPU seconds of a whole ``render()`` frame
+  per transparency method (:func:`transparency_seconds`), per shading method and with fog
+  (:func:`frame_seconds`), ``x₀ + x_S·S + x_T·T`` (depth peeling ``+ x_k·k·S``) for ``S``
+  samples and ``T`` triangles, fitted to ``render()`` timings: depth peeling, shading and fog
+  costs are their ratios (:func:`depth_peeling_cost`, :func:`shading_cost`, :func:`fog_cost`).
 * ``shadow_volume`` — exact (no error model). Cost, in seconds, of shadow volumes and of Embree
   ray tracing for ``T`` triangles and ``N`` receiver samples: ``v₀ + v_T·T + v_N·N`` and
   ``r₀ + r_T·T + r_N·N`` (:func:`shadow_volume_cost`), fitted to both methods timed in the
@@ -55,15 +62,19 @@ __all__ = [
     "choose_shadow_map",
     "depth_peeling_cost",
     "depth_peeling_factor",
+    "fog_cost",
+    "frame_seconds",
     "load",
     "max_normal_angle",
     "predict_depth_peeling",
     "predict_shading",
     "predict_shadow_map",
     "scene_extent",
+    "shading_cost",
     "shadow_map_cost",
     "shadow_volume_cost",
     "shipped_models",
+    "transparency_seconds",
 ]
 
 #: The models shipped with the package (written by ``benchmarks/error_models.py``).
@@ -165,14 +176,95 @@ def depth_peeling_factor(models: dict) -> float:
     return max(float(models["depth_peeling"]["c"]), 1.0)
 
 
-def depth_peeling_cost(models: dict, k: int) -> float:
-    """Predicted time of peeling ``k`` layers relative to the A-buffer's: ``t₀ + t₁·k``."""
+def depth_peeling_cost(models: dict, k: int, samples: int | None = None, triangles: int = 0) -> float:
+    """Predicted time of peeling ``k`` layers relative to the A-buffer's.
+
+    With the frame fit (``frame_cost`` in the models): the whole frame's, by
+    :func:`transparency_seconds` for ``samples`` (``width·height·samples``; None: the fit's
+    median frame) and ``triangles``. Without it, ``t₀ + t₁·k`` (the resolver alone on the
+    calibration fragments).
+    """
+    if "frame_cost" in models:
+        peel = transparency_seconds(models, "depth_peeling", samples, triangles, k)
+        return peel / transparency_seconds(models, "a_buffer", samples, triangles)
     m = models["depth_peeling"]
     return m["t0"] + m["t1"] * k
 
 
+def _samples_or_default(models: dict, samples: int | None) -> int:
+    if samples is None:
+        return int(models["frame_cost"]["samples_median"])
+    if isinstance(samples, bool) or not isinstance(samples, int | np.integer) or samples < 0:
+        raise ValueError(f"samples: expected an integer >= 0, got {samples!r}")
+    return int(samples)
+
+
+def _linear(
+    models: dict, kind: str, name: str, samples: int | None, triangles: int, layers: int = 0
+) -> float:
+    table = models["frame_cost"][kind]
+    if name not in table:
+        raise ValueError(f"method: expected one of {sorted(table)}, got {name!r}")
+    if isinstance(triangles, bool) or not isinstance(triangles, int | np.integer) or triangles < 0:
+        raise ValueError(f"triangles: expected an integer >= 0, got {triangles!r}")
+    s = _samples_or_default(models, samples)
+    c = table[name]
+    return c[0] + c[1] * s + c[2] * int(triangles) + (c[3] * layers * s if len(c) > 3 else 0.0)
+
+
+def transparency_seconds(
+    models: dict, method: str, samples: int | None = None, triangles: int = 0, layers: int = 1
+) -> float:
+    """Predicted process CPU seconds of a ``render()`` frame resolving transparency by ``method``.
+
+    ``x₀ + x_S·S + x_T·T`` per method (``a_buffer``, ``draw_last``, ``sort_objects``), plus
+    ``x_k·layers·S`` for ``depth_peeling``; ``S`` samples (``width·height·samples``), ``T``
+    triangles. Fitted by :mod:`benchmarks.error_models` to the ``frame_costs`` family
+    (``render()`` of the transparency calibration scenes and the frame benchmark's scene at two
+    sizes each, every method timed in the same run): the ratios, not the seconds, carry over to
+    other machines.
+    """
+    return _linear(models, "transparency", method, samples, triangles, layers)
+
+
+def frame_seconds(models: dict, variant: str, samples: int | None = None, triangles: int = 0) -> float:
+    """Predicted process CPU seconds of a whole ``render()`` frame without shadows: ``x₀ + x_S·S + x_T·T``.
+
+    ``variant``: ``phong``, ``gouraud``, ``flat`` (the shading of every mesh) or ``fog``
+    (Phong with exp fog); ``S`` samples (``width·height·samples``), ``T`` triangles. Fitted to
+    the ``frame_costs`` family (see :func:`transparency_seconds`).
+    """
+    return _linear(models, "frame", variant, samples, triangles)
+
+
+def fog_cost(models: dict, samples: int | None = None, triangles: int = 0) -> float | None:
+    """Predicted time of a frame with fog relative to the same frame without (:func:`frame_seconds`);
+    None without the frame fit."""
+    if "frame_cost" not in models:
+        return None
+    return frame_seconds(models, "fog", samples, triangles) / frame_seconds(
+        models, "phong", samples, triangles
+    )
+
+
+def shading_cost(models: dict, method: str, samples: int | None = None, triangles: int = 0) -> float:
+    """Predicted time of a frame shaded by ``method`` relative to Phong's (:func:`frame_seconds`
+    when the frame fit exists, else the calibration sphere's measured ``ratio_to_phong``)."""
+    if "frame_cost" in models:
+        return frame_seconds(models, method, samples, triangles) / frame_seconds(
+            models, "phong", samples, triangles
+        )
+    return float(models["shading"]["methods"][method]["ratio_to_phong"])
+
+
 def choose_depth_peeling(
-    models: dict, tolerance: float, alpha_min: float, brightest: float, max_layers: int
+    models: dict,
+    tolerance: float,
+    alpha_min: float,
+    brightest: float,
+    max_layers: int,
+    samples: int | None = None,
+    triangles: int = 0,
 ) -> dict:
     """The fewest layers predicted within ``tolerance`` and faster than the A-buffer, else the A-buffer.
 
@@ -182,6 +274,9 @@ def choose_depth_peeling(
         alpha_min: smallest opacity of the transparent surfaces, in (0, 1].
         brightest: bound of the straight radiance behind the peeled layers (≥ 0).
         max_layers: an upper bound of the depth complexity (peeling that many is exact).
+        samples: the frame's samples ``width·height·samples`` for the cost model (None: the
+            fit's median frame).
+        triangles: the scene's triangles, for the cost model.
 
     Returns:
         ``{"method": "depth_peeling", "layers": k, "predicted_steps", "predicted_cost"}`` or
@@ -196,7 +291,7 @@ def choose_depth_peeling(
     ):
         raise ValueError(f"brightest: expected a finite radiance >= 0, got {brightest!r}")
     for k in range(1, max_layers):
-        cost = depth_peeling_cost(models, k)
+        cost = depth_peeling_cost(models, k, samples, triangles)
         if cost >= 1.0:
             break
         err = predict_depth_peeling(models, k, alpha_min, brightest)
@@ -231,8 +326,12 @@ def shadow_map_cost(
 ) -> float:
     """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing.
 
-    With the frame-aware fit (``m0``, ``m2``, ``mn``, ``b0``, ``bn``, seconds, measured on
-    the calibration scene): ``(m0 + m2·R² + mn·N)/(b0·τ + bn·N)`` for ``N = receivers``
+    With the frame-aware fit in seconds over two triangle counts (``mt``, ``bt`` present):
+    ``(m0 + m2·R² + mn·N + mt·T)/(b0 + bn·N + bt·T)`` for ``N = receivers`` points and
+    ``T = triangles`` (rasterizing the map's triangles; building Embree's BVH, which ``render``
+    reuses while the same triangles come back — the model charges it to every frame, as for
+    a first frame or an animation). The former single-scene fit:
+    ``(m0 + m2·R² + mn·N)/(b0·τ + bn·N)`` for ``N = receivers``
     points, with ``τ = triangles/triangles_calibrated`` (the ray tracer's scene build) —
     set-up, rasterization and one lookup per receiver against the scene build and one ray
     per receiver. Unknown arguments take the calibration scene's values. The rasterization
@@ -245,6 +344,11 @@ def shadow_map_cost(
     if "m0" not in m:
         return m["t0"] + m["t2"] * resolution**2
     n = m["receivers"] if receivers is None else receivers
+    if "mt" in m:
+        t = m["triangles"] if triangles is None else triangles
+        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t) / (
+            m["b0"] + m["bn"] * n + m["bt"] * t
+        )
     tau = 1.0 if triangles is None else triangles / m["triangles"]
     return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n) / (m["b0"] * tau + m["bn"] * n)
 
@@ -310,7 +414,7 @@ def shadow_volume_cost(models: dict, triangles: int, receivers: int) -> dict | N
     Args:
         models: from :func:`load` or :func:`shipped_models`.
         triangles: ``T``, triangles in the scene (≥ 0).
-        receivers: ``N``, receiver samples of the frame (``width·height·samples²``, ≥ 0).
+        receivers: ``N``, receiver samples of the frame (``width·height·samples``, ≥ 0).
 
     Returns:
         ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
@@ -344,21 +448,26 @@ def predict_shading(models: dict, method: str, theta: float) -> float:
     return shading.get("margin", 1.0) * m["a"] * theta ** m["b"]
 
 
-def choose_shading(models: dict, tolerance: float, theta: float) -> dict:
+def choose_shading(
+    models: dict, tolerance: float, theta: float, samples: int | None = None, triangles: int = 0
+) -> dict:
     """The cheapest of flat/Gouraud predicted within ``tolerance`` steps and faster than Phong, else Phong.
+
+    Costs by :func:`shading_cost` for the frame's ``samples`` (``width·height·samples``) and
+    ``triangles``.
 
     Returns:
         ``{"method", "predicted_steps", "predicted_cost"}``, the cost relative to Phong's.
     """
     tol = _check_tolerance(tolerance)
-    methods = models["shading"]["methods"]
-    for method in sorted(("flat", "gouraud"), key=lambda name: methods[name]["ratio_to_phong"]):
+    cost = {name: shading_cost(models, name, samples, triangles) for name in ("flat", "gouraud")}
+    for method in sorted(("flat", "gouraud"), key=lambda name: cost[name]):
         err = predict_shading(models, method, theta)
-        if err <= tol and methods[method]["ratio_to_phong"] < 1.0:
+        if err <= tol and cost[method] < 1.0:
             return {
                 "method": method,
                 "predicted_steps": err,
-                "predicted_cost": methods[method]["ratio_to_phong"],
+                "predicted_cost": cost[method],
             }
     return {
         "method": "phong",

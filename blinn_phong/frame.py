@@ -16,7 +16,7 @@ import numpy as np
 from blinn_phong._checks import colour3, number
 from blinn_phong.fog import FOG_MODES
 from blinn_phong.oit import TRANSPARENCY_METHODS
-from blinn_phong.planner import Choice, Plan, embree_available, plan
+from blinn_phong.planner import Choice, Plan, coloured_shadow_reason, embree_available, plan
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
 from blinn_phong.shadows import PCF_KERNELS, SHADOW_METHODS
 
@@ -248,6 +248,7 @@ def frame_plan(
     width: int | None = None,
     height: int | None = None,
     samples: int = 1,
+    fog: Fog | None = None,
 ) -> Plan:
     """The plan a render follows: :func:`blinn_phong.planner.plan`, with the caller's choices replacing it.
 
@@ -268,7 +269,9 @@ def frame_plan(
             nor order-independent transparency); asking for one raises ``ValueError``.
         width: frame width in pixels, for the cost models (None: the planner's default frame).
         height: frame height in pixels (None: the planner's default frame).
-        samples: k for k×k samples per pixel.
+        samples: samples per pixel (k² for a k×k grid), as render takes them.
+        fog: the render's :class:`Fog` (or None): the planner scales its error bounds by the fog
+            factor and states fog's cost (:func:`blinn_phong.planner.plan`).
 
     Returns:
         A :class:`~blinn_phong.planner.Plan` whose choices carry the keyword parameters of the
@@ -287,7 +290,7 @@ def frame_plan(
     if wboit_weight not in WBOIT_WEIGHTS:
         raise ValueError(f"wboit_weight: expected one of {WBOIT_WEIGHTS}, got {wboit_weight!r}")
     per_light = _shadow_list(shadows, len(scene.lights))
-    planned = plan(scene, tolerance, width=width, height=height, samples=samples)
+    planned = plan(scene, tolerance, width=width, height=height, samples=samples, fog=fog)
 
     if gl_compat:
         if transparency not in (*_AUTO, "zbuffer"):
@@ -318,6 +321,11 @@ def frame_plan(
             _shadow_choice(light, options, c)
             for light, options, c in zip(scene.lights, per_light, planned.shadows, strict=True)
         )
+        # a method set by the caller: say how transparent casters shadow with it (coloured if ray traced)
+        s_choices = tuple(
+            c if c.method == p.method else coloured_shadow_reason(scene, c)
+            for c, p in zip(s_choices, planned.shadows, strict=True)
+        )
 
     if shading == "auto":
         shading_choices = planned.shading
@@ -328,7 +336,7 @@ def frame_plan(
             else Choice(shading, _overridden(c, f"render(shading={shading!r})"))
             for mesh, c in zip(scene.meshes, planned.shading, strict=True)
         )
-    return Plan(t_choice, s_choices, shading_choices, planned.tolerance)
+    return Plan(t_choice, s_choices, shading_choices, planned.tolerance, planned.fog)
 
 
 def needs_effects(scene: Scene, the_plan: Plan, fog: Fog | None) -> bool:

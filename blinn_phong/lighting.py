@@ -195,8 +195,9 @@ def _points_and_normals(points: object, normals: object) -> tuple[np.ndarray, np
 
 
 def _visibility(visibility: object, count: int, n_lights: int) -> np.ndarray:
-    """``visibility`` as an (N, L) float64 array of values in [0, 1], or raise."""
-    vis = float_array(visibility, "visibility", (count, n_lights))
+    """``visibility`` as an (N, L) or per-channel (N, L, 3) float64 array of values in [0, 1], or raise."""
+    per_channel = np.ndim(visibility) == 3  # (N, L, 3): coloured shadows, one factor per RGB channel
+    vis = float_array(visibility, "visibility", (count, n_lights, 3) if per_channel else (count, n_lights))
     outside = int(np.count_nonzero((vis < 0) | (vis > 1)))
     if outside:
         raise ValueError(
@@ -231,7 +232,8 @@ def shade(
         model: the specular form and viewer model (``specular``, ``local_viewer``);
             defaults to :class:`~blinn_phong.scene.LightModel` ().
         visibility: optional (N, L) factors in [0, 1] multiplying each light's diffuse
-            and specular terms (1 = lit; e.g. from a shadow test). L = ``len(lights)``.
+            and specular terms (1 = lit; e.g. from a shadow test), or (N, L, 3) one factor
+            per RGB channel (coloured shadows through transparent casters). L = ``len(lights)``.
         per_light: also return the (N, L, 3) per-light diffuse and specular terms.
         engine: ``"numpy"`` (reference), ``"numba"`` (compiled; not with ``per_light``),
             or ``"auto"`` (numba when it imports and ``per_light`` is False).
@@ -298,8 +300,9 @@ def shade(
             dpl[:, i] = d_i
             spl[:, i] = s_i
         if visibility is not None:
-            d_i = d_i * vis[:, i : i + 1]
-            s_i = s_i * vis[:, i : i + 1]
+            w_i = vis[:, i] if vis.ndim == 3 else vis[:, i : i + 1]  # (N, 3) per channel, or (N, 1)
+            d_i = d_i * w_i
+            s_i = s_i * w_i
         diffuse += d_i
         specular += s_i
     return ShadingTerms(ambient, diffuse, specular, alpha, dpl, spl)

@@ -39,7 +39,7 @@ from blinn_phong.fast import (
 )
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene
-from blinn_phong.raster import interpolate
+from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.resolve import (
     FogParameters,
     FrameImage,
@@ -50,26 +50,67 @@ from blinn_phong.resolve import (
 )
 from blinn_phong.scene import AmbientLight, Scene, SpotLight
 from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragments
-from blinn_phong.shadows import light_visibility
+from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
 from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
 
 __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 
 
-def _world_triangles(scene: Scene) -> np.ndarray:
+def _world_vertices(scene: Scene) -> list[np.ndarray]:
+    """(V_m, 3) world-space vertex positions of each mesh, ``(p, 1)·Mᵀ`` with the mesh's model matrix."""
+    out = []
+    for m in scene.meshes:
+        hom = np.empty((len(m.positions), 4))
+        hom[:, :3] = m.positions
+        hom[:, 3] = 1.0
+        out.append((hom @ m.transform.T)[:, :3])
+    return out
+
+
+def _world_triangles(scene: Scene, world_vertices: list[np.ndarray] | None = None) -> np.ndarray:
     """(T, 3, 3) world-space triangles of the meshes that cast shadows (``Mesh.casts_shadows``), in
     scene order, as :func:`blinn_phong.raytrace.world_triangles`.
 
     Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
     :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
+    ``world_vertices``: :func:`_world_vertices` of the scene when already computed.
     """
-    parts = [
-        (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3][m.triangles]
-        for m in scene.meshes
-        if m.casts_shadows
-    ]
+    verts = _world_vertices(scene) if world_vertices is None else world_vertices
+    parts = [v[m.triangles] for m, v in zip(scene.meshes, verts, strict=True) if m.casts_shadows]
     return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+
+
+def _fragment_surface(
+    prepared: PreparedScene, fragments: Fragments, world_vertices: list[np.ndarray], compiled: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) world-space points and (N, 3) unit world face normals of fragments, contiguous float64.
+
+    The point is the perspective-correct interpolation of the world-space corners (equal to the
+    interpolated eye-space point mapped back by the inverse view matrix: the map is affine and
+    the barycentrics sum to 1). Compiled: one pass (:func:`blinn_phong.shadow_kernels.fragment_surface`);
+    numpy: :func:`blinn_phong.raster.interpolate` and a gather.
+    """
+    verts = np.concatenate(world_vertices) if world_vertices else np.zeros((0, 3))
+    if compiled:
+        from blinn_phong.shadow_kernels import fragment_surface
+
+        n = len(fragments)
+        points = np.empty((n, 3))
+        normals = np.empty((n, 3))
+        if n:
+            fragment_surface(
+                np.ascontiguousarray(fragments.triangle, dtype=np.int64),
+                np.ascontiguousarray(fragments.bary, dtype=np.float64),
+                np.ascontiguousarray(prepared.triangles, dtype=np.int64),
+                np.ascontiguousarray(verts),
+                np.ascontiguousarray(prepared.face_world_normal, dtype=np.float64),
+                points,
+                normals,
+            )
+        return points, normals
+    points = np.ascontiguousarray(interpolate(fragments, prepared.triangles, verts))
+    return points, np.ascontiguousarray(prepared.face_world_normal[fragments.triangle])
 
 
 def _soft_visibility(
@@ -104,12 +145,34 @@ def _soft_visibility(
     )
 
 
-def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_plan: Plan) -> np.ndarray | None:
-    """(N, L) visibility of the visible fragments per non-ambient light; None when no light casts shadows.
+def light_visibilities(
+    prepared: PreparedScene, visible: FrameFragments, the_plan: Plan, *, engine: str = "auto"
+) -> np.ndarray | None:
+    """Visibility of the visible fragments per non-ambient light; None when no light casts shadows.
 
     One evaluation per light and frame, by the plan's method for that light
     (:func:`blinn_phong.shadows.light_visibility`, Embree area-light sampling for ``soft``),
-    at the fragments' world positions with their face normals.
+    at the fragments' world positions with their face normals. The world-space points, face
+    normals and caster triangles are computed once per frame (one compiled pass with
+    ``engine`` numba/auto, :func:`_fragment_surface`) and shared by every light; ray-traced
+    lights share one BVH.
+
+    Coloured shadows: where a light's method is ``ray_traced`` and a caster is transparent
+    (:func:`blinn_phong.shadows.caster_transmittance`: ``1 − opacity`` per channel for the
+    partial-occlusion and absorption models, 1 for emission, 0 for opaque casters), that
+    light's visibility is the per-channel fraction of its light that arrives
+    (:func:`blinn_phong.raytrace.transmitted_light`), and the result is (N, L, 3) — the other
+    lights' (N,) visibility repeated over the three channels. Otherwise it is (N, L).
+
+    Args:
+        prepared: the frame's prepared scene.
+        visible: its visible fragments.
+        the_plan: the frame's plan (one shadow choice per light of the scene).
+        engine: ``numpy`` (reference stages), ``numba`` or ``auto``: fragment surfaces and
+            shadow-map kernels.
+
+    Returns:
+        (N, L) or (N, L, 3) float64 in [0, 1], L the non-ambient lights in scene order; or None.
     """
     scene = prepared.scene
     lit = [
@@ -119,26 +182,38 @@ def light_visibilities(prepared: PreparedScene, visible: FrameFragments, the_pla
     ]
     if not any(c.method != "none" for _, c in lit):
         return None
+    compiled = use_compiled(engine)
     f = visible.fragments
-    eye = interpolate(f, prepared.triangles, prepared.eye_position)
-    world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
-    normal = prepared.face_world_normal[f.triangle]
-    tris = _world_triangles(scene)
+    verts = _world_vertices(scene)
+    tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
-        return np.ones((len(world), len(lit)))
+        return np.ones((len(f), len(lit)))
+    world, normal = _fragment_surface(prepared, f, verts, compiled)
+    transmittance = caster_transmittance(scene)
+    coloured = transmittance is not None and any(c.method == "ray_traced" for _, c in lit)
+    out = np.empty((len(lit), len(world), 3) if coloured else (len(lit), len(world)))
     ray_scene: list[object] = []
-    columns = []
-    for light, c in lit:
-        if c.method == "soft":
-            if not ray_scene:
-                from blinn_phong.raytrace import cached_ray_scene  # Embree: imported only when used
+    shadow_engine = "numba" if compiled else "numpy"
+    # world, normal and tris are this frame's own finite float64 arrays: checked once, here
+    with trusted_arrays(world, normal, tris):
+        for i, (light, c) in enumerate(lit):
+            if c.method == "soft":
+                if not ray_scene:
+                    from blinn_phong.raytrace import cached_ray_scene  # Embree: imported only when used
 
-                ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
-            columns.append(_soft_visibility(light, c.params, ray_scene[0], world, normal))
-        else:
-            extra = {"camera": scene.camera} if c.method == "shadow_volume" else {}
-            columns.append(light_visibility(c.method, light, tris, world, normal, **c.params, **extra))  # type: ignore[arg-type]
-    return np.stack(columns, axis=1) if columns else None
+                    ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
+                column = _soft_visibility(light, c.params, ray_scene[0], world, normal)
+            elif coloured and c.method == "ray_traced":
+                column = light_visibility(
+                    c.method, light, tris, world, normal, transmittance=transmittance, **c.params
+                )  # type: ignore[arg-type]
+            else:
+                extra: dict[str, object] = {"camera": scene.camera} if c.method == "shadow_volume" else {}
+                if c.method in ("shadow_map", "ray_traced") and "engine" not in c.params:
+                    extra["engine"] = shadow_engine
+                column = light_visibility(c.method, light, tris, world, normal, **c.params, **extra)  # type: ignore[arg-type]
+            out[i] = column[:, None] if coloured and column.ndim == 1 else column
+    return np.moveaxis(out, 0, 1)
 
 
 FrameResult = tuple[FrameImage, int]
@@ -190,6 +265,7 @@ def _plain_from_winners(
     seconds["resolve_samples"] = 0.0
     say("shade", 1.0)
     return image, shaded
+
 
 #: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays
 #: (about 250 bytes per visible fragment) whatever the image size.

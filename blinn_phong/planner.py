@@ -26,11 +26,14 @@ Transparency (methods of :mod:`blinn_phong.oit`):
 * ``depth_peeling`` — with a tolerance: the fewest layers ``k`` whose predicted max error
   ``255·c·B·(1 − α_min)^k`` is within it (what lies behind ``k`` layers is scaled by their
   transmittance, at most ``(1 − α_min)^k``; ``B`` bounds the straight radiance behind them
-  with every factor of the lighting equation — emission, ambient, light colours, and the
-  attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the smallest distance from the light to a
-  mesh, above 1 when ``k_c < 1`` — see :func:`_max_radiance`; at least 1 because alpha
+  with every factor of the lighting equation — emission, ambient, light colours, and per
+  mesh the attenuation ``1/(k_c + k_l·d + k_q·d²)`` at the mesh's nearest distance from the
+  light, above 1 when ``k_c < 1``, and the spot cone's factor at its smallest angle to the
+  mesh (:func:`_mesh_light_factor`) — see :func:`_max_radiance`; with fog
+  ``f_hi·B + (1 − f_lo)·C_f`` (:func:`_fogged_radiance_bound`); at least 1 because alpha
   counts too; divided by ``α_min`` for the absorption model whose fragments are not
-  premultiplied by their opacity; ``c`` measured), if its predicted cost ``t₀ + t₁·k`` is
+  premultiplied by their opacity; ``c`` measured), if its predicted frame cost for the
+  frame's samples and triangles (:func:`blinn_phong.calibration.depth_peeling_cost`) is
   below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
@@ -47,8 +50,9 @@ Shadows, per light (:mod:`blinn_phong.shadows`, :mod:`blinn_phong.raytrace`):
   every caster lies between that plane and the light: Blinn's projected shadows are exact.
 * ``shadow_map`` — with a tolerance, directional lights (the calibrated case), only when
   ``255·w ≤ T``: ``w`` is the largest change a pixel sees between lit and shadowed (the
-  light's diffuse and specular colours times the materials', times the attenuation bound),
-  which a misplaced hard edge costs in full. The resolution is the smallest power of two
+  light's diffuse and specular colours times the materials', times each mesh's bound of
+  ``att·spot`` and, with fog, its largest fog factor; see :func:`_shadow_weight`), which a
+  misplaced hard edge costs in full. The resolution is the smallest power of two
   whose texel ``D/R`` (``D`` the map's span) is at most half the thinnest caster seen from
   the light (the smallest extent of its projection across the light direction,
   :func:`_projected_width`), if its predicted cost for the frame's receiver samples is below
@@ -71,20 +75,34 @@ Shading frequency, per mesh (:mod:`blinn_phong.render`):
   are constant over each face, so the lighting is.
 * ``flat`` or ``gouraud`` — with a tolerance, shininess within the calibrated range: the
   cheaper one whose predicted max error ``margin·a·θ^b`` (``θ`` the largest angle between
-  adjacent vertex normals) is within it, if it is measured faster than Phong.
+  adjacent vertex normals) is within it, if it is predicted faster than Phong for the frame
+  (:func:`blinn_phong.calibration.shading_cost`).
+
+Fog (``plan(..., fog=Fog(...))``, as ``render`` takes it) is no choice but scales the bounds
+(:func:`_fog_range`); the plan's ``fog`` entry states its factor range and predicted cost.
 * ``phong`` — otherwise (per-pixel evaluation, the reference).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from . import calibration
-from .normals import vertex_normals
+from .mesh_facts import (
+    _beyond_near_plane,
+    _light_side_distance,
+    _may_shadow,
+    _mesh_facts,
+    _MeshFacts,
+    _normal_angle,
+    _projected_width,
+    _rects_overlap,
+    _screen_rect_and_depth,
+    coordinate_tolerance,
+)
 from .scene import AmbientLight, DirectionalLight, Material, Mesh, PointLight, Scene, SpotLight
 
 __all__ = [
@@ -92,6 +110,7 @@ __all__ = [
     "Choice",
     "MapGeometry",
     "Plan",
+    "coloured_shadow_reason",
     "coordinate_tolerance",
     "embree_available",
     "plan",
@@ -133,362 +152,26 @@ class Plan:
         shadows: one choice per entry of ``scene.lights`` (same order).
         shading: one choice per entry of ``scene.meshes`` (same order).
         tolerance: the tolerance the plan was made for, in 8-bit steps (0: exact only).
+        fog: with fog, what it does to the error bounds and what it costs (None without fog).
     """
 
     transparency: Choice
     shadows: tuple[Choice, ...]
     shading: tuple[Choice, ...]
     tolerance: float
+    fog: Choice | None = None
 
     def reasons(self) -> list[str]:
         """Every decision as one human-readable line."""
         lines = [f"transparency: {self.transparency}"]
         lines += [f"shadows, light {i}: {c}" for i, c in enumerate(self.shadows)]
         lines += [f"shading, mesh {i}: {c}" for i, c in enumerate(self.shading)]
+        if self.fog is not None:
+            lines.append(f"fog: {self.fog}")
         return lines
 
     def __str__(self) -> str:
         return "\n".join(self.reasons())
-
-
-# --------------------------------------------------------------------------- geometry facts
-
-
-@dataclass(frozen=True)
-class _ObjectFacts:
-    """Facts of a mesh's object-space geometry that every invertible affine transform keeps."""
-
-    used: np.ndarray  # (V,) bool: vertex used by a triangle
-    good: np.ndarray  # (T,) bool: triangle of non-zero area
-    planar: bool  # every used vertex within the tolerance of the first good triangle's plane
-    closed: bool
-    convex: bool  # closed, every triangle on a supporting plane, counter-clockwise = outward
-    flat_normals: bool
-
-
-@dataclass(frozen=True)
-class _MeshFacts:
-    world: np.ndarray  # (U, 3) world positions of the used vertices
-    mesh: Mesh
-    n_tris: int
-    centre: np.ndarray
-    radius: float
-    planar: bool
-    plane: np.ndarray | None  # (a, b, c, d) unit normal when planar
-    closed: bool
-    convex: bool  # closed, convex and wound outwards in world space (see _convex_surface)
-    flat_normals: bool
-
-    @property
-    def tris(self) -> np.ndarray:
-        """(T, 3, 3) world triangles (computed on demand)."""
-        hom = np.c_[self.mesh.positions, np.ones(len(self.mesh.positions))]
-        return (hom @ self.mesh.transform.T)[:, :3][self.mesh.triangles]
-
-
-def coordinate_tolerance(positions: np.ndarray) -> float:
-    """Distance below which positions like ``positions`` are indistinguishable (their units).
-
-    Coordinates that are all float32 numbers were computed in float32 at best, so their
-    rounding error is float32's (ε = 2⁻²³); otherwise float64's (ε = 2⁻⁵²). A plane through
-    three such points and a point's distance to it carry errors of a few ε·|p| (|p| the
-    largest coordinate magnitude); the tolerance is ``64·ε·|p|`` — far above that rounding,
-    far below any modelled feature (1.4·10⁻¹¹ for float64 coordinates of magnitude 10³,
-    7.6·10⁻⁶ for float32 ones of magnitude 1).
-    """
-    p = np.asarray(positions, dtype=np.float64)
-    if p.size == 0:
-        return 0.0
-    single = bool(np.array_equal(p.astype(np.float32).astype(np.float64), p))
-    eps = float(np.finfo(np.float32 if single else np.float64).eps)
-    return 64.0 * eps * max(float(np.abs(p).max()), 1e-300)
-
-
-def _directed_edges(triangles: np.ndarray, n_vertices: int) -> tuple[bool, np.ndarray]:
-    """Whether every directed edge ``(i, j)`` occurs once with its twin ``(j, i)`` once; the sorted keys."""
-    a = triangles.reshape(-1)
-    b = triangles[:, [1, 2, 0]].reshape(-1)
-    n = np.int64(max(n_vertices, 1))
-    keys = np.sort(a * n + b)
-    if len(keys) == 0 or np.any(a == b) or np.any(keys[1:] == keys[:-1]):
-        return False, keys
-    twins = b * n + a
-    at = np.minimum(np.searchsorted(keys, twins), len(keys) - 1)
-    return bool(np.all(keys[at] == twins)), keys
-
-
-def _convex_surface(points: np.ndarray, triangles: np.ndarray, tol: float) -> tuple[bool, bool]:
-    """``(closed, convex)`` of an indexed triangle mesh by local tests (one sort of the edges).
-
-    ``closed``: every directed edge ``(i, j)`` occurs once and its twin ``(j, i)`` once — a
-    closed, consistently wound surface. When the indexed mesh is not, vertices within ``tol``
-    of each other are welded first (a cube with 4 vertices per face is closed).
-
-    ``convex``: closed, and every triangle lies on a supporting plane of the vertex set with
-    its counter-clockwise normal pointing away from it (the surface is the boundary of the
-    convex hull, wound outwards). Tested by three facts, each within ``tol``:
-
-    1. *vertex stars*: for every triangle ``t`` and each corner ``v`` of ``t``, every
-       neighbour ``w`` of ``v`` (sharing an edge with it) lies on or below ``t``'s plane;
-    2. *star-shaped*: the centroid ``c`` of the vertices lies strictly below (by more than
-       ``tol``) every triangle's plane;
-    3. *winding number 1*: the solid angles of the triangles seen from ``c`` (Van Oosterom &
-       Strackee, IEEE Trans. Biomed. Eng. 30, 1983) add up to 4π.
-
-    Why they suffice. By (2) the central projection from ``c`` onto the unit sphere maps each
-    triangle one-to-one, preserving orientation; the surface being closed, the projection has
-    a degree, the winding number of (3), so every direction off the projected edges has
-    exactly one preimage: the surface is embedded, a radial graph around ``c``, bounding a
-    closed, connected solid ``K``. By (1), at each vertex ``v`` the plane of every triangle at
-    ``v`` supports ``Q = conv({v} ∪ neighbours(v))``, so those triangles lie on ``∂Q``; since
-    they surround ``v`` on the embedded closed surface, ``K`` coincides with ``Q`` near ``v``,
-    and so near every point of the triangles and edges at ``v``. ``K`` is therefore locally
-    convex at every point and, closed and connected, convex (Tietze–Nakajima theorem;
-    Valentine, *Convex Sets*, 1964, thm. 4.4): every triangle lies on a supporting plane of
-    ``K = conv(vertices)``. Conversely a convex closed mesh passes (1)–(3) up to rounding,
-    which ``tol`` covers (:func:`coordinate_tolerance`).
-
-    Cost: sorting the 3T directed edges, then about 18·T point–plane distances (a vertex has
-    about 6 neighbours); no hull is built.
-    """
-    closed, keys = _directed_edges(triangles, len(points))
-    if not closed:
-        cell = max(tol, 1e-300) * 4.0
-        _, weld = np.unique(np.round(points / cell).astype(np.int64), axis=0, return_inverse=True)
-        weld = np.asarray(weld).reshape(-1)
-        n_welded = int(weld.max()) + 1 if len(weld) else 0
-        if n_welded == len(points):
-            return False, False
-        welded_points = np.zeros((n_welded, 3))
-        welded_points[weld] = points
-        triangles = weld[triangles]
-        points = welded_points
-        closed, keys = _directed_edges(triangles, len(points))
-        if not closed:
-            return False, False
-    p0, p1, p2 = (points[triangles[:, k]] for k in range(3))
-    fn = np.cross(p1 - p0, p2 - p0)
-    length = np.sqrt(np.einsum("ij,ij->i", fn, fn))
-    good = length > tol * np.sqrt(np.einsum("ij,ij->i", p1 - p0, p1 - p0))
-    if not good.any():
-        return True, False
-    unit = fn[good] / length[good, None]
-    base = p0[good]
-    offset = np.einsum("ij,ij->i", unit, base)
-    # (2) star-shaped around the centroid of the vertices
-    used = np.zeros(len(points), dtype=bool)
-    used[triangles.reshape(-1)] = True
-    c = points[used].mean(axis=0)
-    if not np.all(unit @ c - offset < -tol):
-        return True, False
-    # (3) winding number 1 around c
-    a, b, d = p0 - c, p1 - c, p2 - c
-    la, lb, ld = (np.sqrt(np.einsum("ij,ij->i", v, v)) for v in (a, b, d))
-    num = np.einsum("ij,ij->i", a, np.cross(b, d))
-    den = (
-        la * lb * ld
-        + np.einsum("ij,ij->i", a, b) * ld
-        + np.einsum("ij,ij->i", a, d) * lb
-        + np.einsum("ij,ij->i", b, d) * la
-    )
-    winding = float(np.sum(2.0 * np.arctan2(num, den))) / (4.0 * math.pi)
-    if abs(winding - 1.0) > 0.25:
-        return True, False
-    # (1) vertex stars: neighbours of each corner on or below the triangle's plane
-    n = np.int64(len(points))
-    src, dst = keys // n, keys % n
-    start = np.searchsorted(src, np.arange(len(points) + 1))
-    corners = triangles[good].reshape(-1)
-    if len(corners) >= _COMPILED_STARS and _star_kernel() is not None:
-        highest = _star_kernel()(points, corners, unit, offset, start, dst, tol)  # type: ignore[operator]
-        return True, bool(highest <= tol)
-    deg = start[corners + 1] - start[corners]
-    total = int(deg.sum())
-    owner = np.repeat(np.arange(len(corners)) // 3, deg)
-    first = np.repeat(start[corners] - (np.cumsum(deg) - deg), deg)
-    neighbour = dst[first + np.arange(total)]
-    height = np.einsum("ij,ij->i", points[neighbour], unit[owner]) - offset[owner]
-    return True, bool(np.all(height <= tol))
-
-
-#: Corners from which the vertex-star test runs compiled (numba), when numba imports.
-_COMPILED_STARS = 60_000
-
-
-@functools.lru_cache(maxsize=1)
-def _star_kernel() -> object | None:
-    """The vertex-star test of :func:`_convex_surface` compiled with numba (None without numba):
-    the largest height of a neighbour of a corner above its triangle's plane, stopping at the
-    first one above ``tol``. Same arithmetic as the numpy path, one pass, no gathered copies."""
-    try:
-        import numba
-    except Exception:
-        return None
-
-    @numba.njit(cache=True)
-    def highest(points, corners, unit, offset, start, dst, tol):  # pragma: no cover - compiled
-        worst = -np.inf
-        for c in range(corners.shape[0]):
-            g = c // 3
-            v = corners[c]
-            for e in range(start[v], start[v + 1]):
-                w = dst[e]
-                h = (
-                    points[w, 0] * unit[g, 0] + points[w, 1] * unit[g, 1] + points[w, 2] * unit[g, 2]
-                ) - offset[g]
-                if h > worst:
-                    worst = h
-                    if worst > tol:
-                        return worst
-        return worst
-
-    return highest
-
-
-_OBJECT_FACTS: dict[tuple[int, int, int], tuple[Mesh, _ObjectFacts]] = {}
-
-
-def _object_facts(mesh: Mesh) -> _ObjectFacts:
-    """Object-space facts of ``mesh``, cached by the identity of its arrays (Mesh arrays are not
-    to be changed in place; a new array is a new entry)."""
-    key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals))
-    hit = _OBJECT_FACTS.get(key)
-    if (
-        hit is not None
-        and hit[0].positions is mesh.positions
-        and hit[0].triangles is mesh.triangles
-        and hit[0].normals is mesh.normals
-    ):
-        return hit[1]
-    pos, tri = mesh.positions, mesh.triangles
-    used = np.zeros(len(pos), dtype=bool)
-    used[tri.reshape(-1)] = True
-    tol = coordinate_tolerance(pos[used]) if used.any() else 0.0
-    if len(tri):
-        p0 = pos[tri[:, 0]]
-        fn = np.cross(pos[tri[:, 1]] - p0, pos[tri[:, 2]] - p0)
-        fn_len = np.sqrt(np.einsum("ij,ij->i", fn, fn))
-        good = fn_len > 0
-        closed, convex = _convex_surface(pos, tri, tol)
-    else:
-        fn, fn_len, good = np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=bool)
-        closed = convex = False
-    planar = False
-    if good.any():
-        first = int(np.argmax(good))
-        n0 = fn[first] / fn_len[first]
-        planar = bool(np.all(np.abs((pos[used] - pos[tri[first, 0]]) @ n0) <= tol))
-    if mesh.normals is None or not good.any():
-        flat_normals = mesh.normals is None  # decided from planarity by the caller
-    else:
-        nrm = mesh.normals / np.maximum(np.linalg.norm(mesh.normals, axis=1, keepdims=True), 1e-300)
-        unit = fn[good] / fn_len[good, None]
-        cos = np.einsum("tkc,tc->tk", nrm[tri[good]], unit)
-        flat_normals = bool(np.all(cos >= 1 - 1e-9))
-    facts = _ObjectFacts(used, good, planar, closed, convex, flat_normals)
-    if len(_OBJECT_FACTS) >= 64:
-        _OBJECT_FACTS.pop(next(iter(_OBJECT_FACTS)))
-    _OBJECT_FACTS[key] = (mesh, facts)
-    return facts
-
-
-_WORLD_FACTS: dict[tuple[int, int, int, bytes], _MeshFacts] = {}
-
-
-def _mesh_facts(mesh: Mesh) -> _MeshFacts:
-    """World-space facts of ``mesh``, cached by its arrays' identity and its transform."""
-    obj = _object_facts(mesh)
-    key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals), mesh.transform.tobytes())
-    hit = _WORLD_FACTS.get(key)
-    if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
-        return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
-    linear = mesh.transform[:3, :3]
-    world = mesh.positions[obj.used] @ linear.T + mesh.transform[:3, 3]
-    if len(world) == 0:
-        return _MeshFacts(world, mesh, 0, np.zeros(3), 0.0, False, None, False, False, False)
-    lo, hi = world.min(axis=0), world.max(axis=0)
-    centre = (lo + hi) / 2
-    radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", world - centre, world - centre))))
-    plane = None
-    if obj.planar:  # an affine map keeps a plane: its world equation from the first good face
-        first = int(np.argmax(obj.good))
-        corner = (np.c_[mesh.positions[mesh.triangles[first]], np.ones(3)] @ mesh.transform.T)[:, :3]
-        n0 = np.cross(corner[1] - corner[0], corner[2] - corner[0])
-        n0 = n0 / np.linalg.norm(n0)
-        plane = np.r_[n0, -float(n0 @ corner[0])]
-    # an invertible affine map keeps convexity; a mirror (det < 0) turns the winding inwards
-    convex = obj.convex and float(np.linalg.det(linear)) > 0
-    flat_normals = obj.planar if mesh.normals is None else obj.flat_normals
-    facts = _MeshFacts(
-        world, mesh, len(mesh.triangles), centre, radius, obj.planar, plane, obj.closed, convex, flat_normals
-    )
-    if len(_WORLD_FACTS) >= 64:
-        _WORLD_FACTS.pop(next(iter(_WORLD_FACTS)))
-    _WORLD_FACTS[key] = facts
-    return facts
-
-
-def _screen_rect_and_depth(facts: _MeshFacts, scene: Scene) -> tuple[np.ndarray, tuple[float, float]]:
-    """NDC rectangle (x0, y0, x1, y1) and eye distance interval (−z) of a mesh."""
-    hom = np.c_[facts.world, np.ones(len(facts.world))]
-    eye = hom @ scene.camera.view.T
-    clip = eye @ scene.camera.projection.T
-    depth = (-float(eye[:, 2].max()), -float(eye[:, 2].min()))
-    if np.any(clip[:, 3] <= 0):
-        return np.array([-np.inf, -np.inf, np.inf, np.inf]), depth
-    ndc = clip[:, :2] / clip[:, 3:4]
-    return np.r_[ndc.min(axis=0), ndc.max(axis=0)], depth
-
-
-def _rects_overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    return bool(a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3])
-
-
-def _may_shadow(
-    caster: _MeshFacts, receiver: _MeshFacts, light: DirectionalLight | PointLight | SpotLight
-) -> bool:
-    """Conservative: can ``caster`` lie between ``light`` and any point of ``receiver``?"""
-    if caster.planar and caster.plane is not None:
-        # a flat caster shades only what lies on its far side from the light
-        oriented, _ = _light_side_distance(caster.plane, light)
-        if float(np.min(receiver.world @ oriented[:3]) + oriented[3]) >= -_EPS * max(receiver.radius, 1.0):
-            return False
-    r = caster.radius + receiver.radius
-    if isinstance(light, DirectionalLight):
-        d = np.asarray(light.direction)  # the direction light travels
-        w = receiver.centre - caster.centre
-        along = float(w @ d)
-        if along < -r:
-            return False  # receiver entirely on the light's side of the caster
-        perp = float(np.linalg.norm(w - max(along, 0.0) * d))
-        return perp < r
-    pos = np.asarray(light.position)
-    to_c = caster.centre - pos
-    to_r = receiver.centre - pos
-    dc, dr = float(np.linalg.norm(to_c)), float(np.linalg.norm(to_r))
-    if dc <= caster.radius or dr <= receiver.radius:
-        return True  # the light is inside a bounding sphere
-    if dr + receiver.radius < dc - caster.radius:
-        return False  # receiver entirely nearer the light than the caster
-    angle = math.acos(float(np.clip(to_c @ to_r / (dc * dr), -1, 1)))
-    return angle < math.asin(min(caster.radius / dc, 1.0)) + math.asin(min(receiver.radius / dr, 1.0))
-
-
-def _light_side_distance(
-    plane: np.ndarray, light: DirectionalLight | PointLight | SpotLight
-) -> tuple[np.ndarray, float]:
-    """Plane oriented towards the light, and the light's signed distance (inf if directional)."""
-    n, d = plane[:3], plane[3]
-    if isinstance(light, DirectionalLight):
-        towards = -np.asarray(light.direction)
-        if float(n @ towards) < 0:
-            n, d = -n, -d
-        return np.r_[n, d], math.inf
-    lp = np.asarray(light.position)
-    h = float(n @ lp + d)
-    if h < 0:
-        n, d, h = -n, -d, -h
-    return np.r_[n, d], h
 
 
 # --------------------------------------------------------------------------- decisions
@@ -510,7 +193,18 @@ def _lowest_opacity(scene: Scene, mesh: Mesh) -> float:
     return min(lowest(m) for m in _sides(scene, mesh))
 
 
-def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, models: dict) -> Choice:
+def _plan_transparency(
+    scene: Scene,
+    facts: list[_MeshFacts],
+    tolerance: float,
+    models: dict,
+    frame: _Frame | None = None,
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
+) -> Choice:
+    frame = frame if frame is not None else _frame(None, None, 1)
+    factors = factors if factors is not None else _light_factors(scene, facts)
+    fog = fog if fog is not None else _fog_range(scene, facts, None)
     opacity = [_lowest_opacity(scene, m) for m in scene.meshes]
     transparent = [i for i, m in enumerate(scene.meshes) if opacity[i] < 1.0 and len(m.triangles)]
     if not transparent:
@@ -561,11 +255,7 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
             relative_cost=1.0,
         )
     # what the dropped layers hide: transparent and opaque colour behind them, and coverage (alpha)
-    factors = [
-        1.0 if isinstance(light, AmbientLight) else _light_factor_bound(light, facts)
-        for light in scene.lights
-    ]
-    brightest = max(1.0, *(_max_radiance(scene, m, factors) for m in scene.meshes))
+    brightest = _fogged_radiance_bound(scene, facts, factors, fog)
     if any(m.transparency_model == "absorption" for i in transparent for m in _sides(scene, scene.meshes[i])):
         brightest /= alpha_min  # c + (1 − α)·behind: a stack behind adds up to B·Σ(1 − α)^j ≤ B/α
     if not math.isfinite(brightest):
@@ -577,14 +267,18 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
     layers_bound = sum(
         1 if facts[i].planar else 2 * max(len(scene.meshes[i].triangles), 1) for i in transparent
     )
-    pick = calibration.choose_depth_peeling(models, tolerance, alpha_min, brightest, layers_bound)
+    n_triangles = sum(f.n_tris for f in facts)
+    pick = calibration.choose_depth_peeling(
+        models, tolerance, alpha_min, brightest, layers_bound, frame.samples_total, n_triangles
+    )
     c = calibration.depth_peeling_factor(models)
     if pick["method"] == "depth_peeling":
         k, err, cost = pick["layers"], pick["predicted_steps"], pick["predicted_cost"]
         return Choice(
             "depth_peeling",
             f"{why}; depth peeling, {k} layers: predicted max error {err:.2g} steps ≤ tolerance "
-            f"{tolerance:g}, cost {cost:.2f}× A-buffer (255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
+            f"{tolerance:g}, cost {cost:.2f}× A-buffer (the frame, {frame.samples_total} samples) "
+            f"(255·{c:.3g}·{brightest:.3g}·(1 − {alpha_min:g})^{k})",
             {"layers": k},
             predicted_steps=err,
             relative_cost=cost,
@@ -592,36 +286,204 @@ def _plan_transparency(scene: Scene, facts: list[_MeshFacts], tolerance: float, 
     return Choice(
         "a_buffer",
         f"{why}: no number of peeled layers is predicted within {tolerance:g} steps and faster than the "
-        f"A-buffer (peeling k of at most {layers_bound} layers costs ({models['depth_peeling']['t0']:.2f} + "
-        f"{models['depth_peeling']['t1']:.3f}·k)× the A-buffer); the A-buffer is exact",
+        f"A-buffer (peeling 1 of at most {layers_bound} layers is predicted at "
+        f"{calibration.depth_peeling_cost(models, 1, frame.samples_total, n_triangles):.2f}× the A-buffer's "
+        f"frame for {frame.samples_total} samples); the A-buffer is exact",
         predicted_steps=0.0,
         relative_cost=1.0,
     )
 
 
-def _light_factor_bound(light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts]) -> float:
-    """Upper bound of ``att·spot`` of ``light`` over every surface point of the scene.
+#: Meshes up to this many triangles get the exact nearest distance to the light and per-triangle
+#: cone angles (one vectorised pass over their triangles); larger ones the bounding-box /
+#: bounding-sphere bounds, which keep planning of 100k-triangle meshes cheap.
+_EXACT_DISTANCE_TRIANGLES = 20_000
 
-    ``att = 1/(k_c + k_l·d + k_q·d²)`` decreases with the distance ``d`` (``k ≥ 0``), so it is
-    at most its value at ``d_min``, a lower bound of the distance from the light to any mesh:
-    the distance to the nearest mesh's axis-aligned bounding box. It exceeds 1 whenever the
-    denominator is below 1 there (``k_c < 1`` near the light): 100 for ``k_c = 0.01`` at
-    ``d = 0``. The spot factor ``max(−l·s, 0)^e`` is at most 1. Directional lights: 1.
-    Infinite when the denominator can be 0.
+
+def _triangle_distances(point: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Euclidean distance from ``point`` (3,) to each triangle of ``tris`` (T, 3, 3), exactly.
+
+    The nearest point of a triangle is the foot of the perpendicular on its plane when that
+    foot lies inside (same side of all three edges), otherwise the nearest point of one of its
+    edges (clamped projection on each segment; Ericson, *Real-Time Collision Detection*, 2005,
+    §5.1.5). Degenerate triangles (zero area) use their edges only.
+    """
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    n = np.cross(b - a, c - a)
+    nn = np.einsum("ij,ij->i", n, n)
+    ap = point - a
+    inside = nn > 0
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, point - p0), n) >= 0
+    plane = np.abs(np.einsum("ij,ij->i", ap, n)) / np.sqrt(np.where(nn > 0, nn, 1.0))
+    best = np.full(len(tris), np.inf)
+    for p0, p1 in ((a, b), (b, c), (c, a)):
+        e = p1 - p0
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", point - p0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+        q = p0 + t[:, None] * e - point
+        best = np.minimum(best, np.sqrt(np.einsum("ij,ij->i", q, q)))
+    return np.where(inside, plane, best)
+
+
+def _eye_triangles(f: _MeshFacts, view: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) triangles of a mesh in eye space (``view`` applied to the world triangles)."""
+    return f.tris @ view[:3, :3].T + view[:3, 3]
+
+
+def _nearest_distance(point: np.ndarray, f: _MeshFacts, view: np.ndarray) -> float:
+    """A lower bound of the eye-space distance from ``point`` (eye space) to any point of a mesh.
+
+    Exact (:func:`_triangle_distances`) up to :data:`_EXACT_DISTANCE_TRIANGLES` triangles;
+    beyond, the larger of the distances to the eye-space vertices' bounding box and bounding
+    sphere (each contains the mesh, so each is a lower bound). ``inf`` for an empty mesh.
+    """
+    if f.n_tris == 0 or len(f.world) == 0:
+        return math.inf
+    if f.n_tris <= _EXACT_DISTANCE_TRIANGLES:
+        return float(_triangle_distances(point, _eye_triangles(f, view)).min())
+    eye = f.world @ view[:3, :3].T + view[:3, 3]
+    lo, hi = eye.min(axis=0), eye.max(axis=0)
+    box = float(np.linalg.norm(np.maximum(np.maximum(lo - point, point - hi), 0.0)))
+    centre = (lo + hi) / 2
+    radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", eye - centre, eye - centre))))
+    return max(box, float(np.linalg.norm(point - centre)) - radius)
+
+
+def _spot_bound(light: SpotLight, f: _MeshFacts, view: np.ndarray, position: np.ndarray) -> float:
+    """Upper bound of a spot light's factor ``spot = [−l·s ≥ cos(cutoff)]·max(−l·s, 0)^e`` over a mesh.
+
+    ``−l·s = cos θ`` with ``θ`` the angle between the spot axis ``s`` and the direction from
+    the light to the point (eye space, as :mod:`blinn_phong.lighting` evaluates it). Every point
+    of a triangle lies in the ball around its centroid ``m`` through its farthest vertex
+    (radius ``ρ``; above :data:`_EXACT_DISTANCE_TRIANGLES` triangles one ball around the whole
+    mesh); seen from the light at distance ``D = |m − p_L| > ρ`` the ball subtends a
+    cone of half-angle ``asin(ρ/D)`` around ``m − p_L``, so by the triangle inequality of angles
+    ``θ ≥ ∠(m − p_L, s) − asin(ρ/D)``; ``θ ≥ 0`` when the light is inside a ball. With
+    ``θ_min`` the smallest of these over the triangles, ``spot ≤ cos(θ_min)^e`` (cos decreasing
+    on [0, π]), and ``spot = 0`` everywhere when ``θ_min`` exceeds the cut-off.
+    """
+    axis = view[:3, :3] @ np.asarray(light.direction, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    if f.n_tris > _EXACT_DISTANCE_TRIANGLES:  # one ball around the whole mesh
+        eye = f.world @ view[:3, :3].T + view[:3, 3]
+        centroid = ((eye.min(axis=0) + eye.max(axis=0)) / 2)[None]
+        rho = np.sqrt(np.max(np.einsum("ij,ij->i", eye - centroid, eye - centroid)))[None]
+    else:
+        tris = _eye_triangles(f, view)
+        centroid = tris.mean(axis=1)
+        rho = np.sqrt(
+            np.max(np.einsum("tkc,tkc->tk", tris - centroid[:, None], tris - centroid[:, None]), axis=1)
+        )
+    to_m = centroid - position
+    dist = np.sqrt(np.einsum("ij,ij->i", to_m, to_m))
+    if np.any(dist <= rho):
+        theta_min = 0.0
+    else:
+        cos_axis = np.clip((to_m @ axis) / dist, -1.0, 1.0)
+        theta = np.arccos(cos_axis) - np.arcsin(np.clip(rho / dist, 0.0, 1.0))
+        theta_min = max(float(theta.min()) - 1e-9, 0.0)  # 1e-9 rad: rounding of arccos/arcsin
+    if theta_min > math.radians(light.cutoff):
+        return 0.0
+    return max(math.cos(theta_min), 0.0) ** light.exponent
+
+
+def _mesh_light_factor(
+    light: DirectionalLight | PointLight | SpotLight, f: _MeshFacts, view: np.ndarray
+) -> float:
+    """Upper bound of ``att·spot`` of ``light`` over every point of one mesh (eye space, as lit).
+
+    ``att = 1/(k_c + k_l·d + k_q·d²)`` decreases with ``d ≥ 0`` (``k ≥ 0``), so over the mesh it
+    is at most its value at the mesh's nearest distance ``d_min`` from the light
+    (:func:`_nearest_distance`: exact, the nearest point of the nearest triangle); it exceeds 1
+    whenever the denominator is below 1 there (``k_c < 1`` near the light): 100 for
+    ``k_c = 0.01`` at ``d = 0``. The spot factor is bounded by :func:`_spot_bound` (the cone's
+    smallest angle to the mesh's triangles), 1 for point lights; ``max(att·spot) ≤
+    max(att)·max(spot)``. Directional lights: 1. Infinite when the denominator can be 0 on the
+    mesh (``k_c = 0`` and a surface at the light); 0 for an empty mesh.
     """
     if isinstance(light, DirectionalLight):
         return 1.0
-    pos = np.asarray(light.position, dtype=np.float64)
-    d_min = math.inf
-    for f in facts:
-        if len(f.world) == 0:
-            continue
-        lo, hi = f.world.min(axis=0), f.world.max(axis=0)
-        d_min = min(d_min, float(np.linalg.norm(np.maximum(np.maximum(lo - pos, pos - hi), 0.0))))
-    if not math.isfinite(d_min):
+    if f.n_tris == 0 or len(f.world) == 0:
         return 0.0
+    position = view[:3, :3] @ np.asarray(light.position, dtype=np.float64) + view[:3, 3]
+    spot = _spot_bound(light, f, view, position) if isinstance(light, SpotLight) else 1.0
+    if spot == 0.0:
+        return 0.0
+    d_min = _nearest_distance(position, f, view)
     denominator = light.constant + light.linear * d_min + light.quadratic * d_min * d_min
-    return math.inf if denominator <= 0 else 1.0 / denominator
+    return math.inf if denominator <= 0 else spot / denominator
+
+
+def _light_factor_bound(
+    light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts], view: np.ndarray | None = None
+) -> float:
+    """Upper bound of ``att·spot`` of ``light`` over every surface point of the scene: the largest
+    per-mesh bound (:func:`_mesh_light_factor`; ``view`` the camera's, identity by default)."""
+    v = np.eye(4) if view is None else np.asarray(view, dtype=np.float64)
+    return max((_mesh_light_factor(light, f, v) for f in facts), default=0.0)
+
+
+def _light_factors(scene: Scene, facts: list[_MeshFacts]) -> np.ndarray:
+    """(meshes, lights) bounds of ``att·spot`` per mesh and light (1 for ambient and directional)."""
+    view = np.asarray(scene.camera.view, dtype=np.float64) if scene.camera is not None else np.eye(4)
+    out = np.ones((len(facts), len(scene.lights)))
+    for j, light in enumerate(scene.lights):
+        if isinstance(light, AmbientLight | DirectionalLight):
+            continue
+        for i, f in enumerate(facts):
+            out[i, j] = _mesh_light_factor(light, f, view)
+    return out
+
+
+@dataclass(frozen=True)
+class _FogRange:
+    """Per mesh, the smallest and largest fog factor over its points (1, 1 without fog), and the
+    largest fog colour channel."""
+
+    low: np.ndarray
+    high: np.ndarray
+    colour: float
+
+
+def _fog_range(scene: Scene, facts: list[_MeshFacts], fog: object) -> _FogRange:
+    """The fog factor's range over each mesh (OpenGL 2.1 §3.10; :func:`blinn_phong.fog.fog_factor`).
+
+    The fog distance ``c`` of a fragment is ``|z_eye|`` (``distance="plane"``) or ``‖p_eye‖``
+    (``"radial"``) of a point of one of its mesh's eye-space triangles, so it lies in
+    ``[c_lo, c_hi]``: for ``plane`` the vertices' ``|z|`` range (0 when it spans z = 0), for
+    ``radial`` the nearest distance from the eye to the triangles (:func:`_nearest_distance`)
+    and the farthest vertex (the norm is convex: its maximum on a triangle is at a corner).
+    The three factors are monotonic in ``c ≥ 0`` (linear both ways, exp and exp2 decreasing,
+    all clamped to [0, 1]), so over the mesh ``f`` lies between its values at ``c_lo`` and ``c_hi``.
+    """
+    n = len(facts)
+    if fog is None:
+        return _FogRange(np.ones(n), np.ones(n), 0.0)
+    from .fog import fog_factor
+
+    view = np.asarray(scene.camera.view, dtype=np.float64)
+    low, high = np.ones(n), np.ones(n)
+    for i, f in enumerate(facts):
+        if f.n_tris == 0 or len(f.world) == 0:
+            continue
+        eye = f.world @ view[:3, :3].T + view[:3, 3]
+        if fog.distance == "plane":  # type: ignore[attr-defined]
+            z_lo, z_hi = float(eye[:, 2].min()), float(eye[:, 2].max())
+            c_lo = 0.0 if z_lo <= 0.0 <= z_hi else min(abs(z_lo), abs(z_hi))
+            c_hi = max(abs(z_lo), abs(z_hi))
+        else:
+            c_lo = _nearest_distance(np.zeros(3), f, view)
+            c_hi = float(np.sqrt(np.max(np.einsum("ij,ij->i", eye, eye))))
+        ends = fog_factor(
+            np.array([c_lo, c_hi]),
+            fog.mode,  # type: ignore[attr-defined]
+            density=fog.density,  # type: ignore[attr-defined]
+            start=fog.start,  # type: ignore[attr-defined]
+            end=fog.end,  # type: ignore[attr-defined]
+        )
+        low[i], high[i] = float(ends.min()), float(ends.max())
+    return _FogRange(low, high, float(max(fog.color)))  # type: ignore[attr-defined]
 
 
 def _sides(scene: Scene, mesh: Mesh) -> list[Material]:
@@ -629,6 +491,27 @@ def _sides(scene: Scene, mesh: Mesh) -> list[Material]:
     if scene.light_model.two_sided and mesh.back_material is not None:
         return [mesh.material, mesh.back_material]
     return [mesh.material]
+
+
+def _fogged_radiance_bound(
+    scene: Scene, facts: list[_MeshFacts], factors: np.ndarray, fog: _FogRange
+) -> float:
+    """Bound ``B`` of the straight colour (and of alpha, 1) of any fragment, fog included.
+
+    Per mesh, :func:`_max_radiance` bounds the unfogged colour ``c`` by ``B_m`` (with that mesh's
+    light factors). Fog (OpenGL 2.1 §3.10) makes a fragment's straight colour
+    ``f·c + (1 − f)·C_f`` with ``f`` in the mesh's range ``[f_lo, f_hi]`` (:func:`_fog_range`),
+    so it lies in ``[0, f_hi·B_m + (1 − f_lo)·max C_f]`` — smaller than ``B_m`` under dark fog,
+    larger under fog brighter than the mesh. Alpha is not fogged and counts 1. The bound is the
+    largest over the meshes, at least 1.
+    """
+    worst = 1.0
+    for i, mesh in enumerate(scene.meshes):
+        b = _max_radiance(scene, mesh, list(factors[i]))
+        if not math.isfinite(b):
+            return math.inf
+        worst = max(worst, float(fog.high[i]) * b + (1.0 - float(fog.low[i])) * fog.colour)
+    return worst
 
 
 def _max_radiance(scene: Scene, mesh: Mesh, factors: list[float]) -> float:
@@ -684,37 +567,9 @@ def _self_shadow_free(scene: Scene, f: _MeshFacts) -> str | None:
     if _lowest_opacity(scene, f.mesh) < 1.0:
         return None
     if scene.camera is not None and len(f.world):
-        hom = np.c_[f.world, np.ones(len(f.world))]
-        clip = hom @ (scene.camera.projection @ scene.camera.view).T
-        if np.all(clip[:, 3] > 0) and np.all(clip[:, 2] > -clip[:, 3]):
+        if _beyond_near_plane(f, scene.camera.projection @ scene.camera.view):
             return "closed and convex, wholly beyond the near plane (its inside is never seen)"
     return None
-
-
-def _projected_width(f: _MeshFacts, direction: np.ndarray) -> float:
-    """Smallest extent (world units) of a mesh seen along ``direction``, the light's view.
-
-    The vertices are projected on the plane across ``direction``; the minimum width of a
-    planar point set is attained across one edge of its convex hull (rotating calipers,
-    Toussaint 1983), so it is the smallest, over the hull's edges, of the extent of the hull
-    along the edge's normal. 0 for a pane seen edge-on.
-    """
-    from scipy.spatial import ConvexHull, QhullError
-
-    d = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(d, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(d, u)
-    flat = np.c_[f.world @ u, f.world @ v]
-    flat = flat - flat.mean(axis=0)
-    try:
-        hull = ConvexHull(flat)
-    except (QhullError, ValueError):  # collinear or too few points: no area seen from the light
-        return 0.0
-    corners = flat[hull.vertices]
-    along = corners @ hull.equations[:, :2].T  # (H, E): unit edge normals
-    return float(np.min(along.max(axis=0) - along.min(axis=0)))
 
 
 def _shadow_pairs(
@@ -777,7 +632,14 @@ def shadow_map_geometry(scene: Scene, index: int) -> MapGeometry:
 
 
 def _plan_shadow(
-    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict, frame: _Frame
+    scene: Scene,
+    facts: list[_MeshFacts],
+    index: int,
+    tolerance: float,
+    models: dict,
+    frame: _Frame,
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
 ) -> Choice:
     light = scene.lights[index]
     if isinstance(light, AmbientLight):
@@ -791,6 +653,14 @@ def _plan_shadow(
         )
     receivers = {b for _, b in pairs}
     casters = {a for a, _ in pairs}
+    see_through = _see_through_casters(scene, casters)
+    if see_through and embree_available():
+        return Choice(
+            "ray_traced",
+            f"meshes {', '.join(map(str, see_through))} cast shadows and let light through: ray-traced "
+            "shadows are the exact method (planar, shadow-map and shadow-volume shadows are binary)",
+            predicted_steps=0.0,
+        )
     planes = [facts[b].plane for b in receivers]
     if all(facts[b].planar for b in receivers) and not (receivers & casters):
         base = planes[0]
@@ -832,7 +702,7 @@ def _plan_shadow(
     # The tolerance bounds every pixel: a sample classified differently from the ray tracer
     # (a shadow map's misplaced edge, a shadow volume's grazing sample) costs the light's whole
     # lit-minus-shadowed contribution there, so such a method is allowed only when that fits.
-    weight = _shadow_weight(scene, light, facts)
+    weight = _shadow_weight(scene, light, facts, factors, fog, index)
     worst = 255.0 * weight
     exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst)
     if tolerance <= 0:
@@ -891,6 +761,51 @@ def _plan_shadow(
         f"the light ({feature:.3g} of a {span:.3g} span) is predicted faster for {frame.receivers} "
         "receiver samples",
     )
+
+
+def _see_through_casters(scene: Scene, casters: set[int]) -> list[int]:
+    """The casters among ``casters`` that let some light through (coloured shadows when ray traced).
+
+    Such a caster's shadow is the light times its transmittance per RGB channel
+    (:func:`blinn_phong.shadows.mesh_shadow_transmittance`); only ray tracing carries it, so the
+    binary methods differ from it by up to the light's whole contribution times the transmittance.
+    """
+    from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
+
+    two_sided = scene.light_model.two_sided
+    return sorted(a for a in casters if mesh_shadow_transmittance(scene.meshes[a], two_sided).any())
+
+
+def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
+    """``choice`` with its reason saying how transparent casters shadow (coloured only when ray traced).
+
+    Args:
+        scene: the scene planned for.
+        choice: one light's shadow choice.
+
+    Returns:
+        ``choice`` unchanged when its method is ``none`` or no caster lets light through
+        (:func:`blinn_phong.shadows.mesh_shadow_transmittance`); else with "; coloured shadows: …"
+        (``ray_traced``) or "; transparent meshes … cast full shadows" (the binary methods) appended.
+    """
+    if choice.method == "none":
+        return choice
+    from .shadows import mesh_shadow_transmittance  # one definition, shared with the renderer
+
+    two_sided = scene.light_model.two_sided
+    lets_through = [
+        i
+        for i, mesh in enumerate(scene.meshes)
+        if mesh.casts_shadows and mesh_shadow_transmittance(mesh, two_sided).any()
+    ]
+    if not lets_through:
+        return choice
+    which = ", ".join(str(i) for i in lets_through)
+    if choice.method == "ray_traced":
+        return replace(choice, reason=f"{choice.reason}; coloured shadows: light crossing transparent "
+                       f"meshes {which} keeps their transmittance per RGB channel")  # fmt: skip
+    return replace(choice, reason=f"{choice.reason}; transparent meshes {which} cast full shadows "
+                   f"({choice.method} is binary; coloured shadows are ray traced)")  # fmt: skip
 
 
 def embree_available() -> bool:
@@ -971,24 +886,81 @@ def _exact_shadow(
 
 
 def _shadow_weight(
-    scene: Scene, light: DirectionalLight | PointLight | SpotLight, facts: list[_MeshFacts]
+    scene: Scene,
+    light: DirectionalLight | PointLight | SpotLight,
+    facts: list[_MeshFacts],
+    factors: np.ndarray | None = None,
+    fog: _FogRange | None = None,
+    index: int | None = None,
 ) -> float:
-    """Largest change of a pixel channel between lit and shadowed by ``light``: over every side's
-    material, ``F·(d_cm·d_cl + s_cm·s_cl)`` with ``F`` the bound of ``att·spot``
-    (:func:`_light_factor_bound`), since ``n ⊙ l ≤ 1`` and the specular factor ``≤ 1``; the
-    light's ambient term is not shadowed."""
-    factor = _light_factor_bound(light, facts)
+    """Largest change of a pixel channel between lit and shadowed by ``light``.
+
+    A fragment of mesh ``m`` changes by at most ``F_m·max(d_cm·d_cl + s_cm·s_cl)`` over its
+    sides' materials, ``F_m`` the bound of ``att·spot`` on that mesh (:func:`_mesh_light_factor`),
+    since ``n ⊙ l ≤ 1`` and the specular factor ``≤ 1``; the light's ambient term is not
+    shadowed. Fog turns a fragment's colour into ``f·c + (1 − f)·C_f`` with the same ``f`` lit
+    or shadowed, so the change is ``f·Δc ≤ f_hi,m·Δc`` (:func:`_fog_range`). A pixel blends
+    fragments: with partial occlusion (and Kay–Greenberg) the weights of the fragments and the
+    background add up to 1, so the pixel changes by at most the largest fragment change; the
+    absorption model adds each layer's colour unscaled, ``c_j`` times the transmittance in
+    front, at most ``Σ(1 − α_min)^j ≤ 1/α_min`` of it; emission-model fragments (α = 0) add
+    up over every layer (:func:`_layer_bound`).
+    """
+    j = index if index is not None else (list(scene.lights).index(light) if factors is not None else None)
+    view = np.asarray(scene.camera.view, dtype=np.float64) if scene.camera is not None else np.eye(4)
     weight = 0.0
-    for mesh in scene.meshes:
+    for i, mesh in enumerate(scene.meshes):
+        factor = (
+            float(factors[i, j])
+            if factors is not None and j is not None
+            else _mesh_light_factor(light, facts[i], view)
+        )
+        if factor == 0.0:
+            continue
         for m in _sides(scene, mesh):
             term = np.asarray(m.diffuse) * np.asarray(light.diffuse)
             term = term + np.asarray(m.specular) * np.asarray(light.specular)
-            weight = max(weight, float(np.max(term)))
-    return factor * weight
+            peak = float(np.max(term))
+            if peak > 0.0:
+                f_hi = 1.0 if fog is None else float(fog.high[i])
+                weight = max(weight, f_hi * factor * peak)
+    return weight * _stack_gain(scene, facts)
+
+
+def _layer_bound(scene: Scene, facts: list[_MeshFacts], meshes: list[int]) -> int:
+    """An upper bound of the fragments of ``meshes`` on one sample: 1 per planar mesh, its
+    triangles (two per ray at most for a convex one) otherwise."""
+    return sum(
+        1 if facts[i].planar else (2 if facts[i].convex else max(len(scene.meshes[i].triangles), 1))
+        for i in meshes
+    )
+
+
+def _stack_gain(scene: Scene, facts: list[_MeshFacts]) -> float:
+    """How much a pixel can change when every fragment on it changes by at most 1 (see
+    :func:`_shadow_weight`): 1, ``1/α_min`` with absorbing transparent layers, the layer bound
+    with emission-model ones (their α is 0: colours add)."""
+    transparent = [
+        i for i, m in enumerate(scene.meshes) if _lowest_opacity(scene, m) < 1.0 and len(m.triangles)
+    ]
+    models = {
+        m.transparency_model for i in transparent for m in _sides(scene, scene.meshes[i]) if m.transparent
+    }
+    if "emission" in models:
+        return float(max(_layer_bound(scene, facts, transparent), 1))
+    if "absorption" in models:
+        lowest = min(_lowest_opacity(scene, scene.meshes[i]) for i in transparent)
+        return math.inf if lowest <= 0 else 1.0 / lowest
+    return 1.0
 
 
 def _plan_shading(
-    scene: Scene, facts: list[_MeshFacts], index: int, tolerance: float, models: dict
+    scene: Scene,
+    facts: list[_MeshFacts],
+    index: int,
+    tolerance: float,
+    models: dict,
+    frame: _Frame | None = None,
 ) -> Choice:
     mesh = scene.meshes[index]
     if mesh.shading is not None:
@@ -1021,7 +993,7 @@ def _plan_shading(
             "phong",
             f"{choice.reason}; shininess {mesh.material.shininess:g} is beyond the calibrated {calibrated:g}",
         )
-    theta = calibration.max_normal_angle(_world_normals(mesh), mesh.triangles)
+    theta = _normal_angle(mesh)  # calibration.max_normal_angle of the world normals, compiled
     theta_max = min(m["theta_range"][1] for m in models["shading"]["methods"].values())
     if theta > theta_max:
         return Choice(
@@ -1029,7 +1001,9 @@ def _plan_shading(
             f"{choice.reason}; adjacent normals {math.degrees(theta):.3g}° apart, beyond the calibrated "
             f"{math.degrees(theta_max):.3g}°",
         )
-    pick = calibration.choose_shading(models, tolerance, theta)
+    triangles = sum(f.n_tris for f in facts)
+    samples = (frame if frame is not None else _frame(None, None, 1)).samples_total
+    pick = calibration.choose_shading(models, tolerance, theta, samples, triangles)
     err, cost = pick["predicted_steps"], pick["predicted_cost"]
     if pick["method"] != "phong":
         return Choice(
@@ -1040,10 +1014,9 @@ def _plan_shading(
             predicted_steps=err,
             relative_cost=cost,
         )
-    methods = models["shading"]["methods"]
     others = ", ".join(
         f"{name} {calibration.predict_shading(models, name, theta):.2g} steps at "
-        f"{methods[name]['ratio_to_phong']:.2f}×"
+        f"{calibration.shading_cost(models, name, samples, triangles):.2f}×"
         for name in ("flat", "gouraud")
     )
     return Choice(
@@ -1052,12 +1025,6 @@ def _plan_shading(
         predicted_steps=err,
         relative_cost=1.0,
     )
-
-
-def _world_normals(mesh: Mesh) -> np.ndarray:
-    """Vertex normals in world space (the inverse transpose of the linear part), as the renderer uses them."""
-    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh.positions, mesh.triangles)
-    return np.asarray(normals, dtype=np.float64) @ np.linalg.inv(mesh.transform[:3, :3])
 
 
 #: The frame assumed when :func:`plan` is not told one (receiver samples for the cost models).
@@ -1071,9 +1038,15 @@ class _Frame:
     samples: int
 
     @property
+    def samples_total(self) -> int:
+        """Samples of the frame, ``width·height·samples`` (``samples`` per pixel, a k×k grid, as
+        ``render`` takes it): what rasterization, shading and the resolve scale with."""
+        return self.width * self.height * self.samples
+
+    @property
     def receivers(self) -> int:
-        """Shading samples of the frame, ``width·height·samples²`` (the points that need a visibility)."""
-        return self.width * self.height * self.samples**2
+        """Shading samples of the frame, ``width·height·samples`` (the points that need a visibility)."""
+        return self.width * self.height * self.samples
 
 
 def _frame(width: int | None, height: int | None, samples: int) -> _Frame:
@@ -1093,6 +1066,7 @@ def plan(
     width: int | None = None,
     height: int | None = None,
     samples: int = 1,
+    fog: object = None,
 ) -> Plan:
     """Pick, per concern, the fastest method that is exact or predicted within ``tolerance`` for ``scene``.
 
@@ -1106,11 +1080,17 @@ def plan(
             fitted to ``python -m benchmarks`` measurements).
         width: frame width in pixels (None: :data:`DEFAULT_FRAME`), as passed to ``render``.
         height: frame height in pixels (None: :data:`DEFAULT_FRAME`).
-        samples: ``k`` for k×k samples per pixel, as passed to ``render``.
+        samples: samples per pixel (``k²`` for a k×k grid: 1, 4, 9, …), as passed to ``render``.
+        fog: a :class:`blinn_phong.Fog` (or None), as passed to ``render``. Fog blends each
+            fragment with the fog colour, ``f·c + (1 − f)·C_f`` (OpenGL 2.1 §3.10), ``f`` in [0, 1]
+            taken over each mesh's eye distances (:func:`_fog_range`): a shadow's change of a
+            pixel is scaled by ``f`` (``C_f`` cancels), and the colours behind peeled layers lie
+            in ``[0, f_hi·B + (1 − f_lo)·C_f]``; the plan's ``fog`` choice states the range and
+            the predicted cost of fog for the frame.
 
-    ``render(scene, width, height, samples=k, tolerance=T)`` follows
-    ``plan(scene, T, width=width, height=height, samples=k)`` wherever the caller sets no
-    method (:func:`blinn_phong.frame.frame_plan`); the frame matters only to the cost models.
+    ``render(scene, width, height, samples=k, tolerance=T, fog=F)`` follows
+    ``plan(scene, T, width=width, height=height, samples=k, fog=F)`` wherever the caller sets
+    no method (:func:`blinn_phong.frame.frame_plan`); the frame matters only to the cost models.
 
     Returns:
         :class:`Plan` with a choice and a reason per concern; approximate choices carry their
@@ -1122,11 +1102,45 @@ def plan(
         isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0
     ):
         raise ValueError(f"tolerance must be a finite number of 8-bit steps >= 0, got {tolerance!r}")
+    if fog is not None:
+        from .frame import Fog
+
+        if not isinstance(fog, Fog):
+            raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")
     tol = float(tolerance)
     frame = _frame(width, height, samples)
     m = models if models is not None else calibration.shipped_models()
     facts = [_mesh_facts(mesh) for mesh in scene.meshes]
-    transparency = _plan_transparency(scene, facts, tol, m)
-    shadows = tuple(_plan_shadow(scene, facts, i, tol, m, frame) for i in range(len(scene.lights)))
-    shading = tuple(_plan_shading(scene, facts, i, tol, m) for i in range(len(scene.meshes)))
-    return Plan(transparency, shadows, shading, tol)
+    factors = _light_factors(scene, facts)
+    fogged = _fog_range(scene, facts, fog)
+    transparency = _plan_transparency(scene, facts, tol, m, frame, factors, fogged)
+    shadows = tuple(
+        _plan_shadow(scene, facts, i, tol, m, frame, factors, fogged) for i in range(len(scene.lights))
+    )
+    shadows = tuple(coloured_shadow_reason(scene, c) for c in shadows)
+    shading = tuple(_plan_shading(scene, facts, i, tol, m, frame) for i in range(len(scene.meshes)))
+    return Plan(transparency, shadows, shading, tol, _plan_fog(fog, fogged, m, frame, facts))
+
+
+def _plan_fog(
+    fog: object, fogged: _FogRange, models: dict, frame: _Frame, facts: list[_MeshFacts]
+) -> Choice | None:
+    """The fog entry of a plan: its factor range over the meshes and its predicted cost."""
+    if fog is None:
+        return None
+    used = [i for i, f in enumerate(facts) if f.n_tris]
+    lo = min((float(fogged.low[i]) for i in used), default=1.0)
+    hi = max((float(fogged.high[i]) for i in used), default=1.0)
+    triangles = sum(f.n_tris for f in facts)
+    cost = calibration.fog_cost(models, frame.samples_total, triangles)
+    mode = fog.mode  # type: ignore[attr-defined]
+    where = f"for {frame.samples_total} samples and {triangles} triangles"
+    return Choice(
+        mode,
+        f"{mode} fog by {fog.distance} distance (OpenGL 2.1 §3.10): factor f in [{lo:.3g}, {hi:.3g}] "  # type: ignore[attr-defined]
+        "over the meshes' eye distances; a shadow's change of a pixel is scaled by f, the colour behind "
+        "peeled layers lies within f·B + (1 − f)·C_f"
+        + (f"; predicted cost {cost:.2f}× the frame without fog {where}" if cost is not None else ""),
+        predicted_steps=0.0,
+        relative_cost=cost,
+    )

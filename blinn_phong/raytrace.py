@@ -34,7 +34,9 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import os
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -182,11 +184,43 @@ class RayScene:
         )
 
     def _occluded32(self, origins: np.ndarray, directions: np.ndarray, t_max: np.ndarray) -> np.ndarray:
-        """One ``rtcOccluded`` batch: float32 recentred origins, unit directions and t_max (modified)."""
-        if len(origins) == 0:
+        """``rtcOccluded`` over float32 recentred origins, unit directions and t_max (modified).
+
+        A large batch is cut into contiguous chunks queried on :func:`_pool`'s threads (the
+        binding releases the GIL while Embree traverses); each ray's answer does not depend on
+        the chunk it is in.
+        """
+        n = len(origins)
+        if n == 0:
             return np.zeros(0, dtype=bool)
-        res = self._scene.run(origins, directions, dists=t_max, query="OCCLUDED")
-        return np.asarray(res) >= 0
+        chunks = min(_threads(), n // _MIN_CHUNK)
+        if chunks < 2:
+            return np.asarray(self._scene.run(origins, directions, dists=t_max, query="OCCLUDED")) >= 0
+        out = np.empty(n, dtype=bool)
+        bounds = np.linspace(0, n, 2 * chunks + 1).astype(np.int64)
+
+        def run(k: int) -> None:
+            a, b = int(bounds[k]), int(bounds[k + 1])
+            res = self._scene.run(origins[a:b], directions[a:b], dists=t_max[a:b], query="OCCLUDED")
+            out[a:b] = np.asarray(res) >= 0
+
+        list(_pool().map(run, range(len(bounds) - 1)))
+        return out
+
+
+#: Fewest rays per chunk of a threaded occlusion batch (smaller batches run on the calling thread).
+_MIN_CHUNK = 1 << 15
+
+
+def _threads() -> int:
+    """Threads for Embree batches: ``NUMBA_NUM_THREADS`` when set (the renderer's budget), else the CPUs."""
+    return max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
+
+
+@functools.lru_cache(maxsize=1)
+def _pool() -> ThreadPoolExecutor:
+    """The process's thread pool for Embree batches (created on first use)."""
+    return ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="embree")
 
 
 #: A few recently built scenes, keyed by the triangles' bytes (a BVH per frame, not per light).

@@ -223,6 +223,7 @@ def render(
         width=width,
         height=height,
         samples=samples,
+        fog=fog,
     )
     seconds["plan"] = time.perf_counter() - t
     if shading == "auto":

@@ -81,8 +81,8 @@ def shade_fragments(
         shading: ``"flat"``, ``"gouraud"`` or ``"phong"``; a mesh's own ``shading`` overrides it.
         gl_compat: the OpenGL 2.1 fixed-function preset (module docstring).
         visibility: optional (N, L) per-fragment, per-light factors in [0, 1] multiplying
-            diffuse and specular (L = ``len(prepared.lights)``, light order as in the
-            scene without AmbientLights). With Gouraud/flat shading the per-light terms
+            diffuse and specular, or (N, L, 3) one per RGB channel (L = ``len(prepared.lights)``,
+            light order as in the scene without AmbientLights). With Gouraud/flat shading the per-light terms
             are interpolated and then multiplied, which has no per-vertex clamp, so it
             cannot be combined with ``gl_compat``.
         engine: ``"numpy"`` (reference), ``"numba"`` or ``"auto"`` for the lighting
@@ -93,10 +93,10 @@ def shade_fragments(
     n_lights = len(prepared.lights)
     if visibility is not None:
         visibility = np.asarray(visibility, dtype=np.float64)
-        if visibility.shape != (count, n_lights):
+        if visibility.shape not in ((count, n_lights), (count, n_lights, 3)):
             raise ValueError(
-                f"visibility: expected shape (n_fragments, n_lights) = ({count}, {n_lights}), "
-                f"got {visibility.shape}"
+                f"visibility: expected shape (n_fragments, n_lights) = ({count}, {n_lights}) or "
+                f"(n_fragments, n_lights, 3) per RGB channel, got {visibility.shape}"
             )
     scene = prepared.scene
     model = scene.light_model
@@ -279,8 +279,9 @@ def _terms_at_fragments(
     ambient = at(terms.ambient)
     if vis is None:
         return ambient, at(terms.diffuse), at(terms.specular)
-    d = np.einsum("nlc,nl->nc", at(terms.diffuse_per_light), vis)
-    s = np.einsum("nlc,nl->nc", at(terms.specular_per_light), vis)
+    spec = "nlc,nlc->nc" if vis.ndim == 3 else "nlc,nl->nc"  # (N, L, 3) per channel, or (N, L)
+    d = np.einsum(spec, at(terms.diffuse_per_light), vis)
+    s = np.einsum(spec, at(terms.specular_per_light), vis)
     return ambient, d, s
 
 

@@ -10,14 +10,20 @@ that never build an array of all fragments:
   §3.5.5), near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
   §2.12), the viewport transform, snapping to 1/256 texel, edge functions and the top-left
   fill rule of :mod:`blinn_phong.raster`; then per band of rows (in parallel) the
-  scan conversion keeps the smallest biased depth ``z + constant + slope·m`` per texel
-  (``glPolygonOffset(slope, ·)``). The result is a minimum, so it does not depend on the
-  order in which triangles are drawn.
+  scan conversion (each row only over the span its three edge functions allow, plus a texel
+  of margin; every texel still takes the exact edge tests) keeps the smallest biased depth
+  ``z + constant + slope·m`` per texel (``glPolygonOffset(slope, ·)``). The result is a
+  minimum, so it does not depend on the order in which triangles are drawn.
 * :func:`lookup_compiled` — per receiver point (in parallel): normal offset (Holbert 2011),
   projection into the light's clip space, the cube face of the major axis for point
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
   & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`. The per-point body is
   :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly.
+* :func:`fragment_surface` — per visible fragment (in parallel): its world-space point (the
+  perspective-correct barycentrics of the rasterizer applied to the world-space corners,
+  ``Σ_k b_k·v_k`` — an affine map commutes with the barycentric sum, so this is the eye-space
+  point mapped back to world space) and its triangle's world face normal, written into
+  preallocated contiguous arrays, so the look-ups and the ray set-up read them without copies.
 * :func:`hard_shadow_rays` — per receiver point (in parallel): the float32 origin, unit
   direction and ``t_max`` of its shadow ray, as ``raytrace._hard_rays_numpy`` computes them
   (offset scaled with the point's distance from the scene centre), so that Embree gets
@@ -34,8 +40,10 @@ stored depth, or a snapped vertex sits on a rounding boundary.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -45,6 +53,7 @@ __all__ = [
     "corner_bounds",
     "cube_maps_compiled",
     "depth_map_compiled",
+    "fragment_surface",
     "hard_shadow_rays",
     "lookup_compiled",
     "visibility_at",
@@ -106,7 +115,7 @@ def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma
     return True
 
 
-@numba.njit(cache=True)  # serial: ~100 ns a triangle, less than a parallel launch on a busy machine
+@numba.njit(cache=True, nogil=True)  # serial: ~100 ns a triangle; nogil: a cube's faces set up on threads
 def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
     # slots are filled in order (k counts them), so only the rows of drawn triangles are touched
     n = world.shape[0]
@@ -226,9 +235,27 @@ def _scan_rows(
         exact = ex_area * area > 0 and abs(ex_area) > 1e-12
         abs_area = abs(area)
         b = bias[s]
+        bx0 = float(box[s, 0])
+        bx1 = float(box[s, 1])
         for py in range(lo, hi + 1):
             cy = py + 0.5
-            for px in range(box[s, 0], box[s, 1] + 1):
+            # the row's span: each edge function is linear in x, so its sign changes once; the
+            # span is widened by a texel on each side and every texel in it still takes the
+            # exact tests below, so the covered texels are those of the whole bounding box
+            x_lo, x_hi = bx0, bx1
+            empty = False
+            for i in range(3):
+                a = ea[s, i]
+                k = eb[s, i] * cy + ec[s, i]
+                if a > 0:
+                    x_lo = max(x_lo, math.ceil(-k / a - 0.5) - 1.0)
+                elif a < 0:
+                    x_hi = min(x_hi, math.floor(-k / a - 0.5) + 1.0)
+                elif k < 0 or (k == 0 and not etl[s, i]):
+                    empty = True
+            if empty or not x_lo <= x_hi:
+                continue
+            for px in range(int(x_lo), int(x_hi) + 1):
                 cx = px + 0.5
                 e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
                 if e0 < 0 or (e0 == 0 and not etl[s, 0]):
@@ -273,13 +300,30 @@ def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, et
 
 
 @numba.njit(parallel=True, cache=True)
-def _cube(world, vps, slope_bias, constant_bias, out):  # pragma: no cover - compiled
-    # the six faces of a cube map at once, one face per task (set-up and scan of a face are serial)
+def _scan_faces(
+    out, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+):  # pragma: no cover - compiled
+    # every (face, band of rows) is one task, faces interleaved so that each thread gets a share
+    # of every face (one face may hold most of the work: the one looking at the ground); the
+    # per-face arrays come as tuples, one entry per face, so nothing is copied into one block
+    n_faces = out.shape[0]
     res = out.shape[1]
-    for f in numba.prange(vps.shape[0]):
-        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], float(res), slope_bias)
-        slots = np.flatnonzero(valid)
-        _scan_rows(out[f], 0, res - 1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
+    band_h = (res + n_bands - 1) // n_bands
+    for task in numba.prange(n_faces * n_bands):
+        f = task % n_faces
+        r0 = (task // n_faces) * band_h
+        r1 = min(res, r0 + band_h) - 1
+        if r0 <= r1:
+            _scan_rows(
+                out[f], r0, r1, slots[f], bias[f], constant_bias,
+                sx[f], sy[f], sz[f], ea[f], eb[f], ec[f], etl[f], box[f],
+            )  # fmt: skip
+
+
+@functools.lru_cache(maxsize=1)
+def _setup_pool() -> ThreadPoolExecutor:
+    """Threads for the per-face set-up of a cube (``_setup`` releases the GIL)."""
+    return ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="shadow-setup")
 
 
 def cube_maps_compiled(
@@ -289,7 +333,11 @@ def cube_maps_compiled(
     slope_bias: float,
     out: np.ndarray,
 ) -> np.ndarray:
-    """:func:`depth_map_compiled` for several cameras at once (a cube's six faces), one face per thread.
+    """:func:`depth_map_compiled` for several cameras at once (a cube's six faces).
+
+    Each face's triangle set-up runs on a thread of its own (the compiled set-up releases the
+    GIL); then every (face, band of rows) pair is one task of a parallel scan, so that a face
+    holding most of the work is shared by every thread.
 
     Args:
         world_triangles: (n, 3, 3) float64 world-space casters.
@@ -306,7 +354,18 @@ def cube_maps_compiled(
         out[:] = 1.0
         return out
     vps = np.ascontiguousarray(view_projections, dtype=np.float64)
-    _cube(world, vps, float(slope_bias), float(constant_bias), out)
+    res = float(out.shape[1])
+
+    def setup(f: int) -> tuple[np.ndarray, ...]:
+        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], res, float(slope_bias))
+        k = int(np.count_nonzero(valid))  # slots are filled in order: the first k are the drawn ones
+        return tuple(a[:k] for a in (bias, sx, sy, sz, ea, eb, ec, etl, box))
+
+    faces = list(_setup_pool().map(setup, range(len(vps))))
+    slots = tuple(np.arange(len(face[0]), dtype=np.int64) for face in faces)
+    per_face = [tuple(face[j] for face in faces) for j in range(9)]
+    n_bands = max(1, min(out.shape[1], 2 * _threads()))
+    _scan_faces(out, n_bands, slots, per_face[0], float(constant_bias), *per_face[1:])
     return out
 
 
@@ -561,3 +620,26 @@ def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  #
         scale = 1.0 / dist if dist > 0 else 1.0
         d32[i, 0], d32[i, 1], d32[i, 2] = dx * scale, dy * scale, dz * scale
         t32[i] = max(dist - offset[i], 0.0)
+
+
+@numba.njit(parallel=True, cache=True)
+def fragment_surface(
+    triangle, bary, triangles, world_vertices, face_normals, out_points, out_normals
+):  # pragma: no cover - compiled
+    """World-space point and face normal of each fragment, in one compiled pass.
+
+    ``triangle``: (n,) int64 triangle of each fragment; ``bary``: (n, 3) float64 its
+    perspective-correct barycentrics; ``triangles``: (T, 3) int64 vertex indices;
+    ``world_vertices``: (V, 3) float64 world positions; ``face_normals``: (T, 3) float64 unit
+    world face normals. Writes ``out_points[i] = Σ_k bary[i, k]·world_vertices[triangles[t, k]]``
+    (the formula of :func:`blinn_phong.raster.interpolate`, summed in the order k = 0, 1, 2) and
+    ``out_normals[i] = face_normals[t]``, ``t = triangle[i]``.
+    """
+    for i in numba.prange(triangle.shape[0]):
+        t = triangle[i]
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        w0, w1, w2 = bary[i, 0], bary[i, 1], bary[i, 2]
+        for k in range(3):
+            va, vb, vc = world_vertices[a, k], world_vertices[b, k], world_vertices[c, k]
+            out_points[i, k] = (w0 * va + w1 * vb) + w2 * vc
+            out_normals[i, k] = face_normals[t, k]

@@ -22,11 +22,21 @@ Per receiver point ``p`` (a visible sample), with the camera's view and projecti
   here nothing is clipped but the near plane, which is what ``GL_DEPTH_CLAMP`` (or Everitt &
   Kilgard's infinite projection) gives the stencil buffer.
 
-``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). ``stencil="auto"`` uses
-z-fail everywhere: the planner's random scenes include one (an open pane lying inside a
-closed slab, under a spot light) where z-pass leaves 119 of 1966 lit samples in shadow even
-though :func:`zpass_is_safe` holds, while z-fail agrees with Embree on every sample; until
-that case is understood z-pass runs only when asked for (``stencil="zpass"``).
+``p`` is lit when its count is 0 (the stencil test ``GL_EQUAL 0``). Whatever the method,
+``zfail − zpass = w(q_p)``, the number of volumes containing the point ``q_p`` where the camera
+ray through ``p`` crosses the near plane: every face is counted by exactly one of the two.
+
+z-pass here draws the **light caps** (Heidmann drew the sides only): a receiver hidden behind
+a caster — a layer the A-buffer shades, a surface behind a transparent caster, the far side
+of a two-sided object — has the caster's lit faces between it and the eye, and without them
+its count is off by the cap's own count (the planner's random scenes found it: a closed box
+under two-sided lighting, an open pane inside a closed slab under spot lights, 119 of 1966
+samples wrong; tests/failures/test_shadow_volume_failures.py). The dark cap at infinity is
+never in front of a finite point (its window depth ``(f+n)/(f−n)`` exceeds every finite
+point's), so z-pass still skips it — and z-pass skips nothing else z-fail draws.
+``stencil="auto"`` (:func:`choose_stencil`) picks z-pass where it is provably exact — every
+receiver inside the near rectangle and :func:`zpass_is_safe` (no volume reaches it), so
+``w(q_p) = 0`` — and z-fail elsewhere.
 
 Geometry
 --------
@@ -70,10 +80,15 @@ triangles sharing an edge give exactly opposite values and, with a fixed tie-bre
 (perturbation towards +x, then +y), a point on a shared edge belongs to exactly one of them —
 and whose depth, interpolated linearly in screen space (OpenGL 4.6 §14.6.1), is nearer than the
 receiver's (z-pass; ``GL_LESS`` passes) or not nearer (z-fail; the depth test fails). Facing is
-the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid; the
-compiled kernel (numba) processes horizontal bands of that grid in parallel, each band owning its
-receivers (no write races); the numpy engine is the readable reference. Counts are integers and
-both engines evaluate the same floating-point expressions, so they agree exactly.
+the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid. With
+numba every step is compiled (receiver projection, a counting sort into tiles, volume-triangle
+set-up, counting, the scatter back); the counting kernel gives each thread interleaved rows of
+tiles, each row owning its receivers (no write races), and jobs under ``_PARALLEL_RECEIVERS``
+run on one thread. The numpy engine is the readable reference. Counts are integers and both
+engines evaluate the same floating-point expressions in the same order (written out, no fused
+multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached by a
+digest of the casters and the light (a frame's lights share one topology; the next frame
+reuses the volumes).
 
 Self-shadowing without depth invariance: a real stencil pass relies on a surface and its own
 light cap giving bit-identical depths (the cap then fails ``GL_LESS`` and lies "behind"). Here
@@ -87,7 +102,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,6 +112,7 @@ __all__ = [
     "STENCIL_METHODS",
     "Topology",
     "analyse_topology",
+    "choose_stencil",
     "shadow_volume_triangles",
     "shadow_volume_visibility",
     "silhouette_edges",
@@ -108,7 +123,7 @@ __all__ = [
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
-_TILE_POINTS = 16  # receivers per screen tile, on average
+_TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
 
 
@@ -124,11 +139,12 @@ def _triangles(name: str, value: object) -> np.ndarray:
     return tris.astype(np.float64, copy=False)
 
 
-def _points(name: str, value: object) -> np.ndarray:
+def _points(name: str, value: object, check_finite: bool = True) -> np.ndarray:
+    """(n, 3) float64; ``check_finite=False`` leaves the NaN/Inf check to :func:`_projected`."""
     arr = np.asarray(value)
     if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f"{name}: expected a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if check_finite and not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: expected finite coordinates, got NaN or Inf")
     return arr.astype(np.float64, copy=False)
 
@@ -199,14 +215,44 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
             (),
             np.zeros((0, 3), np.int64),
         )
-    key = hashlib.blake2b(tris.tobytes(), digest_size=16).digest()
+    return _topology_with_key(tris)[0]
+
+
+def _digest(tris: np.ndarray) -> bytes:
+    """A 128-bit content digest of a float64 array (the cache key of its topology): BLAKE2b, or
+    with numba four interleaved splitmix64 lanes per 64-bit half, seeded differently (a cache
+    key against accidental collisions, not an adversary; it is several times faster)."""
+    flat = np.ascontiguousarray(tris).reshape(-1)
+    from .fast import numba_available
+
+    if not numba_available():
+        return hashlib.blake2b(flat.data, digest_size=16).digest()
+    lanes = _hash_kernels()[3](flat.view(np.uint64))
+    return b"%d:" % len(flat) + lanes.tobytes()
+
+
+def _topology_with_key(tris: np.ndarray) -> tuple[Topology, bytes]:
+    """The (cached) topology of checked float64 triangles and the digest it is cached by."""
+    key = _digest(tris)
     if key in _TOPOLOGY_CACHE:
-        return _TOPOLOGY_CACHE[key]
+        return _TOPOLOGY_CACHE[key], key
+    if len(tris) == 0:
+        e = np.zeros(0, np.int64)
+        empty = (
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            e.astype(bool),
+            e,
+            e.astype(bool),
+            (),
+            np.zeros((0, 3), np.int64),
+        )
+        return Topology(*empty), key
     topology = _analyse(tris)
     if len(_TOPOLOGY_CACHE) >= 2:
         _TOPOLOGY_CACHE.pop(next(iter(_TOPOLOGY_CACHE)))
     _TOPOLOGY_CACHE[key] = topology
-    return topology
+    return topology, key
 
 
 #: The last topologies analysed, by a digest of the triangles (a frame asks once per light).
@@ -214,16 +260,12 @@ _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 
 @functools.lru_cache(maxsize=1)
-def _hash_kernels() -> tuple[object, object, object]:
-    """Compiled hash-table welding, edge pairing (linear probing) and union-find: same results as
-    the numpy sorts and pointer jumping."""
+def _hash_kernels() -> tuple[object, object, object, object]:
+    """Compiled hash-table welding, edge pairing (linear probing) and union-find (same results as
+    the numpy sorts and pointer jumping), and the content digest of :func:`_digest`."""
     import numba
 
-    @numba.njit(inline="always", cache=True)
-    def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
     @numba.njit(cache=True)
     def weld(bits):  # pragma: no cover - compiled
@@ -238,7 +280,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         for r in range(m):
             h = np.uint64(0)
             for c in range(3):
-                h = mix(bits[r, c] ^ h)
+                h = vh.mix(bits[r, c] ^ h)
             slot = np.int64(h & np.uint64(size - 1))
             while True:
                 u = table[slot]
@@ -266,7 +308,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         count = np.zeros(m, np.int64)  # indexed by the first occurrence
         first_of = np.empty(m, np.int64)
         for e in range(m):
-            slot = np.int64(mix(np.uint64(key[e])) & np.uint64(size - 1))
+            slot = np.int64(vh.mix(np.uint64(key[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -284,7 +326,7 @@ def _hash_kernels() -> tuple[object, object, object]:
         twin_first = np.full(m, -1, np.int64)
         for e in range(m):
             own[e] = count[first_of[e]]
-            slot = np.int64(mix(np.uint64(twin[e])) & np.uint64(size - 1))
+            slot = np.int64(vh.mix(np.uint64(twin[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -316,7 +358,24 @@ def _hash_kernels() -> tuple[object, object, object]:
             parent[i] = parent[parent[i]]
         return parent
 
-    return weld, pair, union_find
+    @numba.njit(cache=True)
+    def digest(bits):  # pragma: no cover - compiled
+        out = np.empty(8, np.uint64)
+        for lane in range(8):
+            out[lane] = vh.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
+        m = bits.shape[0]
+        full = m - m % 4
+        for i in range(0, full, 4):
+            for lane in range(4):
+                v = bits[i + lane]
+                out[lane] = vh.mix(out[lane] ^ v)
+                out[lane + 4] = vh.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
+        for i in range(full, m):
+            out[0] = vh.mix(out[0] ^ bits[i])
+            out[4] = vh.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
+        return out
+
+    return weld, pair, union_find, digest
 
 
 def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -506,7 +565,7 @@ def shadow_volume_triangles(
     world_triangles: np.ndarray | Topology,
     light: DirectionalLight | PointLight | SpotLight,
     *,
-    caps: bool = True,
+    caps: bool | str = True,
     extent: float | None = None,
     force_silhouette: bool = False,
 ) -> np.ndarray:
@@ -519,7 +578,10 @@ def shadow_volume_triangles(
     Args:
         world_triangles: (n, 3, 3) world-space triangles, or a :class:`Topology` of them.
         light: the light.
-        caps: include light and dark caps (z-fail needs them; z-pass does not draw them).
+        caps: ``True`` — light and dark caps (z-fail needs both); ``"light"`` — the light caps
+            only (z-pass: a light cap lies in front of every receiver hidden behind a caster's
+            lit faces, while a dark cap at infinity is never in front of a finite point);
+            ``False`` — no caps (Heidmann's z-pass, right only for receivers no caster hides).
         extent: None — extrude to infinity (w = 0); else the world distance of the far end.
         force_silhouette: treat open components as if closed too (silhouette extrusion only):
             wrong for open meshes, kept to measure their leak.
@@ -528,6 +590,9 @@ def shadow_volume_triangles(
         (m, 3, 4) float64 homogeneous world-space triangles, counter-clockwise seen from
         outside the volume.
     """
+    if caps not in (True, False, "light"):
+        raise ValueError(f"caps: expected True, False or 'light', got {caps!r}")
+    light_cap, dark_cap = (True, False) if isinstance(caps, str) else (bool(caps), bool(caps))
     topo = world_triangles if isinstance(world_triangles, Topology) else analyse_topology(world_triangles)
     if force_silhouette:
         topo = Topology(
@@ -553,11 +618,10 @@ def shadow_volume_triangles(
     # side quad (a, b, b∞, a∞): outward for an edge a→b of a face that faces the light
     parts.append(np.stack([hv[b], hv[a], far[a]], axis=1))
     parts.append(np.stack([hv[b], far[a], far[b]], axis=1))
-    if caps:
-        light_cap = topo.triangles[closed & lit]
-        dark_cap = topo.triangles[closed & ~lit]
-        parts.append(hv[light_cap])
-        parts.append(far[dark_cap])
+    if light_cap:
+        parts.append(hv[topo.triangles[closed & lit]])
+    if dark_cap:
+        parts.append(far[topo.triangles[closed & ~lit]])
     # open components: every triangle its own two-sided sliver, oriented to face the light
     single = topo.valid & ~closed & (facing != 0)
     f = topo.triangles[single]
@@ -566,8 +630,9 @@ def shadow_volume_triangles(
         ea, eb = f[:, i], f[:, j]
         parts.append(np.stack([hv[eb], hv[ea], far[ea]], axis=1))
         parts.append(np.stack([hv[eb], far[ea], far[eb]], axis=1))
-    if caps:
+    if light_cap:
         parts.append(hv[f])
+    if dark_cap:
         parts.append(far[f[:, ::-1]])
     return np.concatenate(parts).reshape(-1, 3, 4)
 
@@ -575,11 +640,19 @@ def shadow_volume_triangles(
 # --------------------------------------------------------------------------- counting
 
 
+def _plane_distance(clip: np.ndarray, plane: np.ndarray) -> np.ndarray:
+    """``plane · v`` for (..., 4) clip coordinates, summed in a fixed order (as compiled: no fused
+    multiply-add, so both engines clip the same faces at the same points)."""
+    return ((clip[..., 0] * plane[0] + clip[..., 1] * plane[1]) + clip[..., 2] * plane[2]) + clip[
+        ..., 3
+    ] * plane[3]
+
+
 def _clip_plane(clip: np.ndarray, plane: np.ndarray) -> np.ndarray:
     """Clip (S, 3, 4) clip-space triangles to ``plane · v ≥ 0``, keeping winding. New vertices are
     interpolated from the lexicographically first endpoint, so an edge shared by two triangles is
     cut at bit-identical points."""
-    dist = clip @ plane
+    dist = _plane_distance(clip, plane)
     inside = dist >= 0
     n_in = inside.sum(axis=1)
     out = [clip[n_in == 3]]
@@ -621,7 +694,9 @@ def _clip(clip: np.ndarray, guard: float) -> np.ndarray:
     planes = np.array(
         [(0, 0, 1, 1), (-1, 0, 0, guard), (1, 0, 0, guard), (0, -1, 0, guard), (0, 1, 0, guard)], np.float64
     )
-    inside = ((clip @ planes.T) >= 0).all(axis=(1, 2))  # most faces need no clipping at all
+    inside = np.ones(len(clip), bool)  # most faces need no clipping at all
+    for plane in planes:
+        inside &= (_plane_distance(clip, plane) >= 0).all(axis=1)
     cut = clip[~inside]
     for plane in planes:
         cut = _clip_plane(cut, plane)
@@ -722,24 +797,31 @@ def _setup(clip: np.ndarray, grid: tuple[float, float, float, float, int, int], 
     )
 
 
-def _grid(
-    px: np.ndarray, py: np.ndarray
-) -> tuple[tuple[float, float, float, float, int, int], np.ndarray, np.ndarray]:
-    """A screen grid over the receivers (about two per cell): (grid, cell_start, order)."""
-    m = len(px)
-    xmin, xmax = float(px.min()), float(px.max())
-    ymin, ymax = float(py.min()), float(py.max())
+def _grid_params(
+    m: int, bounds: tuple[float, float, float, float]
+) -> tuple[float, float, float, float, int, int]:
+    """A screen grid over ``m`` receivers within ``bounds`` = (xmin, xmax, ymin, ymax), about
+    ``_TILE_POINTS`` per tile: (xmin, ymin, cw, ch, nx, ny)."""
+    xmin, xmax, ymin, ymax = bounds
     spanx, spany = max(xmax - xmin, 1e-12), max(ymax - ymin, 1e-12)
     cells = max(1, m // _TILE_POINTS)
     nx = int(min(4096, max(1, round(math.sqrt(cells * spanx / spany)))))
     ny = int(min(4096, max(1, round(cells / nx))))
     cw, ch = spanx / nx * (1 + 1e-9), spany / ny * (1 + 1e-9)
+    return xmin, ymin, cw, ch, nx, ny
+
+
+def _bin_numpy(
+    px: np.ndarray, py: np.ndarray, grid: tuple[float, float, float, float, int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Receivers sorted by tile (stable): (cell_start, order)."""
+    xmin, ymin, cw, ch, nx, ny = grid
     cx = np.clip(((px - xmin) / cw).astype(np.int64), 0, nx - 1)
     cy = np.clip(((py - ymin) / ch).astype(np.int64), 0, ny - 1)
     cell = cy * nx + cx
     order = np.argsort(cell, kind="stable")
     cell_start = np.searchsorted(cell[order], np.arange(nx * ny + 1))
-    return (xmin, ymin, cw, ch, nx, ny), cell_start.astype(np.int64), order.astype(np.int64)
+    return cell_start.astype(np.int64), order.astype(np.int64)
 
 
 def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool) -> np.ndarray:
@@ -810,28 +892,27 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         py,
         pz,
         cell_start,
+        zlo,
+        zhi,
         zfail,
     ):  # pragma: no cover - compiled
-        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c)
+        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c);
+        # zlo/zhi: each tile's receiver depth range
         n_cells = nx * ny
         counts = np.zeros(px.shape[0], np.int64)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
-        zlo = np.full(n_cells, np.inf)
-        zhi = np.full(n_cells, -np.inf)
-        for cell in range(n_cells):
-            for k in range(cell_start[cell], cell_start[cell + 1]):
-                zlo[cell] = min(zlo[cell], pz[k])
-                zhi[cell] = max(zhi[cell], pz[k])
-        band_h = (ny + n_bands - 1) // n_bands
+        # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
+        # gets a share of the busy rows whatever the threads' static split of the bands
         for band in numba.prange(n_bands):
-            r0 = band * band_h
-            r1 = min(ny, r0 + band_h) - 1
             for t in range(front.shape[0]):
-                lo = max(cy0[t], r0)
-                hi = min(cy1[t], r1)
-                if lo > hi or cx0[t] > cx1[t]:
+                if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
                     continue
-                for row in range(lo, hi + 1):
+                if n_bands == 1:
+                    lo = cy0[t]
+                else:  # the first row >= cy0 of this band
+                    d = band - cy0[t] % n_bands
+                    lo = cy0[t] + (d + n_bands if d < 0 else d)
+                for row in range(lo, cy1[t] + 1, n_bands):
                     # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
                     sy0 = ymin + row * ch - 1e-9 * ch
                     sy1 = ymin + (row + 1) * ch + 1e-9 * ch
@@ -942,13 +1023,280 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                                     counts[p] -= front[t]
                             elif depth < pz[p]:
                                 counts[p] += front[t]
-            for row in range(r0, r1 + 1):
+            for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
                         counts[k] += whole[cell]
         return counts
 
     return count
+
+
+# --------------------------------------------------------------------------- compiled set-up
+#
+# The numba engine runs the per-receiver and per-volume-triangle set-up compiled (one pass
+# each, no large temporaries); every expression below is written out in the same order as its
+# numpy twin (:func:`_project_numpy`, :func:`_transform`, :func:`_setup`), without fused
+# multiply-adds, so both engines produce bit-identical set-ups and therefore identical counts.
+
+
+def _transform(vol: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """(m, 3, 4) homogeneous world → clip coordinates, summed in a fixed order (as compiled)."""
+    return (
+        (vol[..., 0, None] * vp[:, 0] + vol[..., 1, None] * vp[:, 1]) + vol[..., 2, None] * vp[:, 2]
+    ) + vol[..., 3, None] * vp[:, 3]
+
+
+def _offset_numpy(
+    p: np.ndarray, n: np.ndarray, light_vec: np.ndarray, directional: bool, offset: float
+) -> np.ndarray:
+    """Each receiver moved ``offset`` along its normal towards the light's side (as compiled)."""
+    if directional:
+        t0, t1, t2 = -light_vec[0], -light_vec[1], -light_vec[2]
+    else:
+        t0, t1, t2 = light_vec[0] - p[:, 0], light_vec[1] - p[:, 1], light_vec[2] - p[:, 2]
+    dot = (n[:, 0] * t0 + n[:, 1] * t1) + n[:, 2] * t2
+    side = np.where(dot >= 0, 1.0, -1.0)
+    length = np.sqrt((n[:, 0] * n[:, 0] + n[:, 1] * n[:, 1]) + n[:, 2] * n[:, 2])
+    k = side * offset / np.maximum(length, 1e-300)
+    return p + n * k[:, None]
+
+
+def _project_numpy(q: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Window (normalised-device) x, y, z and clip w of world points (as compiled)."""
+    c = [((q[:, 0] * vp[r, 0] + q[:, 1] * vp[r, 1]) + q[:, 2] * vp[r, 2]) + vp[r, 3] for r in range(4)]
+    return c[0] / c[3], c[1] / c[3], c[2] / c[3], c[3]
+
+
+@functools.lru_cache(maxsize=2)
+def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
+    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up and
+    the final scatter of counts to visibility."""
+    import numba
+
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
+
+    @numba.njit(parallel=parallel, cache=True)
+    def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
+        m = p.shape[0]
+        px = np.empty(m)
+        py = np.empty(m)
+        pz = np.empty(m)
+        pw = np.empty(m)
+        n_chunks = 64
+        # per chunk: min/max of x and y, min of w, and 1 if an input was not finite
+        stats = np.empty((n_chunks, 6))
+        size = (m + n_chunks - 1) // n_chunks
+        for chunk in numba.prange(n_chunks):
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            for i in range(chunk * size, min(m, (chunk + 1) * size)):
+                if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+                    bad = 1.0
+                if moved and not (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2])):
+                    bad = 1.0
+                vh.project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
+                xlo = min(xlo, px[i])
+                xhi = max(xhi, px[i])
+                ylo = min(ylo, py[i])
+                yhi = max(yhi, py[i])
+                wlo = min(wlo, pw[i])
+            stats[chunk, 0] = xlo
+            stats[chunk, 1] = xhi
+            stats[chunk, 2] = ylo
+            stats[chunk, 3] = yhi
+            stats[chunk, 4] = wlo
+            stats[chunk, 5] = bad
+        return px, py, pz, pw, stats
+
+    @numba.njit(cache=True)
+    def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Stable counting sort of the receivers by tile; per tile the depth range."""
+        m = px.shape[0]
+        n_cells = nx * ny
+        cell = np.empty(m, np.int64)
+        cell_start = np.zeros(n_cells + 1, np.int64)
+        # a reciprocal instead of a division: a receiver on a tile border may land in either tile,
+        # which the kernel's tile tests allow for (they widen each tile by 1e-9 of its size)
+        icw = 1.0 / cw
+        ich = 1.0 / ch
+        for i in range(m):
+            fx = (px[i] - xmin) * icw
+            fy = (py[i] - ymin) * ich
+            cx = np.int64(fx) if fx < nx else nx - 1
+            cy = np.int64(fy) if fy < ny else ny - 1
+            c = max(cy, 0) * nx + max(cx, 0)
+            cell[i] = c
+            cell_start[c + 1] += 1
+        for c in range(n_cells):
+            cell_start[c + 1] += cell_start[c]
+        fill = cell_start[:n_cells].copy()
+        order = np.empty(m, np.int64)
+        sx = np.empty(m)
+        sy = np.empty(m)
+        sz = np.empty(m)
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        for i in range(m):
+            c = cell[i]
+            k = fill[c]
+            fill[c] = k + 1
+            order[k] = i
+            sx[k] = px[i]
+            sy[k] = py[i]
+            z = pz[i]
+            sz[k] = z
+            zlo[c] = min(zlo[c], z)
+            zhi[c] = max(zhi[c], z)
+        return order, cell_start, sx, sy, sz, zlo, zhi
+
+    @numba.njit(parallel=parallel, cache=True)
+    def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
+        ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
+        a triangle that crosses the near plane or the guard band (when ``check``) is flagged in
+        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area."""
+        s = src.shape[0]
+        ex = np.empty((s, 3))
+        ey = np.empty((s, 3))
+        edx = np.empty((s, 3))
+        edy = np.empty((s, 3))
+        esign = np.empty((s, 3))
+        etie = np.zeros((s, 3), np.bool_)
+        z0 = np.zeros(s)
+        x0 = np.zeros(s)
+        y0 = np.zeros(s)
+        gx = np.zeros(s)
+        gy = np.zeros(s)
+        front = np.zeros(s, np.int64)
+        cx0 = np.ones(s, np.int64)
+        cx1 = np.zeros(s, np.int64)
+        cy0 = np.ones(s, np.int64)
+        cy1 = np.zeros(s, np.int64)
+        bx0 = np.zeros(s)
+        bx1 = np.zeros(s)
+        by0 = np.zeros(s)
+        by1 = np.zeros(s)
+        todo = np.zeros(s, np.bool_)
+        for t in numba.prange(s):
+            c00 = vh.component(src, vp, transform, t, 0, 0)
+            c01 = vh.component(src, vp, transform, t, 0, 1)
+            c02 = vh.component(src, vp, transform, t, 0, 2)
+            c03 = vh.component(src, vp, transform, t, 0, 3)
+            c10 = vh.component(src, vp, transform, t, 1, 0)
+            c11 = vh.component(src, vp, transform, t, 1, 1)
+            c12 = vh.component(src, vp, transform, t, 1, 2)
+            c13 = vh.component(src, vp, transform, t, 1, 3)
+            c20 = vh.component(src, vp, transform, t, 2, 0)
+            c21 = vh.component(src, vp, transform, t, 2, 1)
+            c22 = vh.component(src, vp, transform, t, 2, 2)
+            c23 = vh.component(src, vp, transform, t, 2, 3)
+            if check:
+                out = False
+                for v in range(3):
+                    if v == 0:
+                        xc, yc, zc, wc = c00, c01, c02, c03
+                    elif v == 1:
+                        xc, yc, zc, wc = c10, c11, c12, c13
+                    else:
+                        xc, yc, zc, wc = c20, c21, c22, c23
+                    gw = guard * wc
+                    if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
+                        out = True
+                if out:
+                    todo[t] = True
+                    continue
+            if not (c03 > 0 and c13 > 0 and c23 > 0):
+                continue
+            xa = c00 / c03
+            xb = c10 / c13
+            xc_ = c20 / c23
+            ya = c01 / c03
+            yb = c11 / c13
+            yc_ = c21 / c23
+            za = c02 / c03
+            zb = c12 / c13
+            zc_ = c22 / c23
+            area = (xb - xa) * (yc_ - ya) - (xc_ - xa) * (yb - ya)
+            if area == 0 or not np.isfinite(area):
+                continue
+            sgn = 1.0 if area > 0 else -1.0
+            for i in range(3):
+                if i == 0:
+                    xp, yp, xq, yq = xa, ya, xb, yb
+                elif i == 1:
+                    xp, yp, xq, yq = xb, yb, xc_, yc_
+                else:
+                    xp, yp, xq, yq = xc_, yc_, xa, ya
+                canonical = (xp < xq) or (xp == xq and yp < yq)
+                if canonical:
+                    sx, sy, tx, ty = xp, yp, xq, yq
+                else:
+                    sx, sy, tx, ty = xq, yq, xp, yp
+                ex[t, i] = sx
+                ey[t, i] = sy
+                edx[t, i] = tx - sx
+                edy[t, i] = ty - sy
+                es = sgn * (1.0 if canonical else -1.0)
+                esign[t, i] = es
+                ddx = -edy[t, i] * es
+                ddy = edx[t, i] * es
+                etie[t, i] = ddx > 0 or (ddx == 0 and ddy > 0)
+            gx[t] = ((zb - za) * (yc_ - ya) - (zc_ - za) * (yb - ya)) / area
+            gy[t] = ((xb - xa) * (zc_ - za) - (xc_ - xa) * (zb - za)) / area
+            z0[t] = za
+            x0[t] = xa
+            y0[t] = ya
+            front[t] = 1 if area > 0 else -1
+            lo_x = min(xa, xb, xc_)
+            hi_x = max(xa, xb, xc_)
+            lo_y = min(ya, yb, yc_)
+            hi_y = max(ya, yb, yc_)
+            fx0 = np.floor((lo_x - xmin) / cw)
+            fx1 = np.floor((hi_x - xmin) / cw)
+            fy0 = np.floor((lo_y - ymin) / ch)
+            fy1 = np.floor((hi_y - ymin) / ch)
+            cx0[t] = np.int64(min(max(fx0, 0.0), float(nx)))
+            cx1[t] = np.int64(min(max(fx1, -1.0), float(nx - 1)))
+            cy0[t] = np.int64(min(max(fy0, 0.0), float(ny)))
+            cy1[t] = np.int64(min(max(fy1, -1.0), float(ny - 1)))
+            pad_x = 1e-9 * (max(abs(xa), abs(xb), abs(xc_)) + 1.0)
+            pad_y = 1e-9 * (max(abs(ya), abs(yb), abs(yc_)) + 1.0)
+            bx0[t] = lo_x - pad_x
+            bx1[t] = hi_x + pad_x
+            by0[t] = lo_y - pad_y
+            by1[t] = hi_y + pad_y
+        return (
+            ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front,
+            cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
+        )  # fmt: skip
+
+    @numba.njit(parallel=parallel, cache=True)
+    def lit(order, sorted_counts):  # pragma: no cover - compiled
+        out = np.empty(order.shape[0])
+        for k in numba.prange(order.shape[0]):
+            out[order[k]] = 1.0 if sorted_counts[k] == 0 else 0.0
+        return out
+
+    @numba.njit(parallel=parallel, cache=True)
+    def scatter(order, sorted_counts):  # pragma: no cover - compiled
+        out = np.empty(order.shape[0], np.int64)
+        for k in numba.prange(order.shape[0]):
+            out[order[k]] = sorted_counts[k]
+        return out
+
+    return project, bin_points, setup, lit, scatter
+
+
+def _threads() -> int:
+    """Threads a compiled parallel loop runs on (numba's setting)."""
+    import numba
+
+    return max(1, int(numba.get_num_threads()))
 
 
 def _use_numba(engine: str) -> bool:
@@ -999,59 +1347,90 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
-    pc = p @ vp[:, :3].T + vp[:, 3]
-    if not np.all(pc[:, 3] > 0):
-        bad = int(np.count_nonzero(pc[:, 3] <= 0))
-        raise ValueError(f"points: {bad} of {len(p)} receivers lie behind the camera (clip w <= 0)")
-    px, py, pz = pc[:, 0] / pc[:, 3], pc[:, 1] / pc[:, 3], pc[:, 2] / pc[:, 3]
-    grid, cell_start, order = _grid(px, py)
-    clip = vol @ vp.T
-    guard = 2.0 * max(float(np.abs(px).max()), float(np.abs(py).max()), 1.0) + 1.0
-    st = _setup(clip, grid, guard)
-    zfail = stencil == "zfail"
-    nx, ny = grid[4], grid[5]
+    px, py, pz, bounds = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
+    return _count(vol, vp, px, py, pz, bounds, stencil == "zfail", numba_path)
+
+
+def _projected(
+    p: np.ndarray,
+    n: np.ndarray,
+    light_vec: np.ndarray,
+    directional: bool,
+    offset: float,
+    moved: bool,
+    vp: np.ndarray,
+    numba_path: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float, float, float]]:
+    """Receivers (moved ``offset`` towards the light's side when ``moved``) in normalised-device
+    coordinates, and their (xmin, xmax, ymin, ymax); raises if a receiver is behind the camera
+    or a point or normal is not finite."""
+    if numba_path:
+        # small jobs run serially: a parallel region costs more than it saves on a busy machine
+        kernels = _fast_kernels(len(p) >= _PARALLEL_RECEIVERS)
+        px, py, pz, _, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+        bad = bool(stats[:, 5].any())
+        w_ok = bool(stats[:, 4].min() > 0)
+        bounds = (
+            float(stats[:, 0].min()),
+            float(stats[:, 1].max()),
+            float(stats[:, 2].min()),
+            float(stats[:, 3].max()),
+        )
+    else:
+        bad = not (np.all(np.isfinite(p)) and (not moved or np.all(np.isfinite(n))))
+        q = _offset_numpy(p, n, light_vec, directional, offset) if moved else p
+        px, py, pz, pw = _project_numpy(q, vp)
+        w_ok = bool(np.all(pw > 0))
+        bounds = (
+            (float(px.min()), float(px.max()), float(py.min()), float(py.max())) if len(px) else (0.0,) * 4
+        )
+    if bad:
+        raise ValueError("points/normals: expected finite coordinates, got NaN or Inf")
+    if not w_ok:
+        raise ValueError(f"points: some of the {len(p)} receivers lie behind the camera (clip w <= 0)")
+    return px, py, pz, bounds
+
+
+def _count(
+    vol: np.ndarray,
+    vp: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+    pz: np.ndarray,
+    bounds: tuple[float, float, float, float],
+    zfail: bool,
+    numba_path: bool,
+    visibility: bool = False,
+) -> np.ndarray:
+    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers
+    whose (xmin, xmax, ymin, ymax) are ``bounds``."""
+    grid = _grid_params(len(px), bounds)
+    xmin, ymin, cw, ch, nx, ny = grid
+    guard = 2.0 * max(*(abs(b) for b in bounds), 1.0) + 1.0
     if not numba_path:
-        return _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
-    # small jobs run serially: a parallel region costs more than it saves on a busy machine
+        st = _setup(_transform(vol, vp), grid, guard)
+        cell_start, order = _bin_numpy(px, py, grid)
+        counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+        return (counts == 0).astype(np.float64) if visibility else counts
     parallel = len(px) >= _PARALLEL_RECEIVERS
-    n_bands = min(ny, max(1, 4 * (os.cpu_count() or 1))) if parallel else 1
+    _, bin_points, setup, lit, scatter = _fast_kernels(parallel)
+    fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
+    todo = fields[-1]
+    if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
+        cut = _clip(_transform(vol[todo], vp), guard)
+        cut = setup(cut, vp, False, False, guard, xmin, ymin, cw, ch, nx, ny)
+        fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
+    st = _Setup(*fields[:-1])
+    order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
+    # small jobs run serially: a parallel region costs more than it saves on a busy machine
+    n_bands = min(ny, _threads()) if parallel else 1
     sorted_counts = _kernel(parallel)(
-        n_bands,
-        ny,
-        nx,
-        grid[0],
-        grid[1],
-        grid[2],
-        grid[3],
-        st.cx0,
-        st.cx1,
-        st.cy0,
-        st.cy1,
-        st.ex,
-        st.ey,
-        st.edx,
-        st.edy,
-        st.esign,
-        st.etie,
-        st.z0,
-        st.x0,
-        st.y0,
-        st.gx,
-        st.gy,
-        st.front,
-        st.bx0,
-        st.bx1,
-        st.by0,
-        st.by1,
-        px[order],
-        py[order],
-        pz[order],
-        cell_start,
-        zfail,
-    )
-    counts = np.empty(len(px), np.int64)
-    counts[order] = sorted_counts
-    return counts
+        n_bands, ny, nx, xmin, ymin, cw, ch,
+        st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
+        st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
+        sx, sy, sz, cell_start, zlo, zhi, zfail,
+    )  # fmt: skip
+    return lit(order, sorted_counts) if visibility else scatter(order, sorted_counts)
 
 
 def zpass_is_safe(
@@ -1157,17 +1536,17 @@ def shadow_volume_visibility(
             normal towards the light's side before it is counted.
         camera: the camera whose samples the points are; None — a view that sees every point
             (fine for z-fail; z-pass is only valid for a camera outside every volume).
-        stencil: ``"auto"`` (z-fail, see the module docstring), ``"zfail"`` (robust) or
-            ``"zpass"`` (valid only while the camera is outside every volume and the near
-            plane cuts none).
+        stencil: ``"auto"`` (z-pass where :func:`choose_stencil` proves it exact, else
+            z-fail), ``"zfail"`` (robust) or ``"zpass"`` (valid only while the camera is
+            outside every volume and the near plane cuts none).
         offset: world units, ≥ 0.
         engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
 
     Returns:
         (m,) float64 in {0, 1}.
     """
-    p = _points("points", points)
-    n = _points("normals", normals)
+    p = _points("points", points, check_finite=False)  # checked while they are projected
+    n = _points("normals", normals, check_finite=False)
     if n.shape != p.shape:
         raise ValueError(f"normals: expected the shape of points {p.shape}, got {n.shape}")
     if not (isinstance(offset, int | float) and math.isfinite(offset) and offset >= 0):
@@ -1180,25 +1559,117 @@ def shadow_volume_visibility(
         raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
     _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
+        _points("points", p)
+        _points("normals", n)
         return np.ones(len(p))
-    to_light = np.broadcast_to(-light_vec, p.shape) if directional else light_vec - p
-    length = np.sqrt(np.einsum("ij,ij->i", n, n))
-    side = np.sign(np.einsum("ij,ij->i", n, to_light))
-    side[side == 0] = 1.0
-    q = p + n * (side * offset / np.maximum(length, 1e-300))[:, None]
+    numba_path = _use_numba(engine)
+    q = None
     if camera is None:
+        q = _offset_numpy(p, n, light_vec, directional, float(offset))
         view, proj = _default_camera(q, tris)
     else:
         view, proj = camera.view, camera.projection
     orthographic = np.allclose(proj[3], [0.0, 0.0, 0.0, 1.0])
     extent = None
     if orthographic:  # w would be 0 at infinity: extrude past every receiver and caster instead
+        q = _offset_numpy(p, n, light_vec, directional, float(offset)) if q is None else q
         pts = np.concatenate([q, tris.reshape(-1, 3)])
         span = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         reach = 0.0 if directional else float(np.linalg.norm(pts - light_vec, axis=1).max())
         extent = 4.0 * (span + reach) + 1.0
+    vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    # offset and projection in one compiled pass (the numpy engine: the same expressions)
+    px, py, pz, bounds = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path)
+    topo, key = _topology_with_key(tris)
     if stencil == "auto":
-        stencil = "zfail"  # exact wherever tested; z-pass failed one "safe" scene (module docstring)
-    volume = shadow_volume_triangles(tris, light, caps=stencil == "zfail", extent=extent)
-    counts = stencil_counts(volume, view, proj, q, stencil=stencil, engine=engine)
-    return (counts == 0).astype(np.float64)
+        stencil = _choose(light, tris, key, view, proj, bounds)[0]
+    # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
+    # when the volumes end at a finite distance (orthographic cameras), the dark caps too
+    caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
+    light_key = (type(light).__name__, light_vec.tobytes(), caps, extent)
+    volume = _cached(
+        ("volume", key, light_key), lambda: shadow_volume_triangles(topo, light, caps=caps, extent=extent)
+    )
+    return _count(volume, vp, px, py, pz, bounds, stencil == "zfail", numba_path, visibility=True)
+
+
+#: Per-frame reuse: volumes and near-plane proofs by (topology digest, light, ...), a few entries.
+_DERIVED_CACHE: dict[tuple, object] = {}
+
+
+def _cached(key: tuple, make: object) -> object:
+    if key in _DERIVED_CACHE:
+        return _DERIVED_CACHE[key]
+    value = make()  # type: ignore[operator]
+    if len(_DERIVED_CACHE) >= 6:  # a frame of two lights needs four entries
+        _DERIVED_CACHE.pop(next(iter(_DERIVED_CACHE)))
+    _DERIVED_CACHE[key] = value
+    return value
+
+
+def _choose(
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    key: bytes,
+    view: np.ndarray,
+    projection: np.ndarray,
+    bounds: tuple[float, ...],
+) -> tuple[str, str]:
+    """:func:`choose_stencil` for receivers whose normalised-device (xmin, xmax, ymin, ymax) are
+    ``bounds`` (empty: no receivers)."""
+    if bounds:
+        reach = max(abs(b) for b in bounds)
+        if not reach <= 1.0:
+            return "zfail", f"a receiver projects outside the near rectangle (|ndc| up to {reach:.3g})"
+    light_vec, _ = _light(light)
+    safe = _cached(
+        ("zpass_is_safe", key, type(light).__name__, light_vec.tobytes(), np.asarray(view, float).tobytes(),
+         np.asarray(projection, float).tobytes()),
+        lambda: zpass_is_safe(light, tris, view, projection),
+    )  # fmt: skip
+    if not safe:
+        return (
+            "zfail",
+            "a caster meets the hull of the near rectangle and the light: the near plane may cut a volume",
+        )
+    return (
+        "zpass",
+        "no caster meets the hull of the near rectangle and the light: no volume reaches the near plane",
+    )
+
+
+def choose_stencil(
+    light: DirectionalLight | PointLight | SpotLight,
+    world_triangles: np.ndarray,
+    view: np.ndarray,
+    projection: np.ndarray,
+    points: np.ndarray,
+) -> tuple[str, str]:
+    """The counting method ``stencil="auto"`` uses, and why: z-pass where it is provably exact.
+
+    z-pass (with the light caps drawn) is short by exactly ``w(q_p)``, the number of volumes
+    containing the point ``q_p`` where the camera ray of receiver p crosses the near plane
+    (module docstring). It is therefore exact when (a) every receiver projects inside the
+    near rectangle (``|x_ndc|, |y_ndc| ≤ 1``), so every ``q_p`` lies on that rectangle, and
+    (b) :func:`zpass_is_safe` proves no caster meets the convex hull of the rectangle and the
+    light, so no point of the rectangle lies in a volume. Elsewhere z-fail is used; it is exact
+    for any camera.
+
+    Args:
+        light: the light.
+        world_triangles: (n, 3, 3) the casters, world space.
+        view: 4×4 world → eye matrix.
+        projection: 4×4 eye → clip matrix (OpenGL conventions).
+        points: (m, 3) world-space receivers (as they will be counted).
+
+    Returns:
+        ``("zpass" | "zfail", reason)``.
+    """
+    p = _points("points", points)
+    tris = _triangles("world_triangles", world_triangles)
+    vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
+    px, py, _, pw = _project_numpy(p, vp)
+    if not np.all(pw > 0):
+        return "zfail", "a receiver lies behind the camera"
+    bounds = (float(px.min()), float(px.max()), float(py.min()), float(py.max())) if len(px) else ()
+    return _choose(light, tris, _topology_with_key(tris)[1], view, projection, bounds)

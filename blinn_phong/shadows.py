@@ -41,8 +41,11 @@ caster was drawn.
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import functools
+import weakref
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,15 +59,19 @@ __all__ = [
     "SHADOW_METHODS",
     "ShadowLookup",
     "ShadowMap",
+    "caster_transmittance",
     "light_cameras",
     "light_shadow_maps",
     "light_visibility",
+    "mesh_shadow_transmittance",
     "planar_shadow_mask",
     "planar_shadow_matrix",
     "render_shadow_map",
     "shadow_lookup",
     "shadow_map_visibility",
+    "shadow_transmittance",
     "shadow_visibility",
+    "trusted_arrays",
 ]
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
@@ -116,6 +123,21 @@ class ShadowMap:
 
 #: ids of float64 arrays already checked by the light_visibility call running in this context
 _CHECKED: contextvars.ContextVar[frozenset[int]] = contextvars.ContextVar("checked", default=frozenset())
+
+
+@contextlib.contextmanager
+def trusted_arrays(*arrays: np.ndarray) -> Iterator[None]:
+    """Inside the block the shadow functions skip the shape and finiteness checks of these arrays.
+
+    For a caller that made them itself (the frame pipeline's world points, face normals and
+    caster triangles, finite float64 arrays of the right shapes): a 1.3 M-point frame then checks
+    its points once, not once per light. Arrays not listed are checked as usual.
+    """
+    token = _CHECKED.set(_CHECKED.get() | frozenset(id(a) for a in arrays))
+    try:
+        yield
+    finally:
+        _CHECKED.reset(token)
 
 
 def _triangles(name: str, value: np.ndarray) -> np.ndarray:
@@ -644,6 +666,68 @@ def planar_shadow_mask(
     return 1.0 - shadowed.astype(np.float64)
 
 
+def shadow_transmittance(material: object) -> np.ndarray:
+    """(3,) RGB fraction of light a surface of ``material`` lets through, for shadow rays.
+
+    By the material's transparency model (docs/transparency_models.md): an opaque material
+    (``not material.transparent``) 0; ``partial_occlusion`` — the surface covers the fraction α,
+    so ``1 − α`` of the light passes (Porter & Duff's ``over`` for the light); ``absorption`` —
+    the grey filter ``T = 1 − α`` the renderer gives it; ``emission`` — it only adds light and
+    hides nothing: 1. A material whose opacity varies over the surface (a base-colour texture, an
+    alpha clip, Kay–Greenberg) has no single transmittance: 0, a full shadow, as before coloured
+    shadows existed. Specular wash-out depends on the viewer, not the light: the base opacity counts.
+
+    Args:
+        material: a :class:`blinn_phong.scene.Material`.
+
+    Returns:
+        (3,) float64 in [0, 1].
+    """
+    if not material.transparent or material.textured or material.kay_greenberg is not None:  # type: ignore[attr-defined]
+        return np.zeros(3)
+    if material.transparency_model == "emission":  # type: ignore[attr-defined]
+        return np.ones(3)
+    return np.full(3, 1.0 - float(material.opacity))  # type: ignore[attr-defined]
+
+
+def mesh_shadow_transmittance(mesh: object, two_sided: bool) -> np.ndarray:
+    """(3,) RGB transmittance of a mesh as a shadow caster: :func:`shadow_transmittance` of its material.
+
+    Under two-sided lighting (``two_sided``) a mesh whose back material lets through other light
+    than its front one casts a full shadow (0): a shadow ray may cross either side.
+    """
+    t = shadow_transmittance(mesh.material)  # type: ignore[attr-defined]
+    back = mesh.back_material  # type: ignore[attr-defined]
+    if two_sided and back is not None and not np.array_equal(t, shadow_transmittance(back)):
+        return np.zeros(3)
+    return t
+
+
+def caster_transmittance(scene: object) -> np.ndarray | None:
+    """(T, 3) per-triangle RGB transmittance of a scene's shadow casters, or None when every caster is opaque.
+
+    Triangles of the meshes with ``casts_shadows``, in scene order (the order of the frame's
+    caster triangles), each with :func:`mesh_shadow_transmittance` of its mesh.
+
+    Args:
+        scene: a :class:`blinn_phong.scene.Scene`.
+
+    Returns:
+        (T, 3) float64 in [0, 1], or None.
+    """
+    two_sided = scene.light_model.two_sided  # type: ignore[attr-defined]
+    parts, any_light = [], False
+    for mesh in scene.meshes:  # type: ignore[attr-defined]
+        if not mesh.casts_shadows:
+            continue
+        t = mesh_shadow_transmittance(mesh, two_sided)
+        any_light = any_light or bool(np.any(t > 0))
+        parts.append(np.broadcast_to(t, (len(mesh.triangles), 3)))
+    if not any_light:
+        return None
+    return np.ascontiguousarray(np.concatenate(parts))
+
+
 #: Shadow methods :func:`light_visibility` dispatches (the planner's shadow choices).
 SHADOW_METHODS: tuple[str, ...] = ("none", "planar", "shadow_map", "ray_traced", "shadow_volume")
 
@@ -726,6 +810,46 @@ def light_visibility(
         _CHECKED.reset(token)
 
 
+#: The last :func:`_on_plane` answer: (weak reference to the points, plane bytes, result). The
+#: lights of a frame test the same points against the same plane; the weak reference makes sure
+#: the points are the very same array, still alive (an id alone could be reused).
+_ON_PLANE: list[tuple[object, bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+
+
+def _on_plane(p: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mask, points, normals): the points within ``1e-6·max|p|`` of the plane (the receivers of
+    planar shadows), and the plane's normal for each, contiguous; reused for the frame's next light."""
+    key = plane.tobytes()
+    for ref, k, result in _ON_PLANE:
+        if k == key and ref() is p:  # type: ignore[operator]
+            return result
+    scale = max(float(-p.min()), float(p.max()), 1.0) if len(p) else 1.0
+    mask = np.abs(p @ plane[:3] + plane[3]) <= 1e-6 * scale
+    q = p[mask]
+    normals = np.empty_like(q)
+    normals[:] = plane[:3]
+    result = (mask, q, normals)
+    try:
+        _ON_PLANE[:] = [(weakref.ref(p), key, result)]
+    except TypeError:  # an array that takes no weak reference: not kept
+        _ON_PLANE.clear()
+    return result
+
+
+def _casters_between(height: np.ndarray, plane: np.ndarray, light: np.ndarray) -> bool:
+    """True when every caster corner (signed ``height`` above ``plane``) lies on the light's side of
+    the plane and, for a positional light, below the light's own height."""
+    if len(height) == 0:
+        return False
+    side = float(plane @ light)  # > 0: the light is on the positive side (w = 0: its direction)
+    if side == 0:
+        return False
+    h = height if side > 0 else -height
+    if h.min() < 0:
+        return False
+    return bool(light[3] == 0 or h.max() < abs(side))
+
+
 def _light_visibility_checked(
     method: str,
     light: DirectionalLight | PointLight | SpotLight,
@@ -766,16 +890,34 @@ def _light_visibility_checked(
         if plane is None:
             raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
         pl = np.asarray(plane, dtype=np.float64)
-        if caster_triangles is None:
-            off_plane = np.abs(tris @ pl[:3] + pl[3]).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
-            caster_triangles = tris[off_plane]
         if isinstance(light, DirectionalLight):
             homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
         else:
             homogeneous_light = np.r_[np.asarray(light.position), 1.0]
-        on_plane = np.abs(p @ pl[:3] + pl[3]) <= 1e-6 * max(np.abs(p).max(), 1.0)
+        on_plane, q, q_normals = _on_plane(p, pl)
         vis = np.ones(len(p))
-        if len(caster_triangles) and on_plane.any():
-            vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, p[on_plane])
+        between = False
+        if caster_triangles is None:
+            height = tris @ pl[:3] + pl[3]  # (n, 3) signed heights (times |(a, b, c)|) of the corners
+            off_plane = np.abs(height).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
+            caster_triangles = tris[off_plane]
+            between = _casters_between(height[off_plane], pl, homogeneous_light)
+        if not (len(caster_triangles) and on_plane.any()):
+            return vis
+        if between:
+            # every caster lies between the plane and the light: a point of the plane is inside a
+            # flattened caster exactly when its segment (ray) to the light crosses that caster, so
+            # the frame's one BVH answers it (cached_ray_scene, shared with every other light)
+            # instead of a new BVH of flattened triangles per light
+            from .raytrace import cached_ray_scene, directional_light_visibility, point_light_visibility
+
+            scene = cached_ray_scene(tris)
+            towards = homogeneous_light[:3]
+            if homogeneous_light[3] == 0:
+                vis[on_plane] = directional_light_visibility(scene, q, q_normals, towards, engine=engine)
+            else:
+                vis[on_plane] = point_light_visibility(scene, q, q_normals, towards, engine=engine)
+            return vis
+        vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, q)
         return vis
     raise ValueError(f"method must be one of {SHADOW_METHODS}, got {method!r}")

@@ -37,7 +37,14 @@ from blinn_phong.fast import (
 )
 from blinn_phong.raster import Fragments, rasterize, resolve_nearest
 
-__all__ = ["ENGINES", "FrameFragments", "frame_fragments", "use_compiled", "visible_fragments"]
+__all__ = [
+    "ENGINES",
+    "FrameFragments",
+    "frame_fragments",
+    "rasterized_count",
+    "use_compiled",
+    "visible_fragments",
+]
 
 #: Engines of the frame stages: the numpy reference, the compiled one, or numba when it imports.
 ENGINES: tuple[str, ...] = ("numpy", "numba", "auto")
@@ -119,6 +126,27 @@ class FrameFragments:
     def n_transparent(self) -> int:
         """Number of transparent fragments kept."""
         return len(self.fragments) - self.n_opaque
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the kept fragments and the per-sample indices (``opaque_of``, ``offsets``).
+
+        About 57 bytes per kept fragment (pixel, sample, depth, triangle: 8 each; barycentrics 24;
+        facing 1) plus 16 bytes per sample: proportional to the fragments that survive the depth
+        test, not to every rasterized fragment (:func:`rasterized_count` counts those).
+        """
+        f = self.fragments
+        arrays = (
+            f.pixel,
+            f.sample,
+            f.depth,
+            f.triangle,
+            f.bary,
+            f.front_facing,
+            self.opaque_of,
+            self.offsets,
+        )
+        return int(sum(a.nbytes for a in arrays))
 
     def fragment_range(self, row0: int, row1: int) -> tuple[int, int, int, int]:
         """``(o0, o1, t0, t1)``: the opaque fragments ``[o0, o1)`` and transparent ones
@@ -213,3 +241,47 @@ def frame_fragments(
     offsets = np.zeros(n_keys + 1, np.int64)
     np.cumsum(np.bincount(key[kept], minlength=n_keys), out=offsets[1:])
     return FrameFragments(frags.subset(np.concatenate([winners, kept])), len(winners), opaque_of, offsets)
+
+
+def rasterized_count(
+    clip_xyzw: np.ndarray,
+    triangles: np.ndarray,
+    width: int,
+    height: int,
+    *,
+    samples: int = 1,
+    cull_backfaces: bool = False,
+    engine: str = "auto",
+) -> int:
+    """Number of fragments rasterization produces: every covered sample of every triangle, hidden or not.
+
+    What an array of all fragments (:func:`blinn_phong.raster.rasterize`) would hold, against
+    which the fragments :func:`frame_fragments` keeps are measured. ``engine="numpy"`` is
+    ``len(rasterize(...))``; the compiled engine counts them in the transparent-list counting
+    pass of :mod:`blinn_phong.fast` against an empty depth buffer (memory: two integers per
+    sample). Samples whose depth is not below 1.0 (the far plane, the depth buffer's clear value)
+    are not counted by the compiled engine (``GL_LESS`` against the clear value discards them).
+    Arguments as for :func:`frame_fragments`.
+    """
+    if not use_compiled(engine):
+        return len(
+            rasterize(clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces)
+        )
+    from blinn_phong.fast import _bands, _kernel
+
+    setup = setup_triangles_compiled(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+    k = setup.k
+    fine_w, fine_h = setup.width * k, setup.height * k
+    _, _, in_front, _ = _kernel()
+    winner = np.full(fine_w * fine_h, -1, np.int64)  # an empty depth buffer: every fragment is in front
+    counts = np.zeros(fine_w * fine_h, np.int64)
+    empty = np.zeros(0, np.int64)
+    geometry = (
+        setup.x0, setup.x1, setup.y0, setup.y1, setup.a, setup.b, setup.c,
+        setup.top_left, setup.x_exact, setup.y_exact, setup.area, setup.z,
+    )  # fmt: skip
+    in_front(
+        False, _bands(fine_h), fine_w, fine_h, k, setup.width, setup.selected.astype(np.int64), *geometry,
+        np.ones(1), winner, counts, empty, empty, empty,
+    )  # fmt: skip
+    return int(counts.sum())

@@ -28,6 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
+from ._kernel_cache import compile_kernel
 from .factors import Expr, OperatorSpec
 
 __all__ = ["composite_fused", "factor_source", "kernel_source", "run_ranges"]
@@ -148,8 +149,7 @@ def _compiled(name: str, spec: OperatorSpec, dtype_name: str, lerp: bool):
         "U3": np.uint64(3),
         **{_const_name(v): t(v) for v in consts},
     }
-    exec(compile(src, f"<fused kernel {name} {dtype_name}>", "exec"), namespace)
-    return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
+    return compile_kernel(src, namespace, f"fused {name} {dtype_name} lerp={lerp}")
 
 
 @functools.cache

@@ -36,10 +36,10 @@ from __future__ import annotations
 
 import functools
 
-import numba
 import numpy as np
 
 from ._fused import MIN_PIXELS_PER_THREAD, run_ranges
+from ._kernel_cache import compile_kernel
 from .factors import Expr
 from .gl_blend import GL_EQUATION_EXPRS, GL_FACTOR_EXPRS, exact_factor, uses_factors
 
@@ -257,11 +257,8 @@ def _namespace(dtype_name: str) -> dict:
 
 
 def _build(src: str, label: str, dtype_name: str, helper_names: tuple[str, ...] = ()):
-    namespace = _namespace(dtype_name)
-    exec(compile(src, f"<gl blend kernel {label} {dtype_name}>", "exec"), namespace)
-    for name in helper_names:  # compiled first so that the kernel calls compiled functions
-        namespace[name] = numba.njit(error_model="numpy")(namespace[name])
-    return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
+    # helpers are compiled first so that the kernel calls compiled functions
+    return compile_kernel(src, _namespace(dtype_name), f"gl blend {label} {dtype_name}", helpers=helper_names)
 
 
 @functools.cache

@@ -32,6 +32,7 @@ from numba import types
 from numba.extending import intrinsic
 
 from ._fused import _const_name, _term, factor_source, run_ranges
+from ._kernel_cache import compile_kernel
 from .factors import ALL_OPERATORS
 
 __all__ = ["TILE", "stack_fused", "update_source"]
@@ -249,8 +250,7 @@ def _compiled(kind: str, dtype_name: str):
         "as_pointer": _pointer_intrinsic(_NUMBA_TYPES[dtype_name]),
         **{_const_name(v): t(v) for v in consts},
     }
-    exec(compile(src, f"<stack kernel {kind} {dtype_name}>", "exec"), namespace)
-    return numba.njit(error_model="numpy", nogil=True)(namespace["kernel"])
+    return compile_kernel(src, namespace, f"stack {kind} {dtype_name} tile={TILE}")
 
 
 def stack_fused(layers: list[np.ndarray], kind: str, threshold: float = 1.0) -> tuple[np.ndarray, int, bool]:

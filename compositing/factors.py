@@ -293,12 +293,26 @@ def evaluate(expr: Expr, sa: np.ndarray, da: np.ndarray) -> np.ndarray | float:
     values in [0, 1]). Constants stay Python floats so callers can skip a multiply
     by 1 or 0. The dtype of the result follows ``sa``/``da``.
     """
+    return evaluate_in(expr, {"sa": sa, "da": da}, np.result_type(sa, da))
+
+
+def evaluate_in(
+    expr: Expr, env: Mapping[str, np.ndarray | float], dtype: np.dtype | None = None
+) -> np.ndarray | float:
+    """Evaluate an expression with its variables looked up by name in ``env`` (numpy broadcasting).
+
+    The one interpreter of the expression trees: the Porter-Duff (Fa, Fb) table
+    (:func:`evaluate`, variables ``sa``/``da``) and the OpenGL blend tables of
+    :mod:`compositing.gl_blend` (variables ``s``, ``d``, ``sa``, ``da``, ``c``, …) both
+    run through it. Constants stay Python floats so callers can skip a multiply by 1 or 0.
+    ``dtype`` is the result type of the comparisons and the safe division (default: the
+    result type of ``env``'s values).
+    """
     if expr.op == "const":
         return float(expr.value)  # type: ignore[arg-type]
     if expr.op == "var":
-        return sa if expr.value == "sa" else da
-    a = evaluate(expr.args[0], sa, da)
-    b = evaluate(expr.args[1], sa, da)
+        return env[str(expr.value)]
+    a, b = (evaluate_in(x, env, dtype) for x in expr.args)
     if expr.op == "add":
         return a + b
     if expr.op == "sub":
@@ -309,16 +323,17 @@ def evaluate(expr: Expr, sa: np.ndarray, da: np.ndarray) -> np.ndarray | float:
         return np.minimum(a, b)
     if expr.op == "max":
         return np.maximum(a, b)
+    kind = np.result_type(*env.values()) if dtype is None else dtype
     if expr.op == "lt":
-        return np.less(a, b).astype(np.result_type(sa, da))
+        return np.less(a, b).astype(kind)
     if expr.op == "gt":
-        return np.greater(a, b).astype(np.result_type(sa, da))
+        return np.greater(a, b).astype(kind)
     if expr.op == "safe_div":
         b_arr = np.asarray(b)
-        a_arr = np.asarray(a, dtype=np.result_type(sa, da))
+        a_arr = np.asarray(a, dtype=kind)
         zero = b_arr == 0
         out = np.divide(a_arr, np.where(zero, 1, b_arr))
-        return np.where(zero, 0, out).astype(np.result_type(sa, da))
+        return np.where(zero, 0, out).astype(kind)
     raise ValueError(f"unknown factor operation {expr.op!r}")
 
 

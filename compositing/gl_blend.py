@@ -51,7 +51,7 @@ from typing import Final
 
 import numpy as np
 
-from .factors import ALL_OPERATORS, ONE, ZERO, Expr, maximum, minimum
+from .factors import ALL_OPERATORS, ONE, ZERO, Expr, evaluate_in, maximum, minimum
 from .operators import _fused_available, resolve_operator
 from .validate import as_rgba, broadcast_shapes, check_finite
 
@@ -205,26 +205,6 @@ def exact_factor(name: str, part: int) -> float | None:
     return float(expr.value) if expr.is_const and float(expr.value) in (0.0, 1.0) else None  # type: ignore[arg-type]
 
 
-def _evaluate(expr: Expr, env: Mapping[str, np.ndarray | float]) -> np.ndarray | float:
-    """An expression of the table on arrays (numpy broadcasting) or Python floats."""
-    if expr.op == "const":
-        return float(expr.value)  # type: ignore[arg-type]
-    if expr.op == "var":
-        return env[str(expr.value)]
-    a, b = (_evaluate(x, env) for x in expr.args)
-    if expr.op == "add":
-        return a + b
-    if expr.op == "sub":
-        return a - b
-    if expr.op == "mul":
-        return a * b
-    if expr.op == "min":
-        return np.minimum(a, b)
-    if expr.op == "max":
-        return np.maximum(a, b)
-    raise AssertionError(f"operation {expr.op!r} is not used by the GL table")
-
-
 def _blend_part(
     env: dict[str, np.ndarray | float], sf: str, df: str, eq: str, part: int
 ) -> np.ndarray | float:
@@ -237,8 +217,8 @@ def _blend_part(
             elif exact == 1.0:
                 env[key] = env[colour]
             else:
-                env[key] = env[colour] * _evaluate(GL_FACTOR_EXPRS[name][part], env)
-    return _evaluate(GL_EQUATION_EXPRS[eq], env)
+                env[key] = env[colour] * evaluate_in(GL_FACTOR_EXPRS[name][part], env)
+    return evaluate_in(GL_EQUATION_EXPRS[eq], env)
 
 
 def blend_reference(

@@ -129,19 +129,37 @@ def _bpy_only_python() -> Path:
     return python
 
 
+def _python313_candidates() -> list[str]:
+    """Where a CPython 3.13 may be: ``PYTHON313``, ``python3.13`` on ``PATH``, pyenv's installed 3.13s.
+
+    pyenv's ``python3.13`` shim fails unless 3.13 is among the selected versions, although the
+    interpreter is installed under ``$(pyenv root)/versions``; those are tried too.
+    """
+    found = [os.environ.get("PYTHON313"), shutil.which("python3.13")]
+    pyenv = shutil.which("pyenv")
+    if pyenv:
+        root = subprocess.run([pyenv, "root"], capture_output=True, text=True, check=False, timeout=60)
+        if root.returncode == 0 and root.stdout.strip():
+            found += sorted(str(p) for p in Path(root.stdout.strip()).glob("versions/3.13*/bin/python3.13"))
+    return [c for c in found if c]
+
+
 def _python313() -> str | None:
-    """A working CPython 3.13 (``PYTHON313`` or ``python3.13`` on ``PATH``), else None."""
-    candidate = os.environ.get("PYTHON313") or shutil.which("python3.13")
-    if not candidate:
-        return None
-    done = subprocess.run(
-        [candidate, "-c", "import sys; print(sys.version_info[:2])"],
-        capture_output=True,
-        text=True,
-        check=False,
-        timeout=60,
-    )
-    return candidate if done.returncode == 0 and "(3, 13)" in done.stdout else None
+    """A working CPython 3.13 (the first of :func:`_python313_candidates` that runs), else None."""
+    for candidate in _python313_candidates():
+        try:
+            done = subprocess.run(
+                [candidate, "-c", "import sys; print(sys.version_info[:2])"],
+                capture_output=True,
+                text=True,
+                check=False,
+                timeout=60,
+            )
+        except OSError:
+            continue
+        if done.returncode == 0 and "(3, 13)" in done.stdout:
+            return candidate
+    return None
 
 
 def _bpy52_only_python(python313: str) -> Path:
@@ -318,7 +336,9 @@ def test_installed_on_blender_52_uses_the_cp313_wheels(
     # own reductions may round differently between major versions, hence 1e-5 (float32 output).
     python313 = _python313()
     if python313 is None:
-        pytest.skip("no working python3.13 (set PYTHON313) to build the Blender 5.2 environment")
+        pytest.skip(
+            "no working python3.13 (set PYTHON313; tried PATH and pyenv) to build the Blender 5.2 environment"
+        )
     python = _bpy52_only_python(python313)
     script = tmp_path / "installed.py"
     script.write_text(INSTALLED, encoding="utf-8")

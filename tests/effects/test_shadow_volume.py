@@ -90,9 +90,16 @@ def test_camera_inside_volume_zfail_matches_embree(caster, light_name):
 
 
 @pytest.mark.skipif(not numba_available(), reason="numba not installed")
+@pytest.mark.parametrize("parallel", [False, True])
 @pytest.mark.parametrize("method", ["zfail", "zpass"])
-def test_engines_count_identically(method):
-    """Integer counts from the same float expressions: numba and numpy agree exactly (deterministic)."""
+def test_engines_count_identically(method, parallel, monkeypatch):
+    """Integer counts from the same float expressions: numba and numpy agree exactly (deterministic),
+    on one thread and with the tile rows interleaved between threads (forced on this small image)."""
+    import blinn_phong.shadow_volume as sv
+
+    if parallel:
+        monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
+        monkeypatch.setattr(sv, "_threads", lambda: 3)  # three bands, whatever the machine
     light = LIGHTS["point"]
     scene = scene_with(casters("pair") + casters("box"), light, outside_camera())
     pts, _, _, _ = samples(scene, 80, 60)

@@ -28,6 +28,7 @@ from blinn_phong.shadow_volume import (
     zpass_is_safe,
 )
 from tests.effects.volume_scenes import (
+    HEIGHT,
     LIGHTS,
     WIDTH,
     boundary_band,
@@ -194,3 +195,94 @@ def test_a_silhouette_with_a_gap_streaks(method):
         worst = max(worst or 0, int(np.count_nonzero(wrong)))
     assert worst > 0, "some gap must show as a streak"
     assert WIDTH <= 160
+
+
+def _every_layer(scene, width=WIDTH, height=HEIGHT):
+    """Every fragment at every pixel centre, hidden ones included (what an A-buffer shades):
+    (world points, face normals, flat pixel index, nearest-at-its-pixel flag)."""
+    from blinn_phong.raster import interpolate, rasterize, resolve_nearest
+    from blinn_phong.render import prepare_scene
+
+    prepared = prepare_scene(scene)
+    frags = rasterize(prepared.clip, prepared.triangles, width, height)
+    nearest = np.zeros(len(frags.pixel), bool)
+    win = resolve_nearest(frags)
+    nearest[win[win >= 0]] = True
+    eye = interpolate(frags, prepared.triangles, prepared.eye_position)
+    world = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
+    return world, prepared.face_world_normal[frags.triangle], frags.pixel, nearest
+
+
+@pytest.mark.parametrize("light_name", sorted(LIGHTS))
+def test_zpass_without_light_caps_is_wrong_behind_a_caster(light_name):
+    """Heidmann's z-pass draws the volume sides only. That counts right at the nearest surface,
+    where no caster face can lie in front of the sample, but a receiver hidden behind a caster
+    (a layer an A-buffer shades, or a surface seen through a transparent caster) has the
+    caster's lit faces — the light cap — between it and the eye. With the cap X left out the
+    count is ``w − c_X`` (module docstring), so the wrong samples are exactly those where the
+    light cap's own z-pass count ``c_X`` is not 0; for a convex caster the camera ray crosses its
+    surface twice, so ``c_X ∈ {−1, 0, 1}`` and it is non-zero exactly when one of the two
+    crossings is a lit face and the other is not. Those samples are all hidden from the eye
+    (an Embree ray from the eye to them is blocked). The camera is outside every volume and
+    ``choose_stencil`` picks z-pass: with the light caps drawn it agrees with Embree."""
+    from blinn_phong.raytrace import RayScene
+    from blinn_phong.shadow_volume import choose_stencil
+
+    light = LIGHTS[light_name]
+    scene = scene_with(casters("sphere"), light, outside_camera())
+    tris = world_triangles(scene)
+    pts, nrm, pix, nearest = _every_layer(scene)
+    truth = embree_visibility(light, tris, pts, nrm)
+    # leave out samples next to a lit/shadowed boundary of Embree's mask, layer by layer
+    band = np.zeros(len(pts), bool)
+    for layer_nearest in (True, False):
+        sel = nearest == layer_nearest
+        order = np.flatnonzero(sel)
+        img = image_of(truth[sel].astype(np.int64), pix[sel])
+        band[order] = boundary_band(img, radius=1).ravel()[pix[sel]]
+    ok = ~band
+    q = pts + 1e-4 * _towards(nrm, pts, light)
+    view, proj = scene.camera.view, scene.camera.projection
+    assert choose_stencil(light, tris, view, proj, q)[0] == "zpass"
+    sides = shadow_volume_triangles(tris, light, caps=False)
+    with_cap = shadow_volume_triangles(tris, light, caps="light")
+    # the light caps, built here: every triangle turned to face the light (the sphere's lit faces;
+    # the open ground quad's triangles, each its own sliver, reversed where they face away)
+    normal = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    if isinstance(light, DirectionalLight):
+        facing = -(normal @ np.asarray(light.direction, float))
+    else:
+        facing = np.einsum("ij,ij->i", normal, np.asarray(light.position) - tris[:, 0])
+    ground = np.arange(len(tris)) < 2  # scene_with puts the ground quad first
+    turned = np.where((facing < 0)[:, None, None], tris[:, ::-1], tris)
+    cap_tris = turned[(facing > 0) | ground]
+    cap = np.concatenate([cap_tris, np.ones((len(cap_tris), 3, 1))], axis=2)
+
+    def rows(a):
+        return np.unique(a.reshape(len(a), -1), axis=0)
+
+    assert np.array_equal(rows(with_cap), rows(np.concatenate([sides, cap])))
+    assert len(with_cap) == len(sides) + len(cap)
+    heidmann = stencil_counts(sides, view, proj, q, stencil="zpass")
+    capped = stencil_counts(with_cap, view, proj, q, stencil="zpass")
+    c_x = stencil_counts(cap, view, proj, q, stencil="zpass")
+    # with the light caps z-pass is exact on every sample, hidden layers included
+    assert np.count_nonzero(((capped == 0) != (truth == 1)) & ok) == 0
+    assert np.count_nonzero(nearest & ~ok) < np.count_nonzero(nearest & ok)  # most samples are judged
+    wrong = ((heidmann == 0) != (truth == 1)) & ok
+    # derived: wrong exactly where the left-out cap counts, and c_X ∈ {−1, 0, 1} (convex caster)
+    assert np.array_equal(wrong, (c_x != 0) & ok)
+    assert set(np.unique(c_x)) <= {-1, 0, 1}
+    # at the nearest surface Heidmann's omission is harmless: no caster face is in front
+    assert not np.any(wrong & nearest)
+    # every wrong sample is hidden from the eye by a caster (Embree, eye → sample)
+    eye = np.linalg.inv(view)[:3, 3]
+    to = q[wrong] - eye
+    dist = np.linalg.norm(to, axis=1)
+    hidden = RayScene(tris).occluded(np.broadcast_to(eye, to.shape), to / dist[:, None], dist * (1 - 1e-6))
+    assert np.all(hidden)
+    # measured: a real share of the hidden samples behind the sphere is wrong
+    behind = ~nearest & ok
+    assert np.count_nonzero(wrong) > 0.05 * np.count_nonzero(behind), (
+        f"{np.count_nonzero(wrong)} wrong of {np.count_nonzero(behind)} hidden samples"
+    )

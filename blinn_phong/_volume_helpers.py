@@ -1,0 +1,64 @@
+"""Compiled helpers of the shadow-volume kernels (:mod:`blinn_phong.shadow_volume`), at module level.
+
+numba keys a cached kernel on the values it closes over; a kernel closing over another compiled
+function (a dispatcher, pickled with a per-process identity) misses the disk cache and is
+compiled again in every new process. The kernels reach these helpers through this module
+instead (``vh.mix``), so they load from the cache. Imported only where numba is installed.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["component", "mix", "project_one"]
+
+
+@numba.njit(inline="always", cache=True)
+def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+@numba.njit(inline="always", cache=True)
+def project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw):  # pragma: no cover
+    q0 = p[i, 0]
+    q1 = p[i, 1]
+    q2 = p[i, 2]
+    if moved:
+        n0 = n[i, 0]
+        n1 = n[i, 1]
+        n2 = n[i, 2]
+        if directional:
+            t0 = -light_vec[0]
+            t1 = -light_vec[1]
+            t2 = -light_vec[2]
+        else:
+            t0 = light_vec[0] - q0
+            t1 = light_vec[1] - q1
+            t2 = light_vec[2] - q2
+        dot = (n0 * t0 + n1 * t1) + n2 * t2
+        side = 1.0 if dot >= 0 else -1.0
+        length = np.sqrt((n0 * n0 + n1 * n1) + n2 * n2)
+        k = side * offset / max(length, 1e-300)
+        q0 = q0 + n0 * k
+        q1 = q1 + n1 * k
+        q2 = q2 + n2 * k
+    c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
+    c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
+    c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
+    c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
+    px[i] = c0 / c3
+    py[i] = c1 / c3
+    pz[i] = c2 / c3
+    pw[i] = c3
+
+
+@numba.njit(inline="always", cache=True)
+def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
+    if transform:  # as _transform sums it
+        return ((src[t, v, 0] * vp[r, 0] + src[t, v, 1] * vp[r, 1]) + src[t, v, 2] * vp[r, 2]) + src[
+            t, v, 3
+        ] * vp[r, 3]
+    return src[t, v, r]
