@@ -13,10 +13,12 @@ wall and CPU time) and reported as ratios to the plain frame of the same run:
 * ``fog`` — ``Fog("exp", density=0.05)`` on the opaque scene;
 * ``shadow_map`` (1024², default bias) and ``ray_traced`` — hard shadows from both lights.
 
-Peer (``--mesa``): the plain compiled frame of :mod:`benchmarks.bench_renderer`'s scene (about
-100k triangles, four lights, per-pixel Blinn-Phong, 1920×1080) against Mesa llvmpipe running
-:mod:`oracles.gl_lighting`'s GLSL shader on it, interleaved in the same run (medians of wall and
-process CPU time, llvmpipe's threads included).
+Peer (``--mesa``): the plain compiled frame against Mesa llvmpipe running
+:mod:`oracles.gl_lighting`'s GLSL shader on the same scene, interleaved in the same run (medians
+of wall and process CPU time, llvmpipe's threads included), for two scenes:
+:mod:`benchmarks.bench_renderer`'s (about 100k triangles, four lights, per-pixel Blinn-Phong,
+1920×1080) and :func:`small_sphere_scene` (a 64-segment sphere at 640×360, where the fixed
+per-frame costs dominate).
 
 Peak memory: each row is rendered once more in a fresh process (after a small warm-up render that
 loads the compiled kernels) and reports its peak resident set (``VmHWM``), with the warm-up's as
@@ -61,7 +63,17 @@ import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, save_figure, time_interleaved, write_json
 from blinn_phong.primitives import grid_plane, uv_sphere
 
-__all__ = ["CASES", "SCALING_CASES", "draw", "issue_scene", "main", "run", "scaling_series"]
+__all__ = [
+    "CASES",
+    "SCALING_CASES",
+    "draw",
+    "issue_scene",
+    "main",
+    "mesa_peer",
+    "run",
+    "scaling_series",
+    "small_sphere_scene",
+]
 
 
 def issue_scene(segments: int = 256, rings: int = 128, transparent: bool = False) -> bp.Scene:
@@ -236,47 +248,84 @@ def scaling_series(segments: int, quick: bool = False) -> dict[str, list[dict]]:
     return series
 
 
-def mesa_peer(repeat: int = 3) -> dict[str, object] | None:
-    """Plain compiled frame vs Mesa llvmpipe GLSL on :mod:`benchmarks.bench_renderer`'s scene, interleaved.
+#: The small scene of the fixed per-frame costs: a 64-segment UV sphere at 640×360.
+SMALL_SPHERE = (64, 32, 640, 360)
 
-    Returns medians of wall and process CPU seconds and their ratios (ours / Mesa), or None when
-    no EGL context can be made.
+
+def small_sphere_scene() -> bp.Scene:
+    """One ``uv_sphere(64, 32)`` (per-pixel Blinn-Phong) under a directional and a point light:
+    the frame whose cost is mostly fixed per-frame work (planning, set-up, buffers)."""
+    segments, rings, width, height = SMALL_SPHERE
+    positions, triangles, normals = uv_sphere(segments, rings)
+    material = bp.Material(diffuse=(0.8, 0.3, 0.2), specular=(0.5, 0.5, 0.5), shininess=32.0)
+    camera = bp.Camera.perspective(40.0, width / height, 0.1, 100.0, view=bp.look_at((0, 0.5, 4), (0, 0, 0)))
+    lights = [bp.DirectionalLight(direction=(-1.0, -1.0, -1.0)), bp.PointLight(position=(2.0, 3.0, 2.0))]
+    return bp.Scene([bp.Mesh(positions, triangles, normals, material=material)], lights, camera)
+
+
+def _peer_row(name: str, scene: bp.Scene, width: int, height: int, repeat: int) -> dict[str, object]:
+    """Our plain frame (``shadows="none"``) and Mesa's GLSL frame of ``scene``, interleaved."""
+    from oracles import gl_lighting
+
+    bp.render(scene, width, height, shadows="none")  # warm-up: kernels, first-touch pages
+    gl_lighting.render_glsl_phong(scene, width, height)
+    wall: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
+    cpu: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
+    stages: list[dict[str, float]] = []
+    for _ in range(repeat):
+        start, start_cpu = time.perf_counter(), time.process_time()
+        result = bp.render(scene, width, height, shadows="none")
+        wall["ours"].append(time.perf_counter() - start)
+        cpu["ours"].append(time.process_time() - start_cpu)
+        stages.append(dict(result.stats.seconds))
+        frame = gl_lighting.render_glsl_phong(scene, width, height, repeats=1)
+        wall["mesa_glsl"].append(frame.seconds)
+        cpu["mesa_glsl"].append(frame.cpu_seconds)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    return {
+        "scene": name,
+        "triangles": sum(len(m.triangles) for m in scene.meshes),
+        "size": [width, height],
+        "median_s": med,
+        "median_cpu_s": med_cpu,
+        "runs_s": wall,
+        "runs_cpu_s": cpu,
+        "stage_median_s": {k: float(np.median([s.get(k, 0.0) for s in stages])) for k in stages[0]},
+        "ratio_to_mesa": med["ours"] / med["mesa_glsl"],
+        "cpu_ratio_to_mesa": med_cpu["ours"] / med_cpu["mesa_glsl"],
+    }
+
+
+def mesa_peer(repeat: int = 3) -> dict[str, object] | None:
+    """Plain compiled frames vs Mesa llvmpipe GLSL, interleaved: two rows.
+
+    * :mod:`benchmarks.bench_renderer`'s scene (about 100k triangles, four lights, 1920×1080);
+    * :func:`small_sphere_scene` (a 64-segment sphere at 640×360): the fixed per-frame costs.
+
+    Each row holds medians of wall and process CPU seconds (llvmpipe's threads included), our
+    stage times and the ratios (ours / Mesa); the first row's fields are also at the top level
+    (as before the second row existed). None when no EGL context can be made.
     """
     from benchmarks.bench_renderer import HEIGHT, WIDTH, build_scene
     from oracles.egl import EGLUnavailable, gl_context
 
     try:
         gl_context()
-        from oracles import gl_lighting
+        from oracles import gl_lighting  # noqa: F401
     except EGLUnavailable as exc:
         print(f"Mesa unavailable, no peer ratio: {exc}")
         return None
-    scene = build_scene()
-    bp.render(scene, WIDTH, HEIGHT, shadows="none")  # warm-up: kernels, first-touch pages
-    gl_lighting.render_glsl_phong(scene, WIDTH, HEIGHT)
-    wall: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
-    cpu: dict[str, list[float]] = {"ours": [], "mesa_glsl": []}
-    for _ in range(repeat):
-        start, start_cpu = time.perf_counter(), time.process_time()
-        bp.render(scene, WIDTH, HEIGHT, shadows="none")
-        wall["ours"].append(time.perf_counter() - start)
-        cpu["ours"].append(time.process_time() - start_cpu)
-        frame = gl_lighting.render_glsl_phong(scene, WIDTH, HEIGHT, repeats=1)
-        wall["mesa_glsl"].append(frame.seconds)
-        cpu["mesa_glsl"].append(frame.cpu_seconds)
-    med = {k: float(np.median(v)) for k, v in wall.items()}
-    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
-    return {
-        "scene": "benchmarks.bench_renderer.build_scene()",
-        "triangles": sum(len(m.triangles) for m in scene.meshes),
-        "size": [WIDTH, HEIGHT],
-        "median_s": med,
-        "median_cpu_s": med_cpu,
-        "runs_s": wall,
-        "runs_cpu_s": cpu,
-        "ratio_to_mesa": med["ours"] / med["mesa_glsl"],
-        "cpu_ratio_to_mesa": med_cpu["ours"] / med_cpu["mesa_glsl"],
-    }
+    big = _peer_row("benchmarks.bench_renderer.build_scene()", build_scene(), WIDTH, HEIGHT, repeat)
+    segments, rings, width, height = SMALL_SPHERE
+    small = _peer_row(
+        f"benchmarks.bench_frame.small_sphere_scene() (uv_sphere({segments}, {rings}))",
+        small_sphere_scene(),
+        width,
+        height,
+        max(repeat, 5),  # a short frame: more runs for a stable median
+    )
+    return {**big, "rows": [big, small]}
 
 
 def run(
@@ -491,10 +540,14 @@ def main(argv: list[str] | None = None) -> None:
     )
     peer = data.get("mesa_peer")
     if peer:
-        print(
-            f"plain frame vs Mesa llvmpipe ({peer['triangles']} triangles): "
-            f"wall {peer['ratio_to_mesa']:.2f}×, CPU {peer['cpu_ratio_to_mesa']:.2f}×"
-        )
+        for row in peer.get("rows", [peer]):
+            w, h = row["size"]
+            ours, mesa = row["median_s"]["ours"] * 1e3, row["median_s"]["mesa_glsl"] * 1e3
+            print(
+                f"plain frame vs Mesa llvmpipe ({row['triangles']} triangles, {w}×{h}): "
+                f"ours {ours:.1f} ms, Mesa {mesa:.1f} ms, "
+                f"wall {row['ratio_to_mesa']:.2f}×, CPU {row['cpu_ratio_to_mesa']:.2f}×"
+            )
     if args.charts is not None:
         for path in draw(data, args.charts / "charts"):
             print(f"chart {path}")

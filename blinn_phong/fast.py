@@ -1,13 +1,19 @@
 """The compiled (numba) engine of the frame stages; :mod:`blinn_phong.raster`, :mod:`blinn_phong.visibility`
 and :mod:`blinn_phong.resolve` hold the numpy references.
 
-* Visibility: the same triangle setup as the reference (:func:`blinn_phong.raster._setup_triangles`:
-  the same clipping, snapping, edge functions and fill rule) through compiled scan-conversion
+* Visibility: the same triangle setup as the reference (:func:`blinn_phong.raster._setup_triangles`,
+  computed to the same bits by :func:`setup_triangles_compiled`: the same clipping, snapping,
+  edge functions and fill rule) through compiled scan-conversion
   loops. :func:`visible_fragments_compiled` keeps only the nearest fragment per sample;
   :func:`frame_fragments_compiled` also builds, per sample, the list of transparent fragments
   in front of the opaque depth (a counting pass, a prefix sum, a filling pass), so no array of
   all fragments is ever built. Barycentrics and depths of the kept fragments come from a
   compiled twin of :func:`blinn_phong.raster._fragments_from_hits`.
+* The plain frame fused (:func:`shade_plain_winners_compiled`, :func:`shade_plain_fragments_compiled`):
+  one sample per pixel, no transparency resolve, no fog, per-pixel shading: each pixel's nearest
+  fragment interpolated, lit by :func:`blinn_phong.lighting.point_terms` (the lighting kernel's
+  own compiled equation) and written into the float32 frame buffers in one parallel pass, with
+  the operations of the separate stages in their order (the same images, no (N, 3) arrays).
 * :func:`fragment_colours_compiled`: transparency models, Kay–Greenberg, wash-out and fog per
   fragment (twin of :func:`blinn_phong.resolve.fragment_colours`).
 * :func:`resolve_frame_compiled`: per pixel, each sample's transparent list sorted and
@@ -29,7 +35,8 @@ import os
 
 import numpy as np
 
-from blinn_phong.raster import Fragments, _setup_triangles, _TriangleSetup
+from blinn_phong._numba import numba_available
+from blinn_phong.raster import Fragments, _TriangleSetup
 
 __all__ = [
     "numba_available",
@@ -39,14 +46,9 @@ __all__ = [
 ]
 
 
-@functools.lru_cache(maxsize=1)
-def numba_available() -> bool:
-    """True when numba imports (the compiled path can be used)."""
-    try:
-        import numba  # noqa: F401
-    except Exception:
-        return False
-    return True
+#: The z-buffer kernels' inlined helpers, set by :func:`_kernel`.
+_triangle_setup: object = None
+_sample_depth: object = None
 
 
 @functools.lru_cache(maxsize=1)
@@ -93,6 +95,11 @@ def _kernel() -> object:  # a numba dispatcher
             return -1.0
         return max(depth, 0.0)
 
+    # Module globals, not closure variables: numba's disk-cache key hashes closure variables, and
+    # a compiled function in one changes it in every process (the kernels were never cached).
+    global _triangle_setup, _sample_depth
+    _triangle_setup, _sample_depth = triangle_setup, sample_depth
+
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
         n_bands, fine_w, fine_h, selected, x0, x1, y0, y1, a, b, c, top_left, xe, ye, area, z, source
@@ -110,11 +117,11 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
-                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
+                ex_area, exact, abs_area = _triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
                     cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(
+                        depth = _sample_depth(
                             t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
                         )
                         if depth < 0.0:
@@ -168,11 +175,11 @@ def _kernel() -> object:  # a numba dispatcher
                 hi = min(y1[t], r1)
                 if lo > hi:
                     continue
-                ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
+                ex_area, exact, abs_area = _triangle_setup(t, xe, ye, area)
                 for py in range(lo, hi + 1):
                     cy = py + 0.5
                     for px in range(x0[t], x1[t] + 1):
-                        depth = sample_depth(
+                        depth = _sample_depth(
                             t, px + 0.5, cy, a, b, c, top_left, xe, ye, ex_area, exact, abs_area, z
                         )
                         if depth < 0.0:
@@ -282,7 +289,7 @@ def visible_fragments_compiled(
     (:func:`blinn_phong.visibility.visible_fragments` with ``engine="numpy"``), computed
     by a compiled loop. Requires numba (:func:`numba_available`).
     """
-    setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+    setup = setup_triangles_compiled(clip_xyzw, triangles, width, height, samples, cull_backfaces)
     fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
     threads = max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
     n_bands = max(1, min(fine_h, 4 * threads))
@@ -951,3 +958,399 @@ def resolve_frame_compiled(
         *out,
     )  # fmt: skip
     return out
+
+
+#: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
+_point_terms: object = None
+
+
+@functools.lru_cache(maxsize=1)
+def _plain_kernel() -> object:  # a numba dispatcher
+    import hashlib
+    import math
+
+    import numba
+
+    from blinn_phong import lighting
+
+    global _point_terms
+    # The lighting equation: the same compiled function as lighting.shade's kernel. A module
+    # global, not a closure variable (numba's disk-cache key hashes closure variables, and a
+    # compiled function in one changes it in every process). numba does not track that this
+    # kernel inlines code from lighting.py, so the hash of that file is a closure constant:
+    # editing the equation invalidates the cached kernel.
+    _point_terms = lighting.point_terms()
+    with open(lighting.__file__, "rb") as source:
+        lighting_stamp = int(hashlib.sha256(source.read()).hexdigest()[:15], 16)
+
+    @numba.njit(parallel=True, cache=True)
+    def plain(
+        width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
+        source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
+        geometry, materials, lights, flags, has_vis, vis, vis_mean,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
+        # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
+        # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Then
+        # surface_at_fragments_compiled's interpolation, the lighting kernel's equation
+        # (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
+        # resolve_plain's float32 writes, with the same operations in the same order.
+        # One loop body, no calls per pixel: a compiled call per pixel would pay a reference
+        # count per array argument; tuples are unpacked once, outside the parallel loop.
+        triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
+        bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
+        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
+        local_viewer, blinn, gl_compat, separate = flags
+        covered = np.zeros(height, np.int64)
+        covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
+        for i_row in numba.prange(height):
+            row = row_order[i_row]  # rows interleaved over the threads (balanced work)
+            n_row = 0
+            cy = row + 0.5
+            for col in range(width):
+                o = index[row * width + col]
+                if o < 0:
+                    for ch in range(4):
+                        o_rgba[row, col, ch] = 0.0
+                    for ch in range(3):
+                        o_amb[row, col, ch] = 0.0
+                        o_dif[row, col, ch] = 0.0
+                        o_spe[row, col, ch] = 0.0
+                        o_nrm[row, col, ch] = 0.0
+                    o_depth[row, col] = np.float32(1.0)
+                    if has_vis:
+                        o_shadow[row, col, 0] = 0.0
+                    continue
+                n_row += 1
+                if from_winners:
+                    t = o
+                    cx = col + 0.5
+                    ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
+                        ye[t, 1] - ye[t, 0]
+                    )
+                    if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
+                        l0 = (
+                            (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
+                        ) / ex_area
+                        l1 = (
+                            (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
+                        ) / ex_area
+                        l2 = (
+                            (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
+                        ) / ex_area
+                    else:
+                        aa = abs(area[t])
+                        l0 = (ea[t, 0] * cx + eb[t, 0] * cy + ec[t, 0]) / aa
+                        l1 = (ea[t, 1] * cx + eb[t, 1] * cy + ec[t, 1]) / aa
+                        l2 = (ea[t, 2] * cx + eb[t, 2] * cy + ec[t, 2]) / aa
+                    depth = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
+                    q0 = l0 / w[t, 0]
+                    q1 = l1 / w[t, 1]
+                    q2 = l2 / w[t, 2]
+                    qs = q0 + q1 + q2
+                    q0 /= qs
+                    q1 /= qs
+                    q2 /= qs
+                    b0 = q0 * weights[t, 0, 0] + q1 * weights[t, 1, 0] + q2 * weights[t, 2, 0]
+                    b1 = q0 * weights[t, 0, 1] + q1 * weights[t, 1, 1] + q2 * weights[t, 2, 1]
+                    b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
+                    src = source[t]
+                    front = sub_front[t]
+                else:
+                    b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
+                    depth = frag_depth[o]
+                    src = tri[o]
+                    front = frag_front[o]
+                back = 1 if two_sided and not front else 0
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
+                nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
+                nx, ny, nz = nx * scale, ny * scale, nz * scale
+                wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+                wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+                wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+                length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                scale = 1.0 / length if length > 0 else 0.0
+                wx, wy, wz = wx * scale, wy * scale, wz * scale
+                mid = 2 * triangle_mesh[src] + back
+                ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                    o, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                    has_vis, vis,
+                )  # fmt: skip
+                r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
+                if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
+                    if separate:
+                        r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
+                        g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
+                        b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
+                    else:
+                        r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                a = opacity[mid]
+                # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve_plain does.
+                o_rgba[row, col, 0] = 0.0 + np.float32(a * r)
+                o_rgba[row, col, 1] = 0.0 + np.float32(a * g)
+                o_rgba[row, col, 2] = 0.0 + np.float32(a * b)
+                o_rgba[row, col, 3] = 0.0 + np.float32(a)
+                o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
+                o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
+                o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
+                o_dif[row, col, 0] = 0.0 + np.float32(dr * a)
+                o_dif[row, col, 1] = 0.0 + np.float32(dg * a)
+                o_dif[row, col, 2] = 0.0 + np.float32(db * a)
+                o_spe[row, col, 0] = 0.0 + np.float32(sr * a)
+                o_spe[row, col, 1] = 0.0 + np.float32(sg * a)
+                o_spe[row, col, 2] = 0.0 + np.float32(sb * a)
+                o_nrm[row, col, 0] = 0.0 + np.float32(wx)
+                o_nrm[row, col, 1] = 0.0 + np.float32(wy)
+                o_nrm[row, col, 2] = 0.0 + np.float32(wz)
+                o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
+                if has_vis:
+                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
+            covered[row] = n_row
+        return covered.sum()
+
+    return plain
+
+
+_NO_SETUP = (
+    np.zeros(0, np.int64), np.zeros(0, np.bool_), *(np.zeros((0, 3)) for _ in range(2)), np.zeros(0),
+    *(np.zeros((0, 3)) for _ in range(5)), np.zeros((0, 3, 3)),
+)  # fmt: skip
+_NO_FRAGMENTS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.bool_))
+
+
+def _row_order(height: int) -> np.ndarray:
+    """Rows grouped by their residue modulo 16: a parallel loop's contiguous share of iterations
+    then covers rows spread over the whole image (an image's busy rows are often together)."""
+    return np.argsort(np.arange(height) % 16, kind="stable").astype(np.int64)
+
+
+#: What the fused plain kernels read of a prepared scene: ``(two_sided, geometry, materials,
+#: lights, flags)`` with geometry ``(triangles, triangle_mesh, eye_position, eye_normal,
+#: world_normal)``, materials and lights as :func:`blinn_phong.lighting.material_tables` and
+#: :func:`blinn_phong.lighting.light_tables` give them, flags ``(local_viewer, blinn,
+#: gl_compat, separate_specular)``.
+PlainTables = tuple[bool, tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple]
+
+
+def shade_plain_fragments_compiled(
+    width: int,
+    height: int,
+    opaque_of: np.ndarray,
+    triangle: np.ndarray,
+    bary: np.ndarray,
+    depth: np.ndarray,
+    front_facing: np.ndarray,
+    tables: PlainTables,
+    visibility: np.ndarray | None,
+    vis_mean: np.ndarray | None,
+    out: tuple[np.ndarray, ...],
+) -> None:
+    """The plain frame's shading and resolve fused: each pixel's one fragment shaded and written.
+
+    For one sample per pixel, no transparency resolve, no fog, per-pixel (phong) shading and
+    partial-occlusion colours ``(α·c, α)``: per pixel, the fragment ``opaque_of[pixel]`` (−1:
+    empty) is interpolated (as :func:`surface_at_fragments_compiled`), lit by
+    :func:`blinn_phong.lighting.point_terms` with ``visibility`` (N, L, K) (K = 1 or 3) and
+    written into the float32 ``out = (rgba, ambient, diffuse, specular, normal, depth, shadow)``
+    buffers as :func:`resolve_plain_compiled` writes them: the same images as the separate
+    shading, colour and resolve stages, without their (N, 3) float64 arrays.
+    """
+    two_sided, geometry, materials, lights, flags = tables
+    fragments = (
+        np.ascontiguousarray(triangle, dtype=np.int64), np.ascontiguousarray(bary),
+        np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_),
+    )  # fmt: skip
+    _plain_kernel()(
+        width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
+        geometry, materials, lights, flags, visibility is not None,
+        np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
+        np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
+        *out,
+    )  # fmt: skip
+
+
+def nearest_winners_compiled(setup: _TriangleSetup) -> np.ndarray:
+    """(fine height · fine width,) int64: the sub-triangle of ``setup`` nearest at each fine sample
+    (−1 where none), by the compiled z-buffer (``GL_LESS`` in draw order)."""
+    fine_w, fine_h = setup.width * setup.k, setup.height * setup.k
+    zbuffer = _kernel()[0]
+    winner, _ = zbuffer(
+        _bands(fine_h), fine_w, fine_h, setup.selected.astype(np.int64), setup.x0, setup.x1, setup.y0,
+        setup.y1, setup.a, setup.b, setup.c, setup.top_left, setup.x_exact, setup.y_exact, setup.area,
+        setup.z, setup.source,
+    )  # fmt: skip
+    return winner
+
+
+def shade_plain_winners_compiled(
+    setup: _TriangleSetup, winner: np.ndarray, tables: PlainTables, out: tuple[np.ndarray, ...]
+) -> int:
+    """:func:`shade_plain_fragments_compiled` straight from the z-buffer's winners (one sample per
+    pixel, no visibility): barycentrics and depth as :func:`frame_fragments_compiled` computes them,
+    in the same pass. Returns the number of covered pixels (fragments shaded)."""
+    if setup.k != 1:
+        raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
+    two_sided, geometry, materials, lights, flags = tables
+    sub = (
+        setup.source, setup.front, setup.x_exact, setup.y_exact, setup.area, setup.a, setup.b, setup.c,
+        setup.z, setup.w, np.ascontiguousarray(setup.weights),
+    )  # fmt: skip
+    return int(
+        _plain_kernel()(
+            setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
+            two_sided, geometry, materials, lights, flags, False, np.zeros((0, 0, 1)), np.zeros(0), *out,
+        )
+    )  # fmt: skip
+
+
+@functools.lru_cache(maxsize=1)
+def _setup_kernels() -> object:  # numba dispatchers
+
+    import numba
+
+    @numba.njit(cache=True)
+    def classify(clip, tri, n_in):  # pragma: no cover - compiled
+        # Vertices inside the near plane (z + w >= 0) per triangle, as raster._clip_near counts them
+        # (serial: a few operations per triangle, not worth a parallel region's start-up).
+        for t in range(tri.shape[0]):
+            n = 0
+            for j in range(3):
+                v = tri[t, j]
+                if clip[v, 2] + clip[v, 3] >= 0:
+                    n += 1
+            n_in[t] = n
+
+    @numba.njit(parallel=True, cache=True)
+    def setup(
+        clip, tri, whole, extra, fine_w, fine_h, cull, w_out, xe_out, ye_out, z_out, area_out, front_out,
+        keep_out, ok_out, x0_out, x1_out, y0_out, y1_out, a_out, b_out, c_out, tl_out, scale,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        # raster._setup_triangles per sub-triangle, the same operations in the same order: the
+        # whole triangles ``tri[whole]`` first, then the near-clipped sub-triangles ``extra``.
+        n_whole = whole.shape[0]
+        half_w = 0.5 * fine_w
+        half_h = 0.5 * fine_h
+        for s in numba.prange(n_whole + extra.shape[0]):
+            ok = True
+            x = (0.0, 0.0, 0.0)
+            y = (0.0, 0.0, 0.0)
+            for j in range(3):
+                if s < n_whole:
+                    v = tri[whole[s], j]
+                    cx, cy, cz, cw = clip[v, 0], clip[v, 1], clip[v, 2], clip[v, 3]
+                else:
+                    e = s - n_whole
+                    cx, cy, cz, cw = extra[e, j, 0], extra[e, j, 1], extra[e, j, 2], extra[e, j, 3]
+                ok = ok and cw > 0
+                w_out[s, j] = cw
+                xe = (cx / cw + 1.0) * half_w
+                ye = fine_h - (cy / cw + 1.0) * half_h
+                xe_out[s, j] = xe
+                ye_out[s, j] = ye
+                z_out[s, j] = (cz / cw + 1.0) * 0.5
+                xs = np.rint(xe * scale) / scale  # snapped to the sub-pixel grid: coverage only
+                ys = fine_h - np.rint((fine_h - ye) * scale) / scale
+                if j == 0:
+                    x = (xs, x[1], x[2])
+                    y = (ys, y[1], y[2])
+                elif j == 1:
+                    x = (x[0], xs, x[2])
+                    y = (y[0], ys, y[2])
+                else:
+                    x = (x[0], x[1], xs)
+                    y = (y[0], y[1], ys)
+            ok_out[s] = ok
+            area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+            area_out[s] = area
+            front = area < 0
+            front_out[s] = front
+            keep = area != 0
+            if cull:
+                keep = keep and front
+            x0 = min(max(np.ceil(min(x[0], x[1], x[2]) - 0.5), 0.0), float(fine_w))
+            x1 = min(max(np.floor(max(x[0], x[1], x[2]) - 0.5), -1.0), float(fine_w - 1))
+            y0 = min(max(np.ceil(min(y[0], y[1], y[2]) - 0.5), 0.0), float(fine_h))
+            y1 = min(max(np.floor(max(y[0], y[1], y[2]) - 0.5), -1.0), float(fine_h - 1))
+            x0_out[s], x1_out[s], y0_out[s], y1_out[s] = int(x0), int(x1), int(y0), int(y1)
+            keep_out[s] = keep and x0 <= x1 and y0 <= y1
+            sign = -1.0 if area < 0 else 1.0
+            for i in range(3):
+                j = (i + 1) % 3
+                k = (i + 2) % 3
+                xj, yj, xk, yk = x[j], y[j], x[k], y[k]
+                a = -(yk - yj) * sign
+                b = (xk - xj) * sign
+                a_out[s, i] = a
+                b_out[s, i] = b
+                c_out[s, i] = ((yk - yj) * xj - (xk - xj) * yj) * sign
+                tl_out[s, i] = a > 0 or (a == 0 and b < 0)
+
+    return classify, setup
+
+
+def setup_triangles_compiled(
+    clip_xyzw: np.ndarray, triangles: np.ndarray, width: int, height: int, samples: int, cull_backfaces: bool
+) -> _TriangleSetup:
+    """Compiled twin of :func:`blinn_phong.raster._setup_triangles`: the same arrays, bit for bit.
+
+    The same validation; triangles crossing the near plane are clipped by the reference
+    :func:`blinn_phong.raster._clip_near` (on those triangles only), and every sub-triangle's
+    window positions, snapping, bounding box and edge functions are computed in one parallel
+    loop with the reference's operations in the reference's order (IEEE arithmetic, no
+    fast-math: the same bits; tests/blinn_phong/test_engines_agree.py checks every array).
+    """
+    from blinn_phong._checks import float_array
+    from blinn_phong.raster import SUBPIXEL_BITS, _check_size, _check_triangles, _clip_near, _grid_side
+
+    clip = np.ascontiguousarray(float_array(clip_xyzw, "clip_xyzw", (None, 4)))
+    tri = np.ascontiguousarray(_check_triangles(triangles, len(clip)))
+    width = _check_size(width, "width")
+    height = _check_size(height, "height")
+    k = _grid_side(samples)
+    fine_w, fine_h = width * k, height * k
+    classify, setup = _setup_kernels()
+    n_in = np.empty(len(tri), np.int64)
+    classify(clip, tri, n_in)
+    whole = np.flatnonzero(n_in == 3)
+    partial = np.flatnonzero((n_in == 1) | (n_in == 2))
+    if len(partial):
+        extra, extra_weights, extra_source = _clip_near(clip[tri[partial]])
+        extra_source = partial[extra_source]
+    else:
+        extra, extra_weights, extra_source = np.zeros((0, 3, 4)), np.zeros((0, 3, 3)), np.zeros(0, np.int64)
+    n = len(whole) + len(extra)
+    f64 = np.float64
+    w, xe, ye, z = (np.empty((n, 3), f64) for _ in range(4))
+    area = np.empty(n, f64)
+    front, keep, ok = (np.empty(n, np.bool_) for _ in range(3))
+    x0, x1, y0, y1 = (np.empty(n, np.int64) for _ in range(4))
+    a, b, c = (np.empty((n, 3), f64) for _ in range(3))
+    top_left = np.empty((n, 3), np.bool_)
+    setup(
+        clip, tri, whole, np.ascontiguousarray(extra, dtype=f64), fine_w, fine_h, bool(cull_backfaces),
+        w, xe, ye, z, area, front, keep, ok, x0, x1, y0, y1, a, b, c, top_left, float(1 << SUBPIXEL_BITS),
+    )  # fmt: skip
+    source = np.concatenate([whole, extra_source]).astype(np.int64, copy=False)
+    weights = np.empty((n, 3, 3))
+    weights[: len(whole)] = np.eye(3)
+    weights[len(whole) :] = extra_weights
+    if not ok.all():  # a non-standard projection left w <= 0 after near clipping: dropped
+        arrays = [source, weights, w, xe, ye, z, area, front, keep, x0, x1, y0, y1, a, b, c, top_left]
+        source, weights, w, xe, ye, z, area, front, keep, x0, x1, y0, y1, a, b, c, top_left = (
+            v[ok] for v in arrays
+        )
+    return _TriangleSetup(
+        width, height, k, source, weights, w, xe, ye, z, area, front, np.flatnonzero(keep),
+        x0, x1, y0, y1, a, b, c, top_left,
+    )  # fmt: skip

@@ -27,10 +27,12 @@ not clamped here; the GL-compatibility clamp is the separate, explicit
 :func:`gl_clamp`.
 
 :func:`shade` has two engines: ``"numpy"`` (vectorised over points) and ``"numba"``
-(a compiled per-point loop). Both evaluate the per-light terms with the same two
+(a compiled per-point loop). Both evaluate the per-light terms with the same three
 functions, :func:`_view_vector`, :func:`_light_direction` and :func:`_reflection`, written
 once on numbers that may be arrays (numpy) or scalars (compiled by numba); the engines
-agree to 1e-12.
+agree to 1e-12. The compiled per-point body is :func:`point_terms`, which the fused frame
+kernel of :mod:`blinn_phong.fast` (interpolation, lighting and the frame buffers in one
+pass) calls as well.
 """
 
 from __future__ import annotations
@@ -58,7 +60,10 @@ __all__ = [
     "EyeLights",
     "ShadingTerms",
     "gl_clamp",
+    "light_tables",
     "lights_in_eye_space",
+    "material_tables",
+    "point_terms",
     "shade",
     "shade_many",
 ]
@@ -249,7 +254,7 @@ def shade(
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if engine != "numpy" and not per_light:
-        from blinn_phong.fast import numba_available
+        from blinn_phong._numba import numba_available
 
         if numba_available():
             ids = np.zeros(count, np.int64)
@@ -336,7 +341,7 @@ def shade_many(
     if engine not in ("numpy", "numba", "auto"):
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if engine != "numpy":
-        from blinn_phong.fast import numba_available
+        from blinn_phong._numba import numba_available
 
         if numba_available():
             return _shade_compiled(
@@ -474,44 +479,44 @@ def _shade_compiled(
     vis: np.ndarray | None,
 ) -> ShadingTerms:
     """:func:`shade_many` through the compiled kernel (same equation, same argument meaning)."""
-    a_cm = np.array([m.ambient for m in materials], dtype=np.float64).reshape(-1, 3)
-    emission = np.array([m.emission for m in materials], dtype=np.float64).reshape(-1, 3)
-    base = emission + a_cm * (np.asarray(global_ambient, dtype=np.float64) + lights.ambient_lights)
+    base, a_cm, d_cm, s_cm, shininess, opacity = material_tables(materials, lights, global_ambient)
     count = len(p)
     ambient = np.empty((count, 3))
     diffuse = np.empty((count, 3))
     specular = np.empty((count, 3))
+    if vis is None:
+        vis3 = np.zeros((0, 0, 1))
+    else:  # (N, L) -> (N, L, 1); (N, L, 3) per channel
+        vis3 = np.ascontiguousarray(vis if vis.ndim == 3 else vis[:, :, None], dtype=np.float64)
     _kernel()(
-        np.ascontiguousarray(p),
-        np.ascontiguousarray(n),
-        ids,
-        base,
-        a_cm,
-        np.array([m.diffuse for m in materials], dtype=np.float64).reshape(-1, 3),
-        np.array([m.specular for m in materials], dtype=np.float64).reshape(-1, 3),
-        np.array([m.shininess for m in materials], dtype=np.float64),
-        lights.position,
-        lights.spot_direction,
-        lights.cos_cutoff,
-        lights.spot_exponent,
-        lights.attenuation,
-        lights.ambient,
-        lights.diffuse,
-        lights.specular,
-        bool(model.local_viewer),
-        model.specular == "blinn",
-        np.zeros((0, 0, 1)) if vis is None else np.ascontiguousarray(vis.reshape(len(vis), len(lights), -1)),
-        ambient,
-        diffuse,
-        specular,
-    )
-    opacity = np.array([m.opacity for m in materials], dtype=np.float64)
+        np.ascontiguousarray(p), np.ascontiguousarray(n), ids, base, a_cm, d_cm, s_cm, shininess,
+        light_tables(lights), bool(model.local_viewer), model.specular == "blinn", vis3,
+        ambient, diffuse, specular,
+    )  # fmt: skip
     return ShadingTerms(ambient, diffuse, specular, opacity[ids])
 
 
 @functools.lru_cache(maxsize=1)
-def _kernel() -> object:  # a numba dispatcher
-    """The lighting equation as a compiled per-point loop over the shared per-light functions."""
+def point_terms() -> object:  # a numba dispatcher
+    """The lighting equation at one eye-space point, compiled: the per-point body of every kernel.
+
+    ``point_terms()(q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
+    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis,
+    vis)`` returns the nine floats ``(ambient, diffuse, specular)`` RGB of the module
+    docstring's equation at the point ``p`` with unit normal ``n`` (zero normals get ambient and
+    emission only), for material ``m`` of the tables of :func:`material_tables` (``bases`` =
+    emission + ``a_cm``·(global ambient + AmbientLights)) and the lights of an
+    :class:`EyeLights` as the arrays of :func:`light_tables`. With ``has_vis``, ``vis[q, i, c]``
+    (an (N, L, K) array, K = 1 or 3: one factor per light, or one per RGB channel) multiplies
+    light i's diffuse and specular terms.
+
+    It evaluates each light with the same Python functions as the numpy engine
+    (:func:`_view_vector`, :func:`_light_direction`, :func:`_reflection`), compiled for scalars
+    and inlined; the lighting kernel of :func:`shade` and the fused frame kernel of
+    :mod:`blinn_phong.fast` both call it, so the equation is written once. (Arrays are passed
+    one by one and light rows as tuples of scalars: inside a per-point loop, array views and
+    arrays unpacked from tuples cost a reference count each.)
+    """
     import numba
     from numba.extending import overload
 
@@ -519,67 +524,115 @@ def _kernel() -> object:  # a numba dispatcher
     for shared in (_view_vector, _light_direction, _reflection):
         overload(shared, strict=False, inline="always")(lambda *args, f=shared: f)
 
+    @numba.njit(inline="always", cache=True)
+    def terms(
+        q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
+        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis, vis,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        vx, vy, vz = _view_vector(px, py, pz, local_viewer)
+        ar, ag, ab = bases[m, 0], bases[m, 1], bases[m, 2]
+        a0, a1, a2 = a_cms[m, 0], a_cms[m, 1], a_cms[m, 2]
+        d0, d1, d2 = d_cms[m, 0], d_cms[m, 1], d_cms[m, 2]
+        s0, s1, s2 = s_cms[m, 0], s_cms[m, 1], s_cms[m, 2]
+        shininess = shininesses[m]
+        dr = dg = db = 0.0
+        sr = sg = sb = 0.0
+        per_channel = has_vis and vis.shape[2] == 3
+        for i in range(pos.shape[0]):
+            lx, ly, lz, att = _light_direction(
+                px, py, pz,
+                (pos[i, 0], pos[i, 1], pos[i, 2], pos[i, 3]),
+                (spot_dir[i, 0], spot_dir[i, 1], spot_dir[i, 2]),
+                cos_cut[i], spot_exp[i], (atten[i, 0], atten[i, 1], atten[i, 2]),
+            )  # fmt: skip
+            ar += att * (a0 * l_amb[i, 0])
+            ag += att * (a1 * l_amb[i, 1])
+            ab += att * (a2 * l_amb[i, 2])
+            if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
+                continue  # _reflection gives exactly 0 here
+            fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
+            wr = wg = wb = 1.0
+            if has_vis:
+                wr = vis[q, i, 0]
+                wg = vis[q, i, 1] if per_channel else wr
+                wb = vis[q, i, 2] if per_channel else wr
+            dr += fd * (d0 * l_dif[i, 0]) * wr
+            dg += fd * (d1 * l_dif[i, 1]) * wg
+            db += fd * (d2 * l_dif[i, 2]) * wb
+            sr += fs * (s0 * l_spe[i, 0]) * wr
+            sg += fs * (s1 * l_spe[i, 1]) * wg
+            sb += fs * (s2 * l_spe[i, 2]) * wb
+        return ar, ag, ab, dr, dg, db, sr, sg, sb
+
+    return terms
+
+
+def light_tables(lights: EyeLights) -> tuple[np.ndarray, ...]:
+    """The ``lights`` tuple of :func:`point_terms` (contiguous float64 arrays of an :class:`EyeLights`)."""
+    return tuple(
+        np.ascontiguousarray(a, dtype=np.float64)
+        for a in (
+            lights.position,
+            lights.spot_direction,
+            lights.cos_cutoff,
+            lights.spot_exponent,
+            lights.attenuation,
+            lights.ambient,
+            lights.diffuse,
+            lights.specular,
+        )
+    )
+
+
+def material_tables(
+    materials: Sequence[Material], lights: EyeLights, global_ambient: Sequence[float] | np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """Per-material arrays ``(base, a_cm, d_cm, s_cm, shininess, opacity)`` of :func:`point_terms`.
+
+    ``base`` (M, 3) is emission + ``a_cm``·(global ambient + the AmbientLights' sum), the terms
+    that do not depend on the point.
+    """
+    a_cm = np.array([m.ambient for m in materials], dtype=np.float64).reshape(-1, 3)
+    emission = np.array([m.emission for m in materials], dtype=np.float64).reshape(-1, 3)
+    base = emission + a_cm * (np.asarray(global_ambient, dtype=np.float64) + lights.ambient_lights)
+    return (
+        base,
+        a_cm,
+        np.array([m.diffuse for m in materials], dtype=np.float64).reshape(-1, 3),
+        np.array([m.specular for m in materials], dtype=np.float64).reshape(-1, 3),
+        np.array([m.shininess for m in materials], dtype=np.float64),
+        np.array([m.opacity for m in materials], dtype=np.float64),
+    )
+
+
+#: :func:`point_terms`'s dispatcher once compiled kernels need it (a global: see :func:`_kernel`).
+_point_terms: object = None
+
+
+@functools.lru_cache(maxsize=1)
+def _kernel() -> object:  # a numba dispatcher
+    """The lighting equation as a compiled, parallel per-point loop over :func:`point_terms`."""
+    import numba
+
+    global _point_terms
+    # A module global, not a closure variable: numba's disk-cache key hashes closure variables,
+    # and a compiled function in one would change it in every process (no cache hit, ever).
+    _point_terms = point_terms()
+
     @numba.njit(parallel=True, cache=True)
     def kernel(
-        p,
-        n,
-        ids,
-        bases,
-        a_cms,
-        d_cms,
-        s_cms,
-        shininesses,
-        pos,
-        spot_dir,
-        cos_cut,
-        spot_exp,
-        atten,
-        l_amb,
-        l_dif,
-        l_spe,
-        local_viewer,
-        blinn,
-        vis,
-        out_amb,
-        out_dif,
-        out_spe,
-    ):  # pragma: no cover - compiled
+        p, n, ids, bases, a_cms, d_cms, s_cms, shininesses, lights, local_viewer, blinn, vis,
+        out_amb, out_dif, out_spe,
+    ):  # fmt: skip  # pragma: no cover - compiled
         count = p.shape[0]
-        n_lights = pos.shape[0]
-        has_vis = vis.shape[0] == count and vis.shape[1] == n_lights and count > 0
-        last = vis.shape[2] - 1  # vis is (N, L, K), K = 1 or 3: channel c reads index c if K == 3 else 0
+        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
+        has_vis = vis.shape[0] == count and vis.shape[1] == pos.shape[0] and count > 0
         for q in numba.prange(count):
-            px, py, pz = p[q, 0], p[q, 1], p[q, 2]
-            nx, ny, nz = n[q, 0], n[q, 1], n[q, 2]
-            mid = ids[q]
-            base = bases[mid]
-            a_cm = a_cms[mid]
-            d_cm = d_cms[mid]
-            s_cm = s_cms[mid]
-            shininess = shininesses[mid]
-            vx, vy, vz = _view_vector(px, py, pz, local_viewer)
-            ar, ag, ab = base[0], base[1], base[2]
-            dr = dg = db = 0.0
-            sr = sg = sb = 0.0
-            for i in range(n_lights):
-                lx, ly, lz, att = _light_direction(
-                    px, py, pz, pos[i], spot_dir[i], cos_cut[i], spot_exp[i], atten[i]
-                )
-                ar += att * (a_cm[0] * l_amb[i, 0])
-                ag += att * (a_cm[1] * l_amb[i, 1])
-                ab += att * (a_cm[2] * l_amb[i, 2])
-                if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
-                    continue  # _reflection gives exactly 0 here
-                fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
-                wr = vis[q, i, 0] if has_vis else 1.0
-                wg = vis[q, i, min(1, last)] if has_vis else 1.0
-                wb = vis[q, i, last] if has_vis else 1.0
-                dr += fd * (d_cm[0] * l_dif[i, 0]) * wr
-                dg += fd * (d_cm[1] * l_dif[i, 1]) * wg
-                db += fd * (d_cm[2] * l_dif[i, 2]) * wb
-                sr += fs * (s_cm[0] * l_spe[i, 0]) * wr
-                sg += fs * (s_cm[1] * l_spe[i, 1]) * wg
-                sb += fs * (s_cm[2] * l_spe[i, 2]) * wb
+            ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], ids[q], bases, a_cms, d_cms,
+                s_cms, shininesses, pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
+                local_viewer, blinn, has_vis, vis,
+            )  # fmt: skip
             out_amb[q, 0], out_amb[q, 1], out_amb[q, 2] = ar, ag, ab
             out_dif[q, 0], out_dif[q, 1], out_dif[q, 2] = dr, dg, db
             out_spe[q, 0], out_spe[q, 1], out_spe[q, 2] = sr, sg, sb

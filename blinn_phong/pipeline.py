@@ -31,12 +31,25 @@ from collections.abc import Callable
 
 import numpy as np
 
+from blinn_phong.fast import (
+    nearest_winners_compiled,
+    setup_triangles_compiled,
+    shade_plain_fragments_compiled,
+    shade_plain_winners_compiled,
+)
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
-from blinn_phong.resolve import FogParameters, FrameImage, fragment_colours, resolve_frame, side_tables
+from blinn_phong.resolve import (
+    FogParameters,
+    FrameImage,
+    fragment_colours,
+    resolve_frame,
+    shadow_pass_values,
+    side_tables,
+)
 from blinn_phong.scene import AmbientLight, Scene, SpotLight
-from blinn_phong.shading import shade_fragments
+from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragments
 from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
 from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
@@ -205,6 +218,55 @@ def light_visibilities(
 
 FrameResult = tuple[FrameImage, int]
 
+
+def _empty_frame(height: int, width: int, shadow: bool) -> FrameImage:
+    """Uninitialised float32 frame buffers (for a pass that writes every element)."""
+    names = ("ambient", "diffuse", "specular") + (("shadow",) if shadow else ())
+    return FrameImage(
+        np.empty((height, width, 4), np.float32),
+        np.empty((height, width), np.float32),
+        np.empty((height, width, 3), np.float32),
+        {n: np.empty((height, width, 1 if n == "shadow" else 3), np.float32) for n in names},
+    )
+
+
+def _targets(image: FrameImage) -> tuple[np.ndarray, ...]:
+    """The buffers of ``image`` in the order the compiled resolve kernels write them."""
+    p = image.passes
+    shadow = p["shadow"] if "shadow" in p else np.zeros((0, 0, 1), np.float32)
+    return (image.rgba, p["ambient"], p["diffuse"], p["specular"], image.normal, image.depth, shadow)
+
+
+def _plain_from_winners(
+    prepared: PreparedScene,
+    width: int,
+    height: int,
+    gl_compat: bool,
+    cull_backfaces: bool,
+    seconds: dict[str, float],
+    say: Callable[[str, float], None],
+) -> FrameResult:
+    """The plain z-buffer frame (no shadow, no transparency, no fog, one sample, per-pixel
+    shading) by the compiled engine in two passes: the z-buffer, then each pixel's winner
+    interpolated, lit and written into the frame buffers (no fragment arrays at all).
+
+    The same images as the stages of :func:`render_frame` (the same operations in the same
+    order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
+    """
+    t = time.perf_counter()
+    setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, cull_backfaces)
+    winner = nearest_winners_compiled(setup)
+    seconds["visibility"] = time.perf_counter() - t
+    say("visibility", 0.4)
+    t = time.perf_counter()
+    image = _empty_frame(height, width, False)
+    shaded = shade_plain_winners_compiled(setup, winner, plain_tables(prepared, gl_compat), _targets(image))
+    seconds["shade"] = time.perf_counter() - t
+    seconds["resolve_samples"] = 0.0
+    say("shade", 1.0)
+    return image, shaded
+
+
 #: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays
 #: (about 250 bytes per visible fragment) whatever the image size.
 BAND_SAMPLES = 1 << 19
@@ -266,6 +328,10 @@ def render_frame(
             back = ~front_facing if two_sided else False
             return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
 
+    fused = compiled and fused_shading_applies(scene, shading, samples, fog)
+    if fused and method == "zbuffer" and all(c.method == "none" for c in the_plan.shadows):
+        return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, seconds, say)
+
     t = time.perf_counter()
     visible = frame_fragments(
         prepared.clip,
@@ -286,6 +352,23 @@ def render_frame(
     if visibility is not None:
         seconds["shadows"] = time.perf_counter() - t
         say("shadows", 0.6)
+
+    if fused and (method == "zbuffer" or not visible.n_transparent):
+        # One fused pass over the pixels (no per-fragment shading arrays, so no bands needed).
+        t = time.perf_counter()
+        image = _empty_frame(height, width, visibility is not None)
+        f = visible.fragments
+        shade_plain_fragments_compiled(
+            width, height, visible.opaque_of, f.triangle, f.bary, f.depth, f.front_facing,
+            plain_tables(prepared, gl_compat),
+            None if visibility is None else (visibility if visibility.ndim == 3 else visibility[:, :, None]),
+            None if visibility is None else shadow_pass_values(visibility),
+            _targets(image),
+        )  # fmt: skip
+        seconds["shade"] = time.perf_counter() - t
+        seconds["resolve_samples"] = 0.0
+        say("shade", 1.0)
+        return image, len(f)
 
     # Shade, colour and resolve band by band (whole pixel rows): the shading arrays never hold more
     # than one band's fragments, and every stage works per fragment or per sample, so bands give

@@ -9,6 +9,7 @@ space. Every later stage (:mod:`blinn_phong.visibility`, :mod:`blinn_phong.shadi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,10 +32,11 @@ class PreparedScene:
         world_normal: (V, 3) world-space unit vertex normals.
         triangles: (T, 3) vertex indices into the concatenated arrays, meshes in scene order.
         triangle_mesh: (T,) index of each triangle's mesh.
-        face_eye_normal, face_world_normal: (T, 3) unit face normals (inverse-transpose transformed).
-        face_eye_centroid: (T, 3) eye-space centroids.
         vertex_offset: (M + 1,) first vertex of each mesh (and the total).
         lights: lights in eye space.
+        face_eye_normal, face_world_normal: (T, 3) unit face normals (inverse-transpose
+            transformed), computed on first use (flat shading, shadows, sorting).
+        face_eye_centroid: (T, 3) eye-space centroids, computed on first use.
     """
 
     scene: Scene
@@ -44,11 +46,36 @@ class PreparedScene:
     world_normal: np.ndarray
     triangles: np.ndarray
     triangle_mesh: np.ndarray
-    face_eye_normal: np.ndarray
-    face_world_normal: np.ndarray
-    face_eye_centroid: np.ndarray
     vertex_offset: np.ndarray
     lights: EyeLights
+
+    @cached_property
+    def _face_normals(self) -> tuple[np.ndarray, np.ndarray]:
+        """(eye, world) unit face normals of all meshes, in scene order."""
+        view = self.scene.camera.view
+        eye, world = [], []
+        for mesh in self.scene.meshes:
+            face_obj = face_normals(mesh.positions, mesh.triangles)
+            eye.append(transform_normals(face_obj, view @ mesh.transform))
+            world.append(transform_normals(face_obj, mesh.transform))
+        if not eye:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        return np.concatenate(eye), np.concatenate(world)
+
+    @property
+    def face_eye_normal(self) -> np.ndarray:
+        """(T, 3) unit eye-space face normals (inverse-transpose of the model-view matrix)."""
+        return self._face_normals[0]
+
+    @property
+    def face_world_normal(self) -> np.ndarray:
+        """(T, 3) unit world-space face normals (inverse-transpose of the model matrix)."""
+        return self._face_normals[1]
+
+    @cached_property
+    def face_eye_centroid(self) -> np.ndarray:
+        """(T, 3) eye-space centroids of the triangles."""
+        return self.eye_position[self.triangles].mean(axis=1)
 
 
 def prepare_scene(scene: Scene) -> PreparedScene:
@@ -62,7 +89,6 @@ def prepare_scene(scene: Scene) -> PreparedScene:
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
     view, proj = scene.camera.view, scene.camera.projection
     clips, eyes, eye_ns, world_ns, tris, owner = [], [], [], [], [], []
-    f_eye, f_world, f_centroid = [], [], []
     offsets = [0]
     for m, mesh in enumerate(scene.meshes):
         model_view = view @ mesh.transform
@@ -75,10 +101,6 @@ def prepare_scene(scene: Scene) -> PreparedScene:
             obj_n = vertex_normals(mesh.positions, mesh.triangles, mesh.normal_weighting)
         eye_ns.append(transform_normals(obj_n, model_view))
         world_ns.append(transform_normals(obj_n, mesh.transform))
-        face_obj = face_normals(mesh.positions, mesh.triangles)
-        f_eye.append(transform_normals(face_obj, model_view))
-        f_world.append(transform_normals(face_obj, mesh.transform))
-        f_centroid.append(eye[:, :3][mesh.triangles].mean(axis=1))
         tris.append(mesh.triangles + offsets[-1])
         owner.append(np.full(len(mesh.triangles), m, np.int64))
         offsets.append(offsets[-1] + len(mesh.positions))
@@ -94,9 +116,6 @@ def prepare_scene(scene: Scene) -> PreparedScene:
         world_normal=cat(world_ns, (3,)),
         triangles=cat(tris, (3,), np.int64),
         triangle_mesh=cat(owner, (), np.int64),
-        face_eye_normal=cat(f_eye, (3,)),
-        face_world_normal=cat(f_world, (3,)),
-        face_eye_centroid=cat(f_centroid, (3,)),
         vertex_offset=np.asarray(offsets, np.int64),
         lights=lights_in_eye_space(scene.lights, view),
     )

@@ -52,6 +52,7 @@ __all__ = [
     "resolve_frame",
     "resolve_nearest_buffers",
     "resolve_samples",
+    "shadow_pass_values",
     "side_tables",
 ]
 
@@ -154,6 +155,12 @@ def resolve_nearest_buffers(
         normal = normalize(normal)  # the mean of unit normals; one sample is unit already
     depth_img = buffers[5].reshape(height, width, samples).min(axis=2)
     return rgba, passes, normal, depth_img
+
+
+def shadow_pass_values(visibility: np.ndarray) -> np.ndarray:
+    """(N,) the ``shadow`` pass of fragments before their opacity: the mean visibility over the
+    lights (and channels) of ``visibility`` (N, L) or (N, L, K)."""
+    return visibility.mean(axis=1) if visibility.ndim == 2 else visibility.mean(axis=(1, 2))
 
 
 def side_tables(scene: Scene) -> tuple[list[Material], np.ndarray]:
@@ -362,8 +369,7 @@ def resolve_frame(
     width, height, samples = f.width, f.height, f.samples
     n_keys = width * height * samples
     n_op = fragments.n_opaque
-    # the shadow pass: mean over the lights (and the RGB channels of a coloured (N, L, 3) visibility)
-    vis_mean = None if visibility is None else visibility.mean(axis=tuple(range(1, visibility.ndim)))
+    vis_mean = None if visibility is None else shadow_pass_values(visibility)
     if rgba is None:
         compiled = engine != "numpy" and numba_available()
         if compiled and samples == 1 and (method == "zbuffer" or not fragments.n_transparent):

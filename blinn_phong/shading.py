@@ -21,14 +21,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong.fast import numba_available, surface_at_fragments_compiled
-from blinn_phong.lighting import ShadingTerms, gl_clamp, shade, shade_many
+from blinn_phong.fast import PlainTables, numba_available, surface_at_fragments_compiled
+from blinn_phong.lighting import ShadingTerms, gl_clamp, light_tables, material_tables, shade, shade_many
 from blinn_phong.normals import normalize
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.scene import SHADINGS, Material, Mesh, Scene
 
-__all__ = ["FragmentShading", "check_gl_ranges", "shade_fragments", "surface_at_fragments"]
+__all__ = [
+    "FragmentShading",
+    "check_gl_ranges",
+    "fused_shading_applies",
+    "plain_tables",
+    "shade_fragments",
+    "surface_at_fragments",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,6 +183,59 @@ def _shade_phong(
     else:
         rgb = terms.color
     return FragmentShading(rgb, terms.alpha, terms.ambient, terms.diffuse, terms.specular, world_n)
+
+
+def fused_shading_applies(scene: Scene, shading: str, samples: int, fog: object) -> bool:
+    """True when the compiled engine may shade and resolve the frame in one fused pass.
+
+    That is: one sample per pixel, no fog, every mesh shaded per pixel (``phong``), no image
+    texture, and every material's fragment colour the partial-occlusion ``(α·c, α)`` (no
+    Kay–Greenberg opacity, no specular wash-out, no emission/absorption model). Transparency
+    resolves are checked by the caller (none may be needed). The fused pass
+    (:func:`blinn_phong.fast.shade_plain_fragments_compiled`) gives the images of
+    :func:`shade_fragments`, :func:`blinn_phong.texturing.texture_fragments` and
+    :func:`blinn_phong.resolve.resolve_frame` for these frames.
+    """
+    if samples != 1 or fog is not None:
+        return False
+    if any((mesh.shading or shading) != "phong" for mesh in scene.meshes):
+        return False
+    materials = [m for mesh in scene.meshes for m in (mesh.material, mesh.back_material or mesh.material)]
+    return all(
+        not m.textured
+        and m.kay_greenberg is None
+        and not m.specular_washout
+        and (not m.transparent or m.transparency_model == "partial_occlusion")
+        for m in materials
+    )
+
+
+def plain_tables(prepared: PreparedScene, gl_compat: bool) -> PlainTables:
+    """The arrays the fused frame kernels of :mod:`blinn_phong.fast` read (see ``PlainTables`` there):
+    geometry in eye and world space, per-side material tables (index ``2·mesh + back``), the
+    eye-space lights and the light model's flags."""
+    scene = prepared.scene
+    model = scene.light_model
+    materials = [mat for mesh in scene.meshes for mat in (mesh.material, mesh.back_material or mesh.material)]
+    geometry = tuple(
+        np.ascontiguousarray(a)
+        for a in (
+            prepared.triangles,
+            prepared.triangle_mesh,
+            prepared.eye_position,
+            prepared.eye_normal,
+            prepared.world_normal,
+        )
+    )
+    flags = (model.local_viewer, model.specular == "blinn", gl_compat, model.separate_specular)
+    flags = tuple(bool(v) for v in flags)
+    return (
+        bool(model.two_sided),
+        geometry,
+        material_tables(materials, prepared.lights, scene.ambient),
+        light_tables(prepared.lights),
+        flags,
+    )
 
 
 def surface_at_fragments(

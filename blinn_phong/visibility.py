@@ -29,8 +29,13 @@ from functools import cached_property
 
 import numpy as np
 
-from blinn_phong.fast import frame_fragments_compiled, numba_available, visible_fragments_compiled
-from blinn_phong.raster import Fragments, _setup_triangles, rasterize, resolve_nearest
+from blinn_phong.fast import (
+    frame_fragments_compiled,
+    numba_available,
+    setup_triangles_compiled,
+    visible_fragments_compiled,
+)
+from blinn_phong.raster import Fragments, rasterize, resolve_nearest
 
 __all__ = [
     "ENGINES",
@@ -208,7 +213,7 @@ def frame_fragments(
         :class:`FrameFragments`.
     """
     if use_compiled(engine):
-        setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+        setup = setup_triangles_compiled(clip_xyzw, triangles, width, height, samples, cull_backfaces)
         sub_opaque = None if opaque is None else np.asarray(opaque(setup.source, setup.front), dtype=bool)
         frags, n_opaque, opaque_of, offsets = frame_fragments_compiled(setup, sub_opaque)
         return FrameFragments(frags, n_opaque, opaque_of, offsets)
@@ -264,7 +269,7 @@ def rasterized_count(
         )
     from blinn_phong.fast import _bands, _kernel
 
-    setup = _setup_triangles(clip_xyzw, triangles, width, height, samples, cull_backfaces)
+    setup = setup_triangles_compiled(clip_xyzw, triangles, width, height, samples, cull_backfaces)
     k = setup.k
     fine_w, fine_h = setup.width * k, setup.height * k
     _, _, in_front, _ = _kernel()

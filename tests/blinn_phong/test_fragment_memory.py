@@ -145,10 +145,13 @@ def test_an_opaque_frame_holds_one_band_of_shading_arrays(monkeypatch: pytest.Mo
     prepared = bp.prepare_scene(scene)
     visible = frame_fragments(prepared.clip, prepared.triangles, width, height, engine="numba")
     peaks = {}
+    # Gouraud shading: the staged path, shading array by band (per-pixel shading of a plain frame
+    # is fused into one pass with no per-fragment array; checked below).
+    options = {"shadows": "none", "shading": "gouraud"}
     for band_samples in (band, 1 << 22):  # bands of 512 samples; one band for the whole frame
         monkeypatch.setattr(pipeline, "BAND_SAMPLES", band_samples)
-        bp.render(scene, width, height, shadows="none")  # compile, warm up
-        result, peaks[band_samples] = traced_peak(lambda: bp.render(scene, width, height, shadows="none"))
+        bp.render(scene, width, height, **options)  # compile, warm up
+        result, peaks[band_samples] = traced_peak(lambda: bp.render(scene, width, height, **options))
     image = result.rgba.nbytes + result.depth.nbytes + result.normal.nbytes  # type: ignore[attr-defined]
     image += sum(p.nbytes for p in result.passes.values())  # type: ignore[attr-defined]
     assert result.stats.shaded == len(visible.fragments) > 0.4 * width * height  # type: ignore[attr-defined]
@@ -161,3 +164,8 @@ def test_an_opaque_frame_holds_one_band_of_shading_arrays(monkeypatch: pytest.Mo
     # One band for the whole frame breaks the bound (its shading arrays hold every fragment):
     # the bound can fail.
     assert peaks[1 << 22] > bound
+    # The fused plain frame (per-pixel shading) holds no per-fragment array at all: the frame's
+    # buffers, the per-sample z-buffer (winner and depth, 16 bytes per sample) and the set-up.
+    bp.render(scene, width, height, shadows="none")
+    _, fused_peak = traced_peak(lambda: bp.render(scene, width, height, shadows="none"))
+    assert fused_peak <= image + 32 * width * height + 1000 * len(prepared.triangles) < bound
