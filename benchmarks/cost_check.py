@@ -74,13 +74,16 @@ def _timed(runs: dict[str, Callable[[], bp.RenderResult]], repeat: int) -> dict[
 
 
 def _uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]:
-    """``fn`` run with the ray tracer's scene cache emptied first: every frame builds its BVH, as the
-    first frame of a scene or every frame of an animation does and as the shadow cost models
-    assume (``render()`` reuses the BVH while the same triangles come back)."""
-    from blinn_phong import raytrace
+    """``fn`` run with the ray tracer's scene cache and the shadow volumes' adjacency and volume
+    caches emptied first: every frame builds its BVH and its volumes, as the first frame of a
+    scene or every frame of an animation does and as the shadow cost models assume (``render()``
+    reuses both while the same triangles come back)."""
+    from blinn_phong import raytrace, shadow_volume
 
     def run() -> bp.RenderResult:
         raytrace._SCENE_CACHE.clear()
+        shadow_volume._TOPOLOGY_CACHE.clear()
+        shadow_volume._DERIVED_CACHE.clear()
         return fn()
 
     return run

@@ -111,7 +111,11 @@ def test_interpenetrating_transparent_objects_need_the_a_buffer():
 def test_with_a_tolerance_depth_peeling_stops_when_the_rest_is_invisible():
     scene = scene_of(crossing_quads(0.9), [AmbientLight((1, 1, 1), 1.0)])
     tolerance = 4.0  # 8-bit steps
-    choice = plan(scene, tolerance=tolerance).transparency
+    # planned for a 1080p frame, where the fitted frame cost predicts peeling cheaper than the
+    # A-buffer (in small frames it is not, and the A-buffer is kept); the error bound and the
+    # rendered error do not depend on the frame size
+    hd = {"width": 1920, "height": 1080}
+    choice = plan(scene, tolerance=tolerance, **hd).transparency
     assert choice.method == "depth_peeling"
     k = choice.params["layers"]
     # closed form: the rest behind k layers of opacity 0.9 is at most 0.1^k of the brightest
@@ -128,8 +132,10 @@ def test_with_a_tolerance_depth_peeling_stops_when_the_rest_is_invisible():
     assert 255 * err.max() <= tolerance
     assert err.max() > 0  # it is an approximation, and the bound is not vacuous
     # a looser tolerance peels fewer layers, predicted cheaper
-    loose = plan(scene, tolerance=40.0).transparency
-    assert loose.params["layers"] == 1 and loose.relative_cost < choice.relative_cost
+    loose = plan(scene, tolerance=40.0, **hd).transparency
+    # fewer layers, never predicted dearer (the fitted per-layer cost may be 0: in render() the
+    # layers share the A-buffer's per-sample sort)
+    assert loose.params["layers"] == 1 and loose.relative_cost <= choice.relative_cost
     assert plan(scene).transparency.method == "a_buffer"  # exact was asked for
 
 
@@ -371,7 +377,9 @@ def test_depth_peeling_under_a_close_point_light_stays_within_the_tolerance():
     exact = render_transparency(scene, "a_buffer")
     peeled = 0
     for tolerance in (8.0, 64.0, 255.0):
-        choice = plan(scene, tolerance=tolerance).transparency
+        # planned for 1080p, where peeling is predicted cheaper than the A-buffer (the bound and the
+        # rendered error do not depend on the frame size)
+        choice = plan(scene, tolerance=tolerance, width=1920, height=1080).transparency
         if choice.method == "depth_peeling":
             peeled += 1
             image = render_transparency(scene, "depth_peeling", layers=choice.params["layers"])

@@ -195,7 +195,8 @@ def test_a_larger_tolerance_never_picks_a_slower_predicted_method(scene_name: st
         "sphere": lambda: shiny_sphere(24),
     }[scene_name]()
     tolerances = [0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 255.0]
-    plans = [bp.plan(scene, t) for t in tolerances]
+    # planned for 1080p: the frame where the approximations' fitted costs are lowest
+    plans = [bp.plan(scene, t, width=1920, height=1080) for t in tolerances]
     for before, after in itertools.pairwise(plans):
         for cost_before, cost_after in zip(_costs(before), _costs(after), strict=True):
             assert cost_after <= cost_before + 1e-12, (before.tolerance, after.tolerance)
