@@ -331,6 +331,13 @@ def _eye_triangles(f: _MeshFacts, view: np.ndarray) -> np.ndarray:
     return f.tris @ view[:3, :3].T + view[:3, 3]
 
 
+def _rigid(view: np.ndarray) -> bool:
+    """True when ``view``'s linear part is a rotation (orthonormal to 1e-12): it keeps distances and
+    angles, so world-space bounding boxes and balls bound eye-space distances as well."""
+    r = view[:3, :3]
+    return bool(np.abs(r.T @ r - np.eye(3)).max() <= 1e-12) and bool(np.allclose(view[3], (0, 0, 0, 1)))
+
+
 def _nearest_distance(point: np.ndarray, f: _MeshFacts, view: np.ndarray) -> float:
     """A lower bound of the eye-space distance from ``point`` (eye space) to any point of a mesh.
 
@@ -342,6 +349,10 @@ def _nearest_distance(point: np.ndarray, f: _MeshFacts, view: np.ndarray) -> flo
         return math.inf
     if f.n_tris <= _EXACT_DISTANCE_TRIANGLES:
         return float(_triangle_distances(point, _eye_triangles(f, view)).min())
+    if _rigid(view):  # distances are those of world space: the world box and ball of the facts
+        world = view[:3, :3].T @ (point - view[:3, 3])
+        box = float(np.linalg.norm(np.maximum(np.maximum(f.lo - world, world - f.hi), 0.0)))
+        return max(box, float(np.linalg.norm(world - f.centre)) - f.radius)
     eye = f.world @ view[:3, :3].T + view[:3, 3]
     lo, hi = eye.min(axis=0), eye.max(axis=0)
     box = float(np.linalg.norm(np.maximum(np.maximum(lo - point, point - hi), 0.0)))
@@ -365,7 +376,10 @@ def _spot_bound(light: SpotLight, f: _MeshFacts, view: np.ndarray, position: np.
     """
     axis = view[:3, :3] @ np.asarray(light.direction, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
-    if f.n_tris > _EXACT_DISTANCE_TRIANGLES:  # one ball around the whole mesh
+    if f.n_tris > _EXACT_DISTANCE_TRIANGLES and _rigid(view):  # the facts' world ball, moved to eye space
+        centroid = (view[:3, :3] @ f.centre + view[:3, 3])[None]
+        rho = np.array([f.radius])
+    elif f.n_tris > _EXACT_DISTANCE_TRIANGLES:  # one ball around the whole mesh
         eye = f.world @ view[:3, :3].T + view[:3, 3]
         centroid = ((eye.min(axis=0) + eye.max(axis=0)) / 2)[None]
         rho = np.sqrt(np.max(np.einsum("ij,ij->i", eye - centroid, eye - centroid)))[None]

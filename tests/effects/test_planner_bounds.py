@@ -248,3 +248,45 @@ def test_fog_bounds_the_colour_behind_peeled_layers_by_its_closed_form():
         bound = _fogged_radiance_bound(scene, facts, factors, _fog_range(scene, facts, fog))
         assert bound == pytest.approx(max(1.0, expected))
     assert _fogged_radiance_bound(scene, facts, factors, _fog_range(scene, facts, None)) == pytest.approx(b)
+
+
+@pytest.mark.parametrize("scaled_view", [False, True])
+def test_big_meshes_bound_att_spot_by_their_box_and_ball_under_any_view(scaled_view):
+    """Above _EXACT_DISTANCE_TRIANGLES the bounds use a box and a ball around the mesh: the facts'
+    world ones under a rigid view (rotation and translation keep distances and angles), the
+    eye-space vertices' otherwise. Either way att·spot at every vertex and at random points of
+    every triangle stays below the bound (the lighting equation's own factors)."""
+    from blinn_phong.primitives import uv_sphere
+
+    pos, tris, normals = uv_sphere(160, 80, 1.0)  # 25,280 triangles: the box-and-ball path
+    transform = np.eye(4)
+    transform[:3, 3] = (0.3, -0.2, 0.4)
+    mesh = Mesh(pos, tris, normals, transform=transform)
+    camera = perspective_camera()
+    if scaled_view:  # a view with a non-uniform scale: distances change, the eye-space path is used
+        view = np.diag([1.0, 2.0, 0.5, 1.0]) @ camera.view
+        camera = type(camera)(view=view, projection=camera.projection)
+    lights = [
+        PointLight((1.2, 0.9, 1.8), constant=0.01, quadratic=1.0),
+        SpotLight((0.2, 0.1, 2.5), (0.0, 0.0, -1.0), cutoff=25.0, exponent=8.0, constant=0.05, quadratic=1.0),
+    ]
+    scene = scene_of([mesh], lights, camera)
+    facts = [_mesh_facts(m) for m in scene.meshes]
+    assert facts[0].n_tris > 20_000
+    factors = _light_factors(scene, facts)
+    view = scene.camera.view
+    eye_lights = lights_in_eye_space(scene.lights, view)
+    eye = _on_triangles(facts[0].tris, 4, np.random.default_rng(5)) @ view[:3, :3].T + view[:3, 3]
+    for r, j in enumerate(eye_lights.source):
+        _, _, _, att = _light_direction(
+            eye[:, 0],
+            eye[:, 1],
+            eye[:, 2],
+            eye_lights.position[r],
+            eye_lights.spot_direction[r],
+            eye_lights.cos_cutoff[r],
+            eye_lights.spot_exponent[r],
+            eye_lights.attenuation[r],
+        )
+        top = float(np.max(att))
+        assert 0 < top <= factors[0, j] * (1 + 1e-9) + 1e-12, (j, top, factors[0, j])
