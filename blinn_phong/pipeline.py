@@ -249,8 +249,8 @@ def _plain_from_winners(
 ) -> FrameResult:
     """The plain z-buffer frame (no shadow, no transparency, one sample, per-pixel shading, fog or
     not) by the compiled engine in two passes: the z-buffer, then each pixel's winner
-    interpolated, lit, fogged (``fog`` as :func:`_fog_args` gives it) and written into the frame
-    buffers (no fragment arrays at all).
+    interpolated, lit, fogged (``fog`` as :meth:`FogParameters.compiled_args` gives it) and
+    written into the frame buffers (no fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
     order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
@@ -268,13 +268,6 @@ def _plain_from_winners(
     seconds["resolve_samples"] = 0.0
     say("shade", 1.0)
     return image, shaded
-
-
-def _fog_args(fog: FogParameters | None) -> tuple | None:
-    """``fog`` as the compiled kernels take it: ``(mode, radial, (density, start, end), colour)``."""
-    if fog is None:
-        return None
-    return (fog.mode, fog.distance == "radial", (fog.density, fog.start, fog.end), np.array(fog.color))
 
 
 #: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays
@@ -339,13 +332,12 @@ def render_frame(
             return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
 
     fog_parameters = FogParameters.of(fog)
+    fog_args = None if fog_parameters is None else fog_parameters.compiled_args()
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog (so it is not part of the question).
     fused = compiled and fused_shading_applies(scene, shading, samples, None)
     if fused and method == "zbuffer" and all(c.method == "none" for c in the_plan.shadows):
-        return _plain_from_winners(
-            prepared, width, height, gl_compat, cull_backfaces, _fog_args(fog_parameters), seconds, say
-        )
+        return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, fog_args, seconds, say)
 
     t = time.perf_counter()
     visible = frame_fragments(
@@ -379,7 +371,7 @@ def render_frame(
             None if visibility is None else (visibility if visibility.ndim == 3 else visibility[:, :, None]),
             None if visibility is None else shadow_pass_values(visibility),
             _targets(image),
-            _fog_args(fog_parameters),
+            fog_args,
         )  # fmt: skip
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
