@@ -10,9 +10,10 @@ and :mod:`blinn_phong.resolve` hold the numpy references.
   all fragments is ever built. Barycentrics and depths of the kept fragments come from a
   compiled twin of :func:`blinn_phong.raster._fragments_from_hits`.
 * The plain frame fused (:func:`shade_plain_winners_compiled`, :func:`shade_plain_fragments_compiled`):
-  one sample per pixel, no transparency resolve, no fog, per-pixel shading: each pixel's nearest
+  one sample per pixel, no transparency resolve, per-pixel shading: each pixel's nearest
   fragment interpolated, lit by :func:`blinn_phong.lighting.point_terms` (the lighting kernel's
-  own compiled equation) and written into the float32 frame buffers in one parallel pass, with
+  own compiled equation), fogged by the colour stage's compiled fog (:func:`_fog_function`) and
+  written into the float32 frame buffers in one parallel pass, with
   the operations of the separate stages in their order (the same images, no (N, 3) arrays).
 * :func:`fragment_colours_compiled`: transparency models, Kay–Greenberg, wash-out and fog per
   fragment (twin of :func:`blinn_phong.resolve.fragment_colours`).
@@ -559,8 +560,57 @@ def frame_fragments_compiled(
     return frags, n_opaque, opaque_of, offsets
 
 
-#: Fog modes of the compiled colour kernel (index = code), as :data:`blinn_phong.fog.FOG_MODES`.
+#: Fog modes of the compiled kernels (index = code), as :data:`blinn_phong.fog.FOG_MODES`.
 _FOG_CODES = ("linear", "exp", "exp2")
+#: The compiled per-fragment fog, set by :func:`_fog_function` (a module global: see :func:`_plain_kernel`).
+_fogged: object = None
+#: ``fog`` argument of the compiled kernels without fog (see :func:`_fog_scalars`).
+_NO_FOG = (-1, False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+FogArgs = tuple[str, bool, tuple[float, float, float], np.ndarray] | None
+
+
+def _fog_scalars(fog: FogArgs) -> tuple[int, bool, float, float, float, float, float, float]:
+    """``(mode code, radial, density, start, end, r, g, b)`` of ``fog = (mode, radial, (density,
+    start, end), colour)`` for the compiled kernels, or :data:`_NO_FOG` (mode −1) for None."""
+    if fog is None:
+        return _NO_FOG
+    density, start, end = (float(v) for v in fog[2])
+    r, g, b = (float(v) for v in np.asarray(fog[3], np.float64).reshape(3))
+    return (_FOG_CODES.index(fog[0]), bool(fog[1]), density, start, end, r, g, b)
+
+
+@functools.lru_cache(maxsize=1)
+def _fog_function() -> object:  # a numba dispatcher
+    """The per-fragment fog of every compiled kernel (colour stage and fused plain frame).
+
+    ``_fog_function()(mode, radial, density, start, end, cr, cg, cb, px, py, pz, r, g, b, a)``
+    returns the fogged premultiplied ``(r, g, b)`` of a fragment at eye-space point ``p`` with
+    premultiplied colour ``(r, g, b)`` and alpha ``a``: OpenGL 2.1 §3.10 as
+    :mod:`blinn_phong.fog` states it, ``f`` of the mode code (:data:`_FOG_CODES`) at distance
+    ``‖p‖`` (radial) or ``|p_z|`` (eye plane), clamped to [0, 1], then
+    ``f·rgb + (1 − f)·α·C_f``. Scalars only (no arrays: no reference counts per fragment).
+    """
+    import math
+
+    import numba
+
+    @numba.njit(inline="always", cache=True)
+    def fogged(mode, radial, density, start, end, cr, cg, cb, px, py, pz, r, g, b, a):  # pragma: no cover
+        dist = math.sqrt(px * px + py * py + pz * pz) if radial else abs(pz)
+        if mode == 0:
+            f = (end - dist) / (end - start)
+        elif mode == 1:
+            f = math.exp(-(density * dist))
+        else:
+            dc = density * dist
+            f = math.exp(-(dc * dc))
+        f = min(max(f, 0.0), 1.0)
+        return f * r + (1.0 - f) * a * cr, f * g + (1.0 - f) * a * cg, f * b + (1.0 - f) * a * cb
+
+    return fogged
+
+
 #: Transparency models of the compiled colour kernel (index = code).
 _MODEL_CODES = ("partial_occlusion", "emission", "absorption")
 
@@ -570,6 +620,9 @@ def _colour_kernel() -> object:  # a numba dispatcher
     import math
 
     import numba
+
+    global _fogged
+    _fogged = _fog_function()  # a module global, not a closure variable: see _plain_kernel
 
     @numba.njit(parallel=True, cache=True)
     def colours(
@@ -585,13 +638,11 @@ def _colour_kernel() -> object:  # a numba dispatcher
         kg,
         washout,
         model,
-        fog_mode,
-        fog_radial,
-        fog_par,
-        fog_colour,
+        fog,
         out_rgba,
         out_alpha,
     ):  # pragma: no cover - compiled
+        fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
         for i in numba.prange(tri.shape[0]):
             t = tri[i]
             v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
@@ -621,18 +672,10 @@ def _colour_kernel() -> object:  # a numba dispatcher
                 px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
                 py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
                 pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                dist = math.sqrt(px * px + py * py + pz * pz) if fog_radial else abs(pz)
-                if fog_mode == 0:
-                    f = (fog_par[2] - dist) / (fog_par[2] - fog_par[1])
-                elif fog_mode == 1:
-                    f = math.exp(-(fog_par[0] * dist))
-                else:
-                    dc = fog_par[0] * dist
-                    f = math.exp(-(dc * dc))
-                f = min(max(f, 0.0), 1.0)
-                a = out_rgba[i, 3]
-                for ch in range(3):
-                    out_rgba[i, ch] = f * out_rgba[i, ch] + (1.0 - f) * a * fog_colour[ch]
+                out_rgba[i, 0], out_rgba[i, 1], out_rgba[i, 2] = _fogged(
+                    fog_mode, fog_radial, density, start, end, cr, cg, cb, px, py, pz,
+                    out_rgba[i, 0], out_rgba[i, 1], out_rgba[i, 2], out_rgba[i, 3],
+                )  # fmt: skip
 
     return colours
 
@@ -648,7 +691,7 @@ def fragment_colours_compiled(
     alpha: np.ndarray,
     specular: np.ndarray,
     side_params: tuple[np.ndarray, np.ndarray, np.ndarray],
-    fog: tuple[str, bool, tuple[float, float, float], np.ndarray] | None,
+    fog: FogArgs,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Compiled twin of :func:`blinn_phong.resolve.fragment_colours` (same formulas, one pass).
 
@@ -660,11 +703,6 @@ def fragment_colours_compiled(
     out_rgba = np.empty((n, 4))
     out_alpha = np.empty(n)
     kg, washout, model = side_params
-    if fog is None:
-        mode, radial, par, colour = -1, False, np.zeros(3), np.zeros(3)
-    else:
-        mode = _FOG_CODES.index(fog[0])
-        radial, par, colour = bool(fog[1]), np.asarray(fog[2], np.float64), np.asarray(fog[3], np.float64)
     _colour_kernel()(
         np.ascontiguousarray(triangle, dtype=np.int64),
         np.ascontiguousarray(bary),
@@ -678,10 +716,7 @@ def fragment_colours_compiled(
         kg,
         washout,
         model,
-        mode,
-        radial,
-        par,
-        colour,
+        _fog_scalars(fog),
         out_rgba,
         out_alpha,
     )
@@ -973,7 +1008,8 @@ def _plain_kernel() -> object:  # a numba dispatcher
 
     from blinn_phong import lighting
 
-    global _point_terms
+    global _point_terms, _fogged
+    _fogged = _fog_function()  # the colour stage's fog (a module global, as _point_terms)
     # The lighting equation: the same compiled function as lighting.shade's kernel. A module
     # global, not a closure variable (numba's disk-cache key hashes closure variables, and a
     # compiled function in one changes it in every process). numba does not track that this
@@ -987,7 +1023,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
-        geometry, materials, lights, flags, has_vis, vis, vis_mean,
+        geometry, materials, lights, flags, fog, has_vis, vis, vis_mean,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
@@ -995,13 +1031,16 @@ def _plain_kernel() -> object:  # a numba dispatcher
         # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Then
         # surface_at_fragments_compiled's interpolation, the lighting kernel's equation
         # (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
-        # resolve_plain's float32 writes, with the same operations in the same order.
+        # resolve_plain's float32 writes, with the same operations in the same order; with fog
+        # (mode >= 0) the colour stage's per-fragment fog (_fogged) on the premultiplied colour
+        # before the float32 write, as fragment_colours_compiled and resolve_frame_compiled do.
         # One loop body, no calls per pixel: a compiled call per pixel would pay a reference
         # count per array argument; tuples are unpacked once, outside the parallel loop.
         triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
+        fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
         covered = np.zeros(height, np.int64)
         covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
         for i_row in numba.prange(height):
@@ -1096,10 +1135,15 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
                         b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
                 a = opacity[mid]
+                pr, pg, pb = a * r, a * g, a * b  # premultiplied (α·c, α): fragment_colours' order
+                if fog_mode >= 0:
+                    pr, pg, pb = _fogged(
+                        fog_mode, fog_radial, density, start, end, cr, cg, cb, px, py, pz, pr, pg, pb, a
+                    )
                 # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve_plain does.
-                o_rgba[row, col, 0] = 0.0 + np.float32(a * r)
-                o_rgba[row, col, 1] = 0.0 + np.float32(a * g)
-                o_rgba[row, col, 2] = 0.0 + np.float32(a * b)
+                o_rgba[row, col, 0] = 0.0 + np.float32(pr)
+                o_rgba[row, col, 1] = 0.0 + np.float32(pg)
+                o_rgba[row, col, 2] = 0.0 + np.float32(pb)
                 o_rgba[row, col, 3] = 0.0 + np.float32(a)
                 o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
                 o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
@@ -1155,16 +1199,20 @@ def shade_plain_fragments_compiled(
     visibility: np.ndarray | None,
     vis_mean: np.ndarray | None,
     out: tuple[np.ndarray, ...],
+    fog: FogArgs = None,
 ) -> None:
     """The plain frame's shading and resolve fused: each pixel's one fragment shaded and written.
 
-    For one sample per pixel, no transparency resolve, no fog, per-pixel (phong) shading and
+    For one sample per pixel, no transparency resolve, per-pixel (phong) shading and
     partial-occlusion colours ``(α·c, α)``: per pixel, the fragment ``opaque_of[pixel]`` (−1:
     empty) is interpolated (as :func:`surface_at_fragments_compiled`), lit by
-    :func:`blinn_phong.lighting.point_terms` with ``visibility`` (N, L, K) (K = 1 or 3) and
-    written into the float32 ``out = (rgba, ambient, diffuse, specular, normal, depth, shadow)``
-    buffers as :func:`resolve_plain_compiled` writes them: the same images as the separate
-    shading, colour and resolve stages, without their (N, 3) float64 arrays.
+    :func:`blinn_phong.lighting.point_terms` with ``visibility`` (N, L, K) (K = 1 or 3), fogged
+    when ``fog`` is given (``(mode, radial, (density, start, end), colour)`` as for
+    :func:`fragment_colours_compiled`, by the same compiled function: OpenGL 2.1 §3.10 on the
+    premultiplied colour; the light passes are not fogged) and written into the float32
+    ``out = (rgba, ambient, diffuse, specular, normal, depth, shadow)`` buffers as
+    :func:`resolve_plain_compiled` writes them: the same images as the separate shading,
+    colour and resolve stages, without their (N, 3) float64 arrays.
     """
     two_sided, geometry, materials, lights, flags = tables
     fragments = (
@@ -1173,7 +1221,7 @@ def shade_plain_fragments_compiled(
     )  # fmt: skip
     _plain_kernel()(
         width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
-        geometry, materials, lights, flags, visibility is not None,
+        geometry, materials, lights, flags, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
         *out,
@@ -1194,11 +1242,16 @@ def nearest_winners_compiled(setup: _TriangleSetup) -> np.ndarray:
 
 
 def shade_plain_winners_compiled(
-    setup: _TriangleSetup, winner: np.ndarray, tables: PlainTables, out: tuple[np.ndarray, ...]
+    setup: _TriangleSetup,
+    winner: np.ndarray,
+    tables: PlainTables,
+    out: tuple[np.ndarray, ...],
+    fog: FogArgs = None,
 ) -> int:
     """:func:`shade_plain_fragments_compiled` straight from the z-buffer's winners (one sample per
-    pixel, no visibility): barycentrics and depth as :func:`frame_fragments_compiled` computes them,
-    in the same pass. Returns the number of covered pixels (fragments shaded)."""
+    pixel, no visibility, ``fog`` as there): barycentrics and depth as
+    :func:`frame_fragments_compiled` computes them, in the same pass. Returns the number of
+    covered pixels (fragments shaded)."""
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
     two_sided, geometry, materials, lights, flags = tables
@@ -1209,7 +1262,8 @@ def shade_plain_winners_compiled(
     return int(
         _plain_kernel()(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
-            two_sided, geometry, materials, lights, flags, False, np.zeros((0, 0, 1)), np.zeros(0), *out,
+            two_sided, geometry, materials, lights, flags, _fog_scalars(fog), False, np.zeros((0, 0, 1)),
+            np.zeros(0), *out,
         )
     )  # fmt: skip
 

@@ -243,12 +243,14 @@ def _plain_from_winners(
     height: int,
     gl_compat: bool,
     cull_backfaces: bool,
+    fog: tuple | None,
     seconds: dict[str, float],
     say: Callable[[str, float], None],
 ) -> FrameResult:
-    """The plain z-buffer frame (no shadow, no transparency, no fog, one sample, per-pixel
-    shading) by the compiled engine in two passes: the z-buffer, then each pixel's winner
-    interpolated, lit and written into the frame buffers (no fragment arrays at all).
+    """The plain z-buffer frame (no shadow, no transparency, one sample, per-pixel shading, fog or
+    not) by the compiled engine in two passes: the z-buffer, then each pixel's winner
+    interpolated, lit, fogged (``fog`` as :meth:`FogParameters.compiled_args` gives it) and
+    written into the frame buffers (no fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
     order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
@@ -260,7 +262,8 @@ def _plain_from_winners(
     say("visibility", 0.4)
     t = time.perf_counter()
     image = _empty_frame(height, width, False)
-    shaded = shade_plain_winners_compiled(setup, winner, plain_tables(prepared, gl_compat), _targets(image))
+    tables = plain_tables(prepared, gl_compat)
+    shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog)
     seconds["shade"] = time.perf_counter() - t
     seconds["resolve_samples"] = 0.0
     say("shade", 1.0)
@@ -328,9 +331,13 @@ def render_frame(
             back = ~front_facing if two_sided else False
             return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
 
-    fused = compiled and fused_shading_applies(scene, shading, samples, fog)
+    fog_parameters = FogParameters.of(fog)
+    fog_args = None if fog_parameters is None else fog_parameters.compiled_args()
+    # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
+    # any blending, with the colour stage's compiled fog (so it is not part of the question).
+    fused = compiled and fused_shading_applies(scene, shading, samples, None)
     if fused and method == "zbuffer" and all(c.method == "none" for c in the_plan.shadows):
-        return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, seconds, say)
+        return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, fog_args, seconds, say)
 
     t = time.perf_counter()
     visible = frame_fragments(
@@ -364,6 +371,7 @@ def render_frame(
             None if visibility is None else (visibility if visibility.ndim == 3 else visibility[:, :, None]),
             None if visibility is None else shadow_pass_values(visibility),
             _targets(image),
+            fog_args,
         )  # fmt: skip
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
@@ -382,7 +390,6 @@ def render_frame(
     if visibility is not None:
         passes["shadow"] = np.zeros((height, width, 1), np.float32)
     seconds["shade"] = seconds["resolve_samples"] = 0.0
-    fog_parameters = FogParameters.of(fog)
     materials, _ = side_tables(scene)
     # Fragment colours (α·c, α) of partial occlusion without fog: the compiled resolve computes
     # them in its own pass (resolve_frame with rgba None), no (N, 4) colour array per band.

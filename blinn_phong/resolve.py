@@ -196,6 +196,12 @@ class FogParameters:
     end: float
     distance: str
 
+    def compiled_args(self) -> tuple[str, bool, tuple[float, float, float], np.ndarray]:
+        """``(mode, radial, (density, start, end), colour)``: the ``fog`` argument of the compiled
+        kernels (:func:`blinn_phong.fast.fragment_colours_compiled`, the fused plain frame)."""
+        radial = self.distance == "radial"
+        return (self.mode, radial, (self.density, self.start, self.end), np.array(self.color))
+
     @classmethod
     def of(cls, fog: object) -> FogParameters | None:
         """The parameters of any object with a ``Fog``'s fields (or None for None)."""
@@ -250,14 +256,7 @@ def fragment_colours(
             [TRANSPARENCY_MODELS.index(m.transparency_model) if m.transparent else 0 for m in materials],
             dtype=np.int64,
         )
-        fog_args = None
-        if fog is not None:
-            fog_args = (
-                fog.mode,
-                fog.distance == "radial",
-                (fog.density, fog.start, fog.end),
-                np.array(fog.color),
-            )
+        fog_args = None if fog is None else fog.compiled_args()
         return fragment_colours_compiled(
             f.triangle,
             f.bary,

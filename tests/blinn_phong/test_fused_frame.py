@@ -6,6 +6,10 @@
   buffers) equals the numpy reference engine's frame within 1e-6 on a scene with every light
   type, two-sided lighting with back materials, near-plane clipping, empty pixels and both
   viewer models, with and without the GL-compatibility clamps and with shadows;
+* fogged frames (linear, exp and exp2 fog, eye-plane and radial distance, with and without
+  shadows, both viewer models) stay on the fused pass and equal the numpy engine's
+  (which fogs by :mod:`blinn_phong.fog`'s numpy formulas) within 1e-6 (fog is refused with
+  the GL-compatibility preset);
 * per-channel visibility (N, L, 3) weights each light's diffuse and specular terms channel by
   channel: checked against the numpy engine's per-light terms (``shade(..., per_light=True)``)
   combined by hand.
@@ -110,6 +114,66 @@ def test_fused_frame_equals_the_numpy_reference(case: dict, monkeypatch: pytest.
     assert used == ["shade_plain_fragments_compiled" if shadows else "shade_plain_winners_compiled"]
     assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
     assert ref.stats.shaded == fast.stats.shaded
+    assert set(fast.passes) == set(ref.passes)
+    pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
+    pairs.append(("normal", ref.normal, fast.normal))
+    for name, a, b in pairs + [(n, ref.passes[n], fast.passes[n]) for n in ref.passes]:
+        assert a.dtype == b.dtype == np.float32 and a.shape == b.shape, name
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6, err_msg=name)
+
+
+def _record_fused(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The names of the fused kernels :func:`blinn_phong.pipeline.render_frame` calls, in order."""
+    from blinn_phong import pipeline
+
+    used: list[str] = []
+    for name in ("shade_plain_winners_compiled", "shade_plain_fragments_compiled"):
+        original = getattr(pipeline, name)
+        monkeypatch.setattr(pipeline, name, lambda *a, f=original, n=name: used.append(n) or f(*a))
+    return used
+
+
+FOGS = [
+    bp.Fog("linear", (0.5, 0.6, 0.7), start=2.0, end=5.0, distance=distance)
+    for distance in ("plane", "radial")
+] + [
+    bp.Fog(mode, (0.9, 0.3, 0.1), density=density, distance=distance)
+    for mode, density in (("exp", 0.3), ("exp2", 0.25))
+    for distance in ("plane", "radial")
+]
+
+
+FOG_EXTRAS = {
+    "plain": {},
+    "infinite_viewer-phong": {"local_viewer": False, "specular": "phong"},
+    "shadows": {"shadows": "shadow_map"},
+}
+
+
+@pytest.mark.parametrize("extra", list(FOG_EXTRAS.values()), ids=list(FOG_EXTRAS))
+@pytest.mark.parametrize("fog", FOGS, ids=lambda f: f"{f.mode}-{f.distance}")
+def test_fogged_frame_stays_fused_and_equals_the_numpy_reference(
+    fog: bp.Fog, extra: dict, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The numpy engine fogs by blinn_phong.fog's numpy formulas (fog_factor, apply_fog) on the
+    # staged fragment colours; the fused pass by the compiled per-fragment fog. Same float64
+    # operations in the same order, so 1e-6 as above (float32 step near 1: 6e-8).
+    extra = dict(extra)
+    s = scene(extra.pop("local_viewer", True), extra.pop("specular", "blinn"))
+    options = {"shadows": "none", "shading": "phong", "transparency": "zbuffer", **extra}
+    if options["shadows"] == "shadow_map":
+        options["shadows"] = bp.ShadowOptions("shadow_map", resolution=128)
+    ref = bp.render(s, 64, 48, engine="numpy", fog=fog, **options)
+    used = _record_fused(monkeypatch)
+    fast = bp.render(s, 64, 48, engine="numba", fog=fog, **options)
+    shadows = options["shadows"] != "none"
+    assert used == ["shade_plain_fragments_compiled" if shadows else "shade_plain_winners_compiled"]
+    unfogged = bp.render(s, 64, 48, engine="numpy", **options)
+    # The fog really acts, and only on the colour (the light passes and alpha are not fogged).
+    assert np.abs(ref.rgba[..., :3] - unfogged.rgba[..., :3]).max() > 0.05
+    np.testing.assert_array_equal(ref.rgba[..., 3], unfogged.rgba[..., 3])
+    assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
+    assert (ref.rgba[..., 3][ref.rgba[..., 3] > 0] < 1).any()  # premultiplied: α·C_f with α < 1
     assert set(fast.passes) == set(ref.passes)
     pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
     pairs.append(("normal", ref.normal, fast.normal))
