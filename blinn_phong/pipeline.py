@@ -334,8 +334,8 @@ def render_frame(
     fog_parameters = FogParameters.of(fog)
     fog_args = None if fog_parameters is None else fog_parameters.compiled_args()
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
-    # any blending, with the colour stage's compiled fog (so it is not part of the question).
-    fused = compiled and fused_shading_applies(scene, shading, samples, None)
+    # any blending, with the colour stage's compiled fog.
+    fused = compiled and fused_shading_applies(scene, shading, samples)
     if fused and method == "zbuffer" and all(c.method == "none" for c in the_plan.shadows):
         return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, fog_args, seconds, say)
 

@@ -185,18 +185,18 @@ def _shade_phong(
     return FragmentShading(rgb, terms.alpha, terms.ambient, terms.diffuse, terms.specular, world_n)
 
 
-def fused_shading_applies(scene: Scene, shading: str, samples: int, fog: object) -> bool:
+def fused_shading_applies(scene: Scene, shading: str, samples: int) -> bool:
     """True when the compiled engine may shade and resolve the frame in one fused pass.
 
-    That is: one sample per pixel, no fog, every mesh shaded per pixel (``phong``), no image
-    texture, and every material's fragment colour the partial-occlusion ``(α·c, α)`` (no
-    Kay–Greenberg opacity, no specular wash-out, no emission/absorption model). Transparency
-    resolves are checked by the caller (none may be needed). The fused pass
-    (:func:`blinn_phong.fast.shade_plain_fragments_compiled`) gives the images of
+    That is: one sample per pixel (fogged or not: the pass applies fog), every mesh shaded per
+    pixel (``phong``), no image texture, and every material's fragment colour the
+    partial-occlusion ``(α·c, α)`` (no Kay–Greenberg opacity, no specular wash-out, no
+    emission/absorption model). Transparency resolves are checked by the caller (none may be
+    needed). The fused pass (:func:`blinn_phong.fast.shade_plain_fragments_compiled`) gives the images of
     :func:`shade_fragments`, :func:`blinn_phong.texturing.texture_fragments` and
     :func:`blinn_phong.resolve.resolve_frame` for these frames.
     """
-    if samples != 1 or fog is not None:
+    if samples != 1:
         return False
     if any((mesh.shading or shading) != "phong" for mesh in scene.meshes):
         return False
