@@ -38,7 +38,6 @@ import functools
 import json
 import math
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -58,19 +57,15 @@ PEEL = (1, 2, 4)
 
 
 def _timed(runs: dict[str, Callable[[], bp.RenderResult]], repeat: int) -> dict[str, dict[str, float]]:
-    for fn in runs.values():
-        fn()
-    stages: dict[str, dict[str, list[float]]] = {k: {"total": [], "cpu": []} for k in runs}
-    for _ in range(repeat):
-        for name, fn in runs.items():
-            start, cpu = time.perf_counter(), time.process_time()
-            result = fn()
-            stages[name]["total"].append(time.perf_counter() - start)
-            stages[name]["cpu"].append(time.process_time() - cpu)
-            for stage, sec in result.stats.seconds.items():
-                stages[name].setdefault(stage, []).append(sec)
-    # the fastest round: on a shared machine contention only adds time (as the fits use)
-    return {k: {s: min(v) for s, v in stages[k].items()} for k in runs}
+    """The fastest round's seconds per stage (``total``, ``cpu`` and each ``RenderStats`` stage) of
+    interleaved renders, by :func:`benchmarks.tradeoffs.timed_renders` (on a shared machine
+    contention only adds time, as the fits use)."""
+    from benchmarks.tradeoffs import timed_renders
+
+    return {
+        name: {key[: -len("_s")]: value for key, value in table.items() if not key.endswith("_median_s")}
+        for name, table in timed_renders(runs, repeat).items()
+    }
 
 
 def _uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]:

@@ -41,6 +41,20 @@ def _on_triangles(tris: np.ndarray, n: int, rng: np.random.Generator) -> np.ndar
     return np.concatenate([tris.reshape(-1, 3), inner.reshape(-1, 3)])
 
 
+def _att_spot(eye_lights, r: int, eye: np.ndarray) -> np.ndarray:
+    """att·spot of eye-space light ``r`` at eye-space points (the lighting equation's own factors)."""
+    return _light_direction(
+        eye[:, 0],
+        eye[:, 1],
+        eye[:, 2],
+        eye_lights.position[r],
+        eye_lights.spot_direction[r],
+        eye_lights.cos_cutoff[r],
+        eye_lights.spot_exponent[r],
+        eye_lights.attenuation[r],
+    )[3]
+
+
 def _old_bound(light, facts) -> float:
     """The former bound: attenuation at the distance to the nearest mesh's world bounding box, spot ≤ 1."""
     pos = np.asarray(light.position, float)
@@ -102,16 +116,7 @@ def test_the_light_factor_bounds_att_spot_at_every_point_of_each_mesh(scene):
     for i, f in enumerate(facts):
         eye = _on_triangles(f.tris, 200, rng) @ view[:3, :3].T + view[:3, 3]
         for r, j in enumerate(eye_lights.source):
-            _, _, _, att = _light_direction(
-                eye[:, 0],
-                eye[:, 1],
-                eye[:, 2],
-                eye_lights.position[r],
-                eye_lights.spot_direction[r],
-                eye_lights.cos_cutoff[r],
-                eye_lights.spot_exponent[r],
-                eye_lights.attenuation[r],
-            )
+            att = _att_spot(eye_lights, r, eye)
             assert float(np.max(att)) <= factors[i, j] * (1 + 1e-9) + 1e-12, (i, j, scene.lights[j])
 
 
@@ -278,15 +283,5 @@ def test_big_meshes_bound_att_spot_by_their_box_and_ball_under_any_view(scaled_v
     eye_lights = lights_in_eye_space(scene.lights, view)
     eye = _on_triangles(facts[0].tris, 4, np.random.default_rng(5)) @ view[:3, :3].T + view[:3, 3]
     for r, j in enumerate(eye_lights.source):
-        _, _, _, att = _light_direction(
-            eye[:, 0],
-            eye[:, 1],
-            eye[:, 2],
-            eye_lights.position[r],
-            eye_lights.spot_direction[r],
-            eye_lights.cos_cutoff[r],
-            eye_lights.spot_exponent[r],
-            eye_lights.attenuation[r],
-        )
-        top = float(np.max(att))
+        top = float(np.max(_att_spot(eye_lights, r, eye)))
         assert 0 < top <= factors[0, j] * (1 + 1e-9) + 1e-12, (j, top, factors[0, j])
