@@ -50,6 +50,7 @@ __all__ = [
 #: The z-buffer kernels' inlined helpers, set by :func:`_kernel`.
 _triangle_setup: object = None
 _sample_depth: object = None
+_winner_point: object = None
 
 
 @functools.lru_cache(maxsize=1)
@@ -96,10 +97,38 @@ def _kernel() -> object:  # a numba dispatcher
             return -1.0
         return max(depth, 0.0)
 
+    @numba.njit(inline="always", cache=True)
+    def winner_point(t, cx, cy, xe, ye, area, a, b, c, z, w, weights):  # pragma: no cover - compiled
+        """Window depth and perspective-correct barycentrics ``(depth, b0, b1, b2)`` of a depth-test
+        winner, sub-triangle t, at the sample centred at (cx, cy): the compiled twin of
+        raster._fragments_from_hits (exact barycentrics where triangle_setup allows them, else the
+        snapped edge functions; then 1/w weighting and the sub-triangle's corner weights)."""
+        ex_area, exact, abs_area = triangle_setup(t, xe, ye, area)
+        if exact:
+            l0 = ((xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])) / ex_area
+            l1 = ((xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])) / ex_area
+            l2 = ((xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])) / ex_area
+        else:
+            l0 = (a[t, 0] * cx + b[t, 0] * cy + c[t, 0]) / abs_area
+            l1 = (a[t, 1] * cx + b[t, 1] * cy + c[t, 1]) / abs_area
+            l2 = (a[t, 2] * cx + b[t, 2] * cy + c[t, 2]) / abs_area
+        depth = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
+        q0 = l0 / w[t, 0]
+        q1 = l1 / w[t, 1]
+        q2 = l2 / w[t, 2]
+        qs = q0 + q1 + q2
+        q0 /= qs
+        q1 /= qs
+        q2 /= qs
+        b0 = q0 * weights[t, 0, 0] + q1 * weights[t, 1, 0] + q2 * weights[t, 2, 0]
+        b1 = q0 * weights[t, 0, 1] + q1 * weights[t, 1, 1] + q2 * weights[t, 2, 1]
+        b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
+        return depth, b0, b1, b2
+
     # Module globals, not closure variables: numba's disk-cache key hashes closure variables, and
     # a compiled function in one changes it in every process (the kernels were never cached).
-    global _triangle_setup, _sample_depth
-    _triangle_setup, _sample_depth = triangle_setup, sample_depth
+    global _triangle_setup, _sample_depth, _winner_point
+    _triangle_setup, _sample_depth, _winner_point = triangle_setup, sample_depth, winner_point
 
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
@@ -224,34 +253,10 @@ def _kernel() -> object:  # a numba dispatcher
             fy = fine_key[i] // fine_w
             cx = fx + 0.5
             cy = fy + 0.5
-            ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-                ye[t, 1] - ye[t, 0]
-            )
-            if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
-                l0 = (
-                    (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
-                ) / ex_area
-                l1 = (
-                    (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
-                ) / ex_area
-                l2 = (
-                    (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
-                ) / ex_area
-            else:
-                aa = abs(area[t])
-                l0 = (a[t, 0] * cx + b[t, 0] * cy + c[t, 0]) / aa
-                l1 = (a[t, 1] * cx + b[t, 1] * cy + c[t, 1]) / aa
-                l2 = (a[t, 2] * cx + b[t, 2] * cy + c[t, 2]) / aa
-            depth_out[i] = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
-            q0 = l0 / w[t, 0]
-            q1 = l1 / w[t, 1]
-            q2 = l2 / w[t, 2]
-            qs = q0 + q1 + q2
-            q0 /= qs
-            q1 /= qs
-            q2 /= qs
-            for m in range(3):
-                bary_out[i, m] = q0 * weights[t, 0, m] + q1 * weights[t, 1, m] + q2 * weights[t, 2, m]
+            depth_out[i], b0, b1, b2 = _winner_point(t, cx, cy, xe, ye, area, a, b, c, z, w, weights)
+            bary_out[i, 0] = b0
+            bary_out[i, 1] = b1
+            bary_out[i, 2] = b2
             pixel[i] = (fy // k) * width + fx // k
             sample[i] = (fy % k) * k + fx % k
 
@@ -1009,6 +1014,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
     from blinn_phong import lighting
 
     global _point_terms, _fogged
+    _kernel()  # sets _winner_point: the depth-test winners' depth and barycentrics, shared with finish
     _fogged = _fog_function()  # the colour stage's fog (a module global, as _point_terms)
     # The lighting equation: the same compiled function as lighting.shade's kernel. A module
     # global, not a closure variable (numba's disk-cache key hashes closure variables, and a
@@ -1065,35 +1071,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 if from_winners:
                     t = o
                     cx = col + 0.5
-                    ex_area = (xe[t, 1] - xe[t, 0]) * (ye[t, 2] - ye[t, 0]) - (xe[t, 2] - xe[t, 0]) * (
-                        ye[t, 1] - ye[t, 0]
-                    )
-                    if ex_area * area[t] > 0 and abs(ex_area) > 1e-12:
-                        l0 = (
-                            (xe[t, 2] - xe[t, 1]) * (cy - ye[t, 1]) - (ye[t, 2] - ye[t, 1]) * (cx - xe[t, 1])
-                        ) / ex_area
-                        l1 = (
-                            (xe[t, 0] - xe[t, 2]) * (cy - ye[t, 2]) - (ye[t, 0] - ye[t, 2]) * (cx - xe[t, 2])
-                        ) / ex_area
-                        l2 = (
-                            (xe[t, 1] - xe[t, 0]) * (cy - ye[t, 0]) - (ye[t, 1] - ye[t, 0]) * (cx - xe[t, 0])
-                        ) / ex_area
-                    else:
-                        aa = abs(area[t])
-                        l0 = (ea[t, 0] * cx + eb[t, 0] * cy + ec[t, 0]) / aa
-                        l1 = (ea[t, 1] * cx + eb[t, 1] * cy + ec[t, 1]) / aa
-                        l2 = (ea[t, 2] * cx + eb[t, 2] * cy + ec[t, 2]) / aa
-                    depth = max(l0 * z[t, 0] + l1 * z[t, 1] + l2 * z[t, 2], 0.0)
-                    q0 = l0 / w[t, 0]
-                    q1 = l1 / w[t, 1]
-                    q2 = l2 / w[t, 2]
-                    qs = q0 + q1 + q2
-                    q0 /= qs
-                    q1 /= qs
-                    q2 /= qs
-                    b0 = q0 * weights[t, 0, 0] + q1 * weights[t, 1, 0] + q2 * weights[t, 2, 0]
-                    b1 = q0 * weights[t, 0, 1] + q1 * weights[t, 1, 1] + q2 * weights[t, 2, 1]
-                    b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
+                    depth, b0, b1, b2 = _winner_point(t, cx, cy, xe, ye, area, ea, eb, ec, z, w, weights)
                     src = source[t]
                     front = sub_front[t]
                 else:
