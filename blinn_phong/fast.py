@@ -1029,12 +1029,13 @@ def _plain_kernel() -> object:  # a numba dispatcher
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
-        geometry, materials, lights, flags, fog, has_vis, vis, vis_mean,
+        geometry, materials, lights, flags, fog, has_vis, vis, vis_mean, vis_index,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
         # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
-        # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Then
+        # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Its row of
+        # (vis, vis_mean) is ``o`` for fragments, ``vis_index[pixel]`` for winners. Then
         # surface_at_fragments_compiled's interpolation, the lighting kernel's equation
         # (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
         # resolve_plain's float32 writes, with the same operations in the same order; with fog
@@ -1068,6 +1069,9 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         o_shadow[row, col, 0] = 0.0
                     continue
                 n_row += 1
+                v = o
+                if from_winners and has_vis:
+                    v = vis_index[row * width + col]
                 if from_winners:
                     t = o
                     cx = col + 0.5
@@ -1098,7 +1102,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 wx, wy, wz = wx * scale, wy * scale, wz * scale
                 mid = 2 * triangle_mesh[src] + back
                 ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                    o, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                    v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
                     pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
                     has_vis, vis,
                 )  # fmt: skip
@@ -1137,7 +1141,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 o_nrm[row, col, 2] = 0.0 + np.float32(wz)
                 o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
                 if has_vis:
-                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[o] * a)
+                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[v] * a)
             covered[row] = n_row
         return covered.sum()
 
@@ -1149,6 +1153,7 @@ _NO_SETUP = (
     *(np.zeros((0, 3)) for _ in range(5)), np.zeros((0, 3, 3)),
 )  # fmt: skip
 _NO_FRAGMENTS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.bool_))
+_NO_INDEX = np.zeros(0, np.int64)
 
 
 def _row_order(height: int) -> np.ndarray:
@@ -1202,7 +1207,7 @@ def shade_plain_fragments_compiled(
         geometry, materials, lights, flags, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
-        *out,
+        _NO_INDEX, *out,
     )  # fmt: skip
 
 
@@ -1225,11 +1230,17 @@ def shade_plain_winners_compiled(
     tables: PlainTables,
     out: tuple[np.ndarray, ...],
     fog: FogArgs = None,
+    visibility: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> int:
     """:func:`shade_plain_fragments_compiled` straight from the z-buffer's winners (one sample per
-    pixel, no visibility, ``fog`` as there): barycentrics and depth as
-    :func:`frame_fragments_compiled` computes them, in the same pass. Returns the number of
-    covered pixels (fragments shaded)."""
+    pixel, ``fog`` as there): barycentrics and depth as :func:`frame_fragments_compiled` computes
+    them, in the same pass.
+
+    ``visibility``: None, or ``(vis, vis_mean, rank)`` for shadowed frames: ``vis`` (N, L, K)
+    and ``vis_mean`` (N,) of the covered pixels in row-major order, ``rank`` (H·W,) each pixel's
+    row in them (−1 where empty), as :func:`winner_surfaces_compiled` numbers them.
+
+    Returns the number of covered pixels (fragments shaded)."""
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
     two_sided, geometry, materials, lights, flags = tables
@@ -1237,13 +1248,105 @@ def shade_plain_winners_compiled(
         setup.source, setup.front, setup.x_exact, setup.y_exact, setup.area, setup.a, setup.b, setup.c,
         setup.z, setup.w, np.ascontiguousarray(setup.weights),
     )  # fmt: skip
+    if visibility is None:
+        vis, vis_mean, rank = np.zeros((0, 0, 1)), np.zeros(0), _NO_INDEX
+    else:
+        vis, vis_mean, rank = (np.ascontiguousarray(a) for a in visibility)
+        vis = vis.astype(np.float64, copy=False)
+        vis_mean = vis_mean.astype(np.float64, copy=False)
     return int(
         _plain_kernel()(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
-            two_sided, geometry, materials, lights, flags, _fog_scalars(fog), False, np.zeros((0, 0, 1)),
-            np.zeros(0), *out,
+            two_sided, geometry, materials, lights, flags, _fog_scalars(fog), visibility is not None,
+            vis, vis_mean, rank, *out,
         )
     )  # fmt: skip
+
+
+@functools.lru_cache(maxsize=1)
+def _winner_surface_kernel() -> object:  # a numba dispatcher
+    import math
+
+    import numba
+
+    _kernel()  # sets _winner_point (a module global, as in _plain_kernel)
+
+    @numba.njit(parallel=True, cache=True)
+    def winner_surface(
+        width, height, winner, rank, xe, ye, area, a, b, c, z, w, weights, source, triangles, world,
+        out_points, out_normals,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        # Per covered pixel (its row ``rank[pixel]``): the winner's perspective-correct
+        # barycentrics (_winner_point, as ``finish``), the world point interpolated as
+        # raster.interpolate sums it (k = 0, 1, 2) and the unit face normal
+        # normals.face_normals computes: (p1 − p0) × (p2 − p0) over the world corners, scaled by
+        # its largest component before the length is taken.
+        for row in numba.prange(height):
+            cy = row + 0.5
+            for col in range(width):
+                key = row * width + col
+                t = winner[key]
+                if t < 0:
+                    continue
+                i = rank[key]
+                _, b0, b1, b2 = _winner_point(t, col + 0.5, cy, xe, ye, area, a, b, c, z, w, weights)
+                src = source[t]
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                for k in range(3):
+                    out_points[i, k] = (b0 * world[v0, k] + b1 * world[v1, k]) + b2 * world[v2, k]
+                ux = world[v1, 0] - world[v0, 0]
+                uy = world[v1, 1] - world[v0, 1]
+                uz = world[v1, 2] - world[v0, 2]
+                vx = world[v2, 0] - world[v0, 0]
+                vy = world[v2, 1] - world[v0, 1]
+                vz = world[v2, 2] - world[v0, 2]
+                nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+                largest = max(abs(nx), abs(ny), abs(nz))
+                if largest > 0:
+                    nx, ny, nz = nx / largest, ny / largest, nz / largest
+                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    nx, ny, nz = nx / length, ny / length, nz / length
+                out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
+
+    return winner_surface
+
+
+def winner_surfaces_compiled(
+    setup: _TriangleSetup, winner: np.ndarray, triangles: np.ndarray, world_vertices: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World points and face normals of the z-buffer's winners, one row per covered pixel.
+
+    Args:
+        setup: the frame's triangle set-up (one sample per pixel).
+        winner: (H·W,) int64 from :func:`nearest_winners_compiled`.
+        triangles: (T, 3) int64 vertex indices into ``world_vertices`` (the prepared scene's).
+        world_vertices: (V, 3) float64 world-space positions of every mesh's vertices.
+
+    Returns:
+        ``(points (N, 3), normals (N, 3), rank (H·W,))`` float64, float64, int64: the covered
+        pixels in row-major order, their perspective-correct world points, their unit world face
+        normals (zero for a zero-area triangle; the orientation of the world corners, which
+        shadow methods do not use: they face each normal towards the light), and each
+        pixel's row (−1 where empty).
+    """
+    if setup.k != 1:
+        raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
+    compact = _kernel()[3]
+    n_keys = setup.width * setup.height
+    fine_key = np.empty(n_keys, np.int64)
+    sub = np.empty(n_keys, np.int64)
+    rank = np.empty(n_keys, np.int64)
+    covered = compact(winner, fine_key, sub, rank)
+    del fine_key, sub
+    points = np.empty((covered, 3))
+    normals = np.empty((covered, 3))
+    _winner_surface_kernel()(
+        setup.width, setup.height, winner, rank, setup.x_exact, setup.y_exact, setup.area, setup.a,
+        setup.b, setup.c, setup.z, setup.w, np.ascontiguousarray(setup.weights), setup.source,
+        np.ascontiguousarray(triangles, dtype=np.int64),
+        np.ascontiguousarray(world_vertices, dtype=np.float64), points, normals,
+    )  # fmt: skip
+    return points, normals, rank
 
 
 @functools.lru_cache(maxsize=1)

@@ -36,7 +36,9 @@ from blinn_phong.fast import (
     setup_triangles_compiled,
     shade_plain_fragments_compiled,
     shade_plain_winners_compiled,
+    winner_surfaces_compiled,
 )
+from blinn_phong.normals import face_normals
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
@@ -86,12 +88,18 @@ def _fragment_surface(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) world-space points and (N, 3) unit world face normals of fragments, contiguous float64.
 
+    The face normal is :func:`blinn_phong.normals.face_normals` of the world-space corners (the
+    direction of the model matrix's inverse transpose applied to the object-space normal, up to
+    the sign of its determinant: shadow methods face each normal towards the light, so the
+    sign does not matter).
+
     The point is the perspective-correct interpolation of the world-space corners (equal to the
     interpolated eye-space point mapped back by the inverse view matrix: the map is affine and
     the barycentrics sum to 1). Compiled: one pass (:func:`blinn_phong.shadow_kernels.fragment_surface`);
     numpy: :func:`blinn_phong.raster.interpolate` and a gather.
     """
     verts = np.concatenate(world_vertices) if world_vertices else np.zeros((0, 3))
+    faces = face_normals(verts, prepared.triangles)
     if compiled:
         from blinn_phong.shadow_kernels import fragment_surface
 
@@ -104,13 +112,13 @@ def _fragment_surface(
                 np.ascontiguousarray(fragments.bary, dtype=np.float64),
                 np.ascontiguousarray(prepared.triangles, dtype=np.int64),
                 np.ascontiguousarray(verts),
-                np.ascontiguousarray(prepared.face_world_normal, dtype=np.float64),
+                faces,
                 points,
                 normals,
             )
         return points, normals
     points = np.ascontiguousarray(interpolate(fragments, prepared.triangles, verts))
-    return points, np.ascontiguousarray(prepared.face_world_normal[fragments.triangle])
+    return points, np.ascontiguousarray(faces[fragments.triangle])
 
 
 def _soft_visibility(
@@ -145,6 +153,16 @@ def _soft_visibility(
     )
 
 
+def _shadow_lights(scene: Scene, the_plan: Plan) -> list[tuple[object, object]] | None:
+    """The scene's non-ambient lights with their shadow choices; None when none casts shadows."""
+    lit = [
+        (light, c)
+        for light, c in zip(scene.lights, the_plan.shadows, strict=True)
+        if not isinstance(light, AmbientLight)
+    ]
+    return lit if any(c.method != "none" for _, c in lit) else None
+
+
 def light_visibilities(
     prepared: PreparedScene, visible: FrameFragments, the_plan: Plan, *, engine: str = "auto"
 ) -> np.ndarray | None:
@@ -175,20 +193,26 @@ def light_visibilities(
         (N, L) or (N, L, 3) float64 in [0, 1], L the non-ambient lights in scene order; or None.
     """
     scene = prepared.scene
-    lit = [
-        (light, c)
-        for light, c in zip(scene.lights, the_plan.shadows, strict=True)
-        if not isinstance(light, AmbientLight)
-    ]
-    if not any(c.method != "none" for _, c in lit):
+    lit = _shadow_lights(scene, the_plan)
+    if lit is None:
         return None
-    compiled = use_compiled(engine)
-    f = visible.fragments
     verts = _world_vertices(scene)
+    world, normal = _fragment_surface(prepared, visible.fragments, verts, use_compiled(engine))
+    return _visibility_at(scene, lit, verts, world, normal, use_compiled(engine))
+
+
+def _visibility_at(
+    scene: Scene,
+    lit: list[tuple[object, object]],
+    verts: list[np.ndarray],
+    world: np.ndarray,
+    normal: np.ndarray,
+    compiled: bool,
+) -> np.ndarray:
+    """:func:`light_visibilities` at (N, 3) world points with their (N, 3) face normals."""
     tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
-        return np.ones((len(f), len(lit)))
-    world, normal = _fragment_surface(prepared, f, verts, compiled)
+        return np.ones((len(world), len(lit)))
     transmittance = caster_transmittance(scene)
     coloured = transmittance is not None and any(c.method == "ray_traced" for _, c in lit)
     out = np.empty((len(lit), len(world), 3) if coloured else (len(lit), len(world)))
@@ -237,20 +261,23 @@ def _targets(image: FrameImage) -> tuple[np.ndarray, ...]:
     return (image.rgba, p["ambient"], p["diffuse"], p["specular"], image.normal, image.depth, shadow)
 
 
-def _plain_from_winners(
+def _opaque_from_winners(
     prepared: PreparedScene,
     width: int,
     height: int,
+    lit: list[tuple[object, object]] | None,
     gl_compat: bool,
     cull_backfaces: bool,
     fog: tuple | None,
     seconds: dict[str, float],
     say: Callable[[str, float], None],
 ) -> FrameResult:
-    """The plain z-buffer frame (no shadow, no transparency, one sample, per-pixel shading, fog or
-    not) by the compiled engine in two passes: the z-buffer, then each pixel's winner
-    interpolated, lit, fogged (``fog`` as :meth:`FogParameters.compiled_args` gives it) and
-    written into the frame buffers (no fragment arrays at all).
+    """The opaque z-buffer frame (no transparency, one sample, per-pixel shading, fog or not,
+    shadows or not) by the compiled engine: the z-buffer, then (with shadows: ``lit`` from
+    :func:`_shadow_lights`) each covered pixel's world point and face normal and each light's
+    visibility there, then each pixel's winner interpolated, lit, fogged (``fog`` as
+    :meth:`FogParameters.compiled_args` gives it) and written into the frame buffers (no
+    fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
     order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
@@ -260,10 +287,24 @@ def _plain_from_winners(
     winner = nearest_winners_compiled(setup)
     seconds["visibility"] = time.perf_counter() - t
     say("visibility", 0.4)
+    vis = None
+    if lit is not None:  # shadows: each covered pixel's world point, then each light's visibility there
+        t = time.perf_counter()
+        verts = _world_vertices(prepared.scene)
+        all_verts = np.concatenate(verts) if verts else np.zeros((0, 3))
+        points, normals, rank = winner_surfaces_compiled(setup, winner, prepared.triangles, all_verts)
+        visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True)
+        vis = (
+            visibility if visibility.ndim == 3 else visibility[:, :, None],
+            shadow_pass_values(visibility),
+            rank,
+        )
+        seconds["shadows"] = time.perf_counter() - t
+        say("shadows", 0.6)
     t = time.perf_counter()
-    image = _empty_frame(height, width, False)
+    image = _empty_frame(height, width, lit is not None)
     tables = plain_tables(prepared, gl_compat)
-    shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog)
+    shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
     seconds["shade"] = time.perf_counter() - t
     seconds["resolve_samples"] = 0.0
     say("shade", 1.0)
@@ -336,8 +377,11 @@ def render_frame(
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog.
     fused = compiled and fused_shading_applies(scene, shading, samples)
-    if fused and method == "zbuffer" and all(c.method == "none" for c in the_plan.shadows):
-        return _plain_from_winners(prepared, width, height, gl_compat, cull_backfaces, fog_args, seconds, say)
+    if fused and method == "zbuffer":
+        lit = _shadow_lights(scene, the_plan)
+        return _opaque_from_winners(
+            prepared, width, height, lit, gl_compat, cull_backfaces, fog_args, seconds, say
+        )
 
     t = time.perf_counter()
     visible = frame_fragments(

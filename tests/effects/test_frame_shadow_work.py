@@ -53,9 +53,40 @@ def test_fragment_world_points_are_the_eye_points_mapped_back(compiled):
     back = (np.c_[eye, np.ones(len(eye))] @ np.linalg.inv(scene.camera.view).T)[:, :3]
     # coordinates of size ~5; a few float64 roundings of the matrix products and sums
     np.testing.assert_allclose(points, back, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(normals, prepared.face_world_normal[f.triangle])
+    # The face normal of the world corners is the model matrix's inverse transpose applied to the
+    # object-space face normal, up to the determinant's sign ((Ma)×(Mb) = det M · M⁻ᵀ(a×b)): unit
+    # vectors of equal direction, to a few roundings.
+    expected = prepared.face_world_normal[f.triangle] * np.sign(np.linalg.det(scene.meshes[0].transform))
+    np.testing.assert_allclose(normals, expected, rtol=0, atol=1e-14)
     assert points.flags.c_contiguous and normals.flags.c_contiguous
     assert _world_triangles(scene).shape == (len(prepared.triangles), 3, 3)
+
+
+@pytest.mark.parametrize("cull", [False, True])
+def test_winner_surfaces_are_the_fragment_surfaces(cull):
+    # The opaque frame's shadow work starts from the z-buffer's winners, without fragment arrays:
+    # the covered pixels in row-major order must be the compiled visibility stage's fragments (the
+    # same winners, the same barycentrics: one shared helper), their world points and normals those
+    # of the numpy reference (same sums in the same order; the normal's length by one einsum, so
+    # a rounding or two: 1e-15 on unit vectors, 1e-14 on coordinates of size ~5).
+    pytest.importorskip("numba")
+    from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
+
+    scene = _scene()
+    prepared = prepare_scene(scene)
+    w, h = 64, 48
+    setup = setup_triangles_compiled(prepared.clip, prepared.triangles, w, h, 1, cull)
+    winner = nearest_winners_compiled(setup)
+    verts = _world_vertices(scene)
+    points, normals, rank = winner_surfaces_compiled(setup, winner, prepared.triangles, np.concatenate(verts))
+    visible = frame_fragments(prepared.clip, prepared.triangles, w, h, cull_backfaces=cull, engine="numpy")
+    f = visible.fragments
+    assert len(f) > 500 and len(points) == len(f)
+    np.testing.assert_array_equal(f.pixel, np.flatnonzero(rank >= 0))  # row-major, one per pixel
+    np.testing.assert_array_equal(rank[f.pixel], np.arange(len(f)))
+    ref_points, ref_normals = _fragment_surface(prepared, f, verts, False)
+    np.testing.assert_allclose(points, ref_points, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(normals, ref_normals, rtol=0, atol=1e-15)
 
 
 @pytest.mark.parametrize("light", [DirectionalLight((0.4, -0.3, -1.0)), PointLight((0.5, 0.5, 4.0))])
