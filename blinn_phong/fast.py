@@ -1273,15 +1273,14 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
 
     @numba.njit(parallel=True, cache=True)
     def winner_surface(
-        width, height, winner, rank, xe, ye, area, a, b, c, z, w, weights, source, triangles, world,
-        out_points, out_normals,
+        width, height, row_order, winner, rank, xe, ye, area, a, b, c, z, w, weights, source, triangles,
+        world, face_normal, triangle_mesh, out_points, out_normals, out_mesh,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per covered pixel (its row ``rank[pixel]``): the winner's perspective-correct
         # barycentrics (_winner_point, as ``finish``), the world point interpolated as
-        # raster.interpolate sums it (k = 0, 1, 2) and the unit face normal
-        # normals.face_normals computes: (p1 − p0) × (p2 − p0) over the world corners, scaled by
-        # its largest component before the length is taken.
-        for row in numba.prange(height):
+        # raster.interpolate sums it (k = 0, 1, 2), its triangle's unit face normal and mesh.
+        for i_row in numba.prange(height):
+            row = row_order[i_row]  # rows interleaved over the threads (balanced work)
             cy = row + 0.5
             for col in range(width):
                 key = row * width + col
@@ -1291,29 +1290,43 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
                 i = rank[key]
                 _, b0, b1, b2 = _winner_point(t, col + 0.5, cy, xe, ye, area, a, b, c, z, w, weights)
                 src = source[t]
+                out_mesh[i] = triangle_mesh[src]
                 v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
                 for k in range(3):
                     out_points[i, k] = (b0 * world[v0, k] + b1 * world[v1, k]) + b2 * world[v2, k]
-                ux = world[v1, 0] - world[v0, 0]
-                uy = world[v1, 1] - world[v0, 1]
-                uz = world[v1, 2] - world[v0, 2]
-                vx = world[v2, 0] - world[v0, 0]
-                vy = world[v2, 1] - world[v0, 1]
-                vz = world[v2, 2] - world[v0, 2]
-                nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-                largest = max(abs(nx), abs(ny), abs(nz))
-                if largest > 0:
-                    nx, ny, nz = nx / largest, ny / largest, nz / largest
-                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                    nx, ny, nz = nx / length, ny / length, nz / length
+                nx, ny, nz = face_normal[src, 0], face_normal[src, 1], face_normal[src, 2]
                 out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
 
-    return winner_surface
+    @numba.njit(parallel=True, cache=True)
+    def face_normals(triangles, world, out):  # pragma: no cover - compiled
+        # normals.face_normals: (p1 − p0) × (p2 − p0) over the world corners, scaled by its
+        # largest component before the length is taken; zero for a zero-area triangle.
+        for f in numba.prange(triangles.shape[0]):
+            v0, v1, v2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+            ux = world[v1, 0] - world[v0, 0]
+            uy = world[v1, 1] - world[v0, 1]
+            uz = world[v1, 2] - world[v0, 2]
+            vx = world[v2, 0] - world[v0, 0]
+            vy = world[v2, 1] - world[v0, 1]
+            vz = world[v2, 2] - world[v0, 2]
+            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            largest = max(abs(nx), abs(ny), abs(nz))
+            if largest > 0:
+                nx, ny, nz = nx / largest, ny / largest, nz / largest
+                length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                nx, ny, nz = nx / length, ny / length, nz / length
+            out[f, 0], out[f, 1], out[f, 2] = nx, ny, nz
+
+    return winner_surface, face_normals
 
 
 def winner_surfaces_compiled(
-    setup: _TriangleSetup, winner: np.ndarray, triangles: np.ndarray, world_vertices: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    setup: _TriangleSetup,
+    winner: np.ndarray,
+    triangles: np.ndarray,
+    world_vertices: np.ndarray,
+    triangle_mesh: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """World points and face normals of the z-buffer's winners, one row per covered pixel.
 
     Args:
@@ -1321,13 +1334,15 @@ def winner_surfaces_compiled(
         winner: (H·W,) int64 from :func:`nearest_winners_compiled`.
         triangles: (T, 3) int64 vertex indices into ``world_vertices`` (the prepared scene's).
         world_vertices: (V, 3) float64 world-space positions of every mesh's vertices.
+        triangle_mesh: (T,) int64 the mesh of each triangle.
 
     Returns:
-        ``(points (N, 3), normals (N, 3), rank (H·W,))`` float64, float64, int64: the covered
+        ``(points (N, 3), normals (N, 3), rank (H·W,), mesh (N,))`` float64, float64, int64,
+        int64: the covered
         pixels in row-major order, their perspective-correct world points, their unit world face
         normals (zero for a zero-area triangle; the orientation of the world corners, which
         shadow methods do not use: they face each normal towards the light), and each
-        pixel's row (−1 where empty).
+        pixel's row (−1 where empty), and each covered pixel's mesh.
     """
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
@@ -1340,13 +1355,19 @@ def winner_surfaces_compiled(
     del fine_key, sub
     points = np.empty((covered, 3))
     normals = np.empty((covered, 3))
-    _winner_surface_kernel()(
-        setup.width, setup.height, winner, rank, setup.x_exact, setup.y_exact, setup.area, setup.a,
+    mesh = np.empty(covered, np.int64)
+    winner_surface, face_normals = _winner_surface_kernel()
+    tris = np.ascontiguousarray(triangles, dtype=np.int64)
+    verts = np.ascontiguousarray(world_vertices, dtype=np.float64)
+    faces = np.empty((len(tris), 3))
+    face_normals(tris, verts, faces)
+    winner_surface(
+        setup.width, setup.height, _row_order(setup.height), winner, rank, setup.x_exact, setup.y_exact,
+        setup.area, setup.a,
         setup.b, setup.c, setup.z, setup.w, np.ascontiguousarray(setup.weights), setup.source,
-        np.ascontiguousarray(triangles, dtype=np.int64),
-        np.ascontiguousarray(world_vertices, dtype=np.float64), points, normals,
+        tris, verts, faces, np.ascontiguousarray(triangle_mesh, dtype=np.int64), points, normals, mesh,
     )  # fmt: skip
-    return points, normals, rank
+    return points, normals, rank, mesh
 
 
 @functools.lru_cache(maxsize=1)

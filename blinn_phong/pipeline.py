@@ -26,6 +26,7 @@ module and :mod:`blinn_phong.frame` (the plan); no stage imports a later one.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 
@@ -50,7 +51,7 @@ from blinn_phong.resolve import (
     shadow_pass_values,
     side_tables,
 )
-from blinn_phong.scene import AmbientLight, Scene, SpotLight
+from blinn_phong.scene import AmbientLight, DirectionalLight, Scene, SpotLight
 from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragments
 from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
@@ -197,8 +198,50 @@ def light_visibilities(
     if lit is None:
         return None
     verts = _world_vertices(scene)
-    world, normal = _fragment_surface(prepared, visible.fragments, verts, use_compiled(engine))
-    return _visibility_at(scene, lit, verts, world, normal, use_compiled(engine))
+    compiled = use_compiled(engine)
+    world, normal = _fragment_surface(prepared, visible.fragments, verts, compiled)
+    mesh_of = prepared.triangle_mesh[visible.fragments.triangle] if compiled else None
+    return _visibility_at(scene, lit, verts, world, normal, compiled, mesh_of)
+
+
+def _traced_hard(
+    scene: Scene,
+    light: object,
+    tris: np.ndarray,
+    world: np.ndarray,
+    normal: np.ndarray,
+    mesh_of: np.ndarray,
+    culling: list[object],
+) -> np.ndarray:
+    """Ray-traced hard visibility of one light, tracing only the rays that may be occluded.
+
+    :mod:`blinn_phong.ray_culling` proves the other rays unoccluded (visibility 1, Embree's
+    answer too); the rest go to :func:`blinn_phong.shadows.light_visibility` in one batch.
+    ``culling`` caches the frame's caster tables between lights.
+    """
+    from blinn_phong import raytrace  # Embree: imported only when used
+    from blinn_phong.ray_culling import caster_tables, rays_to_trace
+
+    bvh = raytrace.cached_ray_scene(tris)
+    if not culling:
+        culling.append(caster_tables(scene, bvh.centre))
+    if isinstance(light, DirectionalLight):
+        vec = -np.asarray(light.direction, dtype=np.float64)
+        vec = vec / np.linalg.norm(vec)
+        positional = False
+    else:
+        vec, positional = np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
+    ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
+    trace = rays_to_trace(
+        world, normal, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps, culling[0]
+    )  # type: ignore[arg-type]
+    out = np.ones(len(world))
+    index = np.flatnonzero(trace)
+    if len(index):
+        p, n = world[index], normal[index]
+        with trusted_arrays(p, n):
+            out[index] = light_visibility("ray_traced", light, tris, p, n, engine="numba")  # type: ignore[arg-type]
+    return out
 
 
 def _visibility_at(
@@ -208,18 +251,29 @@ def _visibility_at(
     world: np.ndarray,
     normal: np.ndarray,
     compiled: bool,
+    mesh_of: np.ndarray | None = None,
 ) -> np.ndarray:
-    """:func:`light_visibilities` at (N, 3) world points with their (N, 3) face normals."""
+    """:func:`light_visibilities` at (N, 3) world points with their (N, 3) face normals.
+
+    ``mesh_of``: (N,) the scene mesh of each point; given to the compiled engine, ray-traced
+    hard shadows trace only the rays that may be occluded (:func:`_traced_hard`).
+    """
     tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
         return np.ones((len(world), len(lit)))
     transmittance = caster_transmittance(scene)
     coloured = transmittance is not None and any(c.method == "ray_traced" for _, c in lit)
-    out = np.empty((len(lit), len(world), 3) if coloured else (len(lit), len(world)))
+    out = np.empty((len(world), len(lit), 3) if coloured else (len(world), len(lit)))
     ray_scene: list[object] = []
+    culling: list[object] = []
     shadow_engine = "numba" if compiled else "numpy"
+    one_bvh: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
+    if any(c.method in ("ray_traced", "soft") for _, c in lit):
+        from blinn_phong.raytrace import frame_triangles  # Embree: imported only when used
+
+        one_bvh = frame_triangles(tris)  # the BVH's cache key computed once per frame, not per light
     # world, normal and tris are this frame's own finite float64 arrays: checked once, here
-    with trusted_arrays(world, normal, tris):
+    with trusted_arrays(world, normal, tris), one_bvh:
         for i, (light, c) in enumerate(lit):
             if c.method == "soft":
                 if not ray_scene:
@@ -227,6 +281,8 @@ def _visibility_at(
 
                     ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
                 column = _soft_visibility(light, c.params, ray_scene[0], world, normal)
+            elif compiled and c.method == "ray_traced" and not (coloured or c.params) and mesh_of is not None:
+                column = _traced_hard(scene, light, tris, world, normal, mesh_of, culling)
             elif coloured and c.method == "ray_traced":
                 column = light_visibility(
                     c.method, light, tris, world, normal, transmittance=transmittance, **c.params
@@ -236,8 +292,8 @@ def _visibility_at(
                 if c.method in ("shadow_map", "ray_traced") and "engine" not in c.params:
                     extra["engine"] = shadow_engine
                 column = light_visibility(c.method, light, tris, world, normal, **c.params, **extra)  # type: ignore[arg-type]
-            out[i] = column[:, None] if coloured and column.ndim == 1 else column
-    return np.moveaxis(out, 0, 1)
+            out[:, i] = column[:, None] if coloured and column.ndim == 1 else column
+    return out
 
 
 FrameResult = tuple[FrameImage, int]
@@ -292,8 +348,10 @@ def _opaque_from_winners(
         t = time.perf_counter()
         verts = _world_vertices(prepared.scene)
         all_verts = np.concatenate(verts) if verts else np.zeros((0, 3))
-        points, normals, rank = winner_surfaces_compiled(setup, winner, prepared.triangles, all_verts)
-        visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True)
+        points, normals, rank, mesh_of = winner_surfaces_compiled(
+            setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
+        )
+        visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of)
         vis = (
             visibility if visibility.ndim == 3 else visibility[:, :, None],
             shadow_pass_values(visibility),

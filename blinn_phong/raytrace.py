@@ -32,10 +32,13 @@ one Embree call per light over every point.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import hashlib
 import os
 from collections import OrderedDict
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -58,6 +61,8 @@ __all__ = [
 _MISS_T = 1e30
 #: Smallest ray-origin offset in float32 spacings of the (recentred) point's largest coordinate.
 OFFSET_ULPS = 64.0
+#: Default smallest ray-origin offset of hard shadow rays (world units).
+HARD_SHADOW_OFFSET = 1e-4
 _EPS32 = float(np.finfo(np.float32).eps)  # 2**-23
 
 
@@ -228,11 +233,38 @@ _SCENE_CACHE: OrderedDict[tuple[tuple[int, ...], str], RayScene] = OrderedDict()
 _SCENE_CACHE_SIZE = 2
 
 
+#: Cache keys of arrays their owner promised not to modify inside a :func:`frame_triangles` block.
+_FRAME_KEYS: contextvars.ContextVar[dict[int, tuple[tuple[int, ...], str]] | None] = contextvars.ContextVar(
+    "frame_keys", default=None
+)
+
+
+@contextlib.contextmanager
+def frame_triangles(triangles: np.ndarray) -> Iterator[None]:
+    """Inside the block, :func:`cached_ray_scene` of this very array hashes it once, not per call.
+
+    For a caller that made ``triangles`` itself and does not modify it inside the block (the
+    frame pipeline's caster triangles, queried once per light): the SHA-1 of 260 k triangles
+    costs about 5 ms per call.
+    """
+    token = _FRAME_KEYS.set({**(_FRAME_KEYS.get() or {}), id(triangles): _key(triangles)})
+    try:
+        yield
+    finally:
+        _FRAME_KEYS.reset(token)
+
+
+def _key(triangles: np.ndarray) -> tuple[tuple[int, ...], str]:
+    tris = np.ascontiguousarray(triangles, dtype=np.float64)
+    return tris.shape, hashlib.sha1(memoryview(tris.reshape(-1))).hexdigest()
+
+
 def cached_ray_scene(triangles: np.ndarray) -> RayScene:
     """A :class:`RayScene` over ``triangles``, reused while the same triangles come back.
 
     The key is the SHA-1 of the float64 triangle data, so an array changed in place gets a
-    new BVH. Keeps the last two scenes (e.g. the shadows and the refraction of one frame).
+    new BVH (inside :func:`frame_triangles` the key of that block's array is computed once).
+    Keeps the last two scenes (e.g. the shadows and the refraction of one frame).
 
     Args:
         triangles: (n, 3, 3) world-space triangles.
@@ -241,7 +273,7 @@ def cached_ray_scene(triangles: np.ndarray) -> RayScene:
         The cached or newly built scene.
     """
     tris = np.ascontiguousarray(triangles, dtype=np.float64)
-    key = (tris.shape, hashlib.sha1(memoryview(tris.reshape(-1))).hexdigest())
+    key = (_FRAME_KEYS.get() or {}).get(id(triangles)) or _key(tris)
     scene = _SCENE_CACHE.get(key)
     if scene is None:
         scene = RayScene(tris)
@@ -386,7 +418,7 @@ def directional_light_visibility(
     normals: np.ndarray,
     direction_to_light: np.ndarray | tuple[float, float, float],
     *,
-    offset: float = 1e-4,
+    offset: float = HARD_SHADOW_OFFSET,
     engine: str = "auto",
 ) -> np.ndarray:
     """Ray-traced hard shadows from a directional light: 1 = lit, 0 = shadowed.
@@ -415,7 +447,7 @@ def point_light_visibility(
     normals: np.ndarray,
     light_position: np.ndarray | tuple[float, float, float],
     *,
-    offset: float = 1e-4,
+    offset: float = HARD_SHADOW_OFFSET,
     engine: str = "auto",
 ) -> np.ndarray:
     """Ray-traced hard shadows from a point (or spot) light: 1 = lit, 0 = shadowed.

@@ -159,8 +159,19 @@ def resolve_nearest_buffers(
 
 def shadow_pass_values(visibility: np.ndarray) -> np.ndarray:
     """(N,) the ``shadow`` pass of fragments before their opacity: the mean visibility over the
-    lights (and channels) of ``visibility`` (N, L) or (N, L, K)."""
-    return visibility.mean(axis=1) if visibility.ndim == 2 else visibility.mean(axis=(1, 2))
+    lights (and channels) of ``visibility`` (N, L) or (N, L, K).
+
+    Summed column by column in order, then divided by their count (numpy's ``mean`` over a short
+    axis of a long array is several times slower).
+    """
+    v = visibility.reshape(len(visibility), -1)
+    if v.shape[1] == 0:
+        return np.full(len(v), np.nan)
+    total = v[:, 0].astype(np.float64, copy=True)
+    for column in range(1, v.shape[1]):
+        total += v[:, column]
+    total /= v.shape[1]
+    return total
 
 
 def side_tables(scene: Scene) -> tuple[list[Material], np.ndarray]:

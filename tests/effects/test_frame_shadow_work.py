@@ -78,12 +78,15 @@ def test_winner_surfaces_are_the_fragment_surfaces(cull):
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, w, h, 1, cull)
     winner = nearest_winners_compiled(setup)
     verts = _world_vertices(scene)
-    points, normals, rank = winner_surfaces_compiled(setup, winner, prepared.triangles, np.concatenate(verts))
+    points, normals, rank, mesh = winner_surfaces_compiled(
+        setup, winner, prepared.triangles, np.concatenate(verts), prepared.triangle_mesh
+    )
     visible = frame_fragments(prepared.clip, prepared.triangles, w, h, cull_backfaces=cull, engine="numpy")
     f = visible.fragments
     assert len(f) > 500 and len(points) == len(f)
     np.testing.assert_array_equal(f.pixel, np.flatnonzero(rank >= 0))  # row-major, one per pixel
     np.testing.assert_array_equal(rank[f.pixel], np.arange(len(f)))
+    np.testing.assert_array_equal(mesh, prepared.triangle_mesh[f.triangle])
     ref_points, ref_normals = _fragment_surface(prepared, f, verts, False)
     np.testing.assert_allclose(points, ref_points, rtol=0, atol=1e-14)
     np.testing.assert_allclose(normals, ref_normals, rtol=0, atol=1e-15)

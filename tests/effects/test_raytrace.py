@@ -114,3 +114,22 @@ def test_scene_rejects_bad_triangles():
             (0, 1, 0),
             samples_per_axis=0,
         )
+
+
+def test_the_frame_hashes_its_casters_once_and_an_edited_array_gets_a_new_bvh(monkeypatch):
+    import hashlib
+
+    from blinn_phong import raytrace
+
+    tris = np.concatenate([GROUND, box_triangles((-0.5, -0.5, 0.5), (0.5, 0.5, 1.5))])
+    calls = []
+    sha1 = hashlib.sha1
+    monkeypatch.setattr(raytrace.hashlib, "sha1", lambda data: calls.append(1) or sha1(data))
+    with raytrace.frame_triangles(tris):
+        first = raytrace.cached_ray_scene(tris)
+        assert raytrace.cached_ray_scene(tris) is first
+    assert len(calls) == 1  # once for the block, not per light
+    assert raytrace.cached_ray_scene(tris) is first  # outside: hashed again, same content
+    tris[0, 0, 0] += 1.0
+    assert raytrace.cached_ray_scene(tris) is not first  # outside a block, edits are seen
+    assert len(calls) == 3

@@ -1,0 +1,103 @@
+"""Skipped shadow rays are the provably unoccluded ones: tracing only the rest changes no sample.
+
+:mod:`blinn_phong.ray_culling` answers "lit" without Embree where a ray can reach the light by
+two geometric facts (its own planar or convex mesh lies behind it; it misses every other caster's
+bounding box). The reference is Embree tracing every ray: the visibilities must be equal sample for
+sample (both are exact 0/1 answers for the same float32 rays), on scenes where each fact is used
+and where it must not be (a torus shades itself, a mirrored sphere is not known convex, a point
+light inside a sphere, scenes far from the origin where the offsets grow, float32 coordinates).
+"""
+
+import numpy as np
+import pytest
+
+from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
+from blinn_phong.pipeline import _traced_hard, _world_triangles, _world_vertices
+from blinn_phong.prepared import prepare_scene
+from blinn_phong.scene import Camera, DirectionalLight, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows import light_visibility
+
+from .volume_scenes import LIGHTS, casters, outside_camera, scene_with, sphere_mesh
+
+pytest.importorskip("embreex")
+pytest.importorskip("numba")
+
+
+def _surfaces(scene: Scene, width: int = 160, height: int = 120):
+    prepared = prepare_scene(scene)
+    setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, False)
+    winner = nearest_winners_compiled(setup)
+    verts = _world_vertices(scene)
+    points, normals, _, mesh_of = winner_surfaces_compiled(
+        setup, winner, prepared.triangles, np.concatenate(verts), prepared.triangle_mesh
+    )
+    return points, normals, mesh_of, _world_triangles(scene, verts)
+
+
+def _check(scene: Scene, light) -> float:
+    """Assert culled == traced for ``light``; return the fraction of rays skipped."""
+    from blinn_phong import raytrace
+    from blinn_phong.ray_culling import caster_tables, rays_to_trace
+
+    points, normals, mesh_of, tris = _surfaces(scene)
+    assert len(points) > 1000
+    full = light_visibility("ray_traced", light, tris, points, normals, engine="numba")
+    culled = _traced_hard(scene, light, tris, points, normals, mesh_of, [])
+    np.testing.assert_array_equal(culled, full)
+    bvh = raytrace.cached_ray_scene(tris)
+    if isinstance(light, DirectionalLight):
+        vec, positional = -np.asarray(light.direction) / np.linalg.norm(light.direction), False
+    else:
+        vec, positional = np.asarray(light.position, float), True
+    ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
+    trace = rays_to_trace(
+        points, normals, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps,
+        caster_tables(scene, bvh.centre),
+    )  # fmt: skip
+    assert np.all(full[trace] <= 1) and np.all(full[~trace] == 1)  # skipped rays are lit
+    return float(1 - trace.mean())
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+@pytest.mark.parametrize("name", ["sphere", "torus", "box", "pair"])
+def test_culled_rays_equal_traced_rays(name, light_name):
+    skipped = _check(scene_with(casters(name), LIGHTS[light_name], outside_camera()), LIGHTS[light_name])
+    assert skipped > 0.3  # the ground away from the casters, the lit side of convex casters
+
+
+def _placed(mesh: Mesh, centre, mirror: bool = False) -> Mesh:
+    transform = np.eye(4)
+    transform[0, 0] = -1.0 if mirror else 1.0
+    transform[:3, 3] = centre
+    return Mesh(mesh.positions, mesh.triangles, mesh.normals, transform=transform, material=mesh.material)
+
+
+@pytest.mark.parametrize("far", [0.0, 300.0, 3000.0])
+def test_far_from_the_origin_and_mirrored(far):
+    # Offsets grow with the distance from the BVH's centre; a mirror (det < 0) turns the second
+    # sphere's winding inwards, so it is not known convex: its rays are all traced.
+    shift = np.array([far, -far / 2, 0.0])
+    ball, small = casters("pair")
+    ground = scene_with([], LIGHTS["point"], outside_camera()).meshes[0]
+    meshes = (
+        _placed(ground, shift),
+        _placed(ball, shift + np.array([0.0, 0.0, 1.2])),
+        _placed(small, shift + np.array([0.55, 0.3, 1.55]), mirror=True),
+    )
+    view = look_at(shift + np.array([0.0, -6.0, 5.0]), shift + np.array([0.0, 0.0, 0.5]), (0, 0, 1))
+    camera = Camera.perspective(40.0, 4 / 3, 0.5, 40.0, view=view)
+    for light in (PointLight(tuple(shift + np.array([1.0, 0.5, 3.5]))), LIGHTS["directional"]):
+        skipped = _check(Scene(meshes, (light,), camera), light)
+        assert skipped > 0.2
+
+
+def test_point_light_inside_a_sphere_and_float32_coordinates():
+    ball = sphere_mesh((0.0, 0.0, 1.2), 0.7)
+    ball32 = Mesh(ball.positions.astype(np.float32).astype(np.float64), ball.triangles, ball.normals,
+                  transform=ball.transform, material=ball.material)  # fmt: skip
+    inside = PointLight((0.05, 0.0, 1.25))
+    camera = Camera.perspective(
+        50.0, 4 / 3, 0.3, 30.0, view=look_at((0.0, -4.0, 3.0), (0, 0, 0.8), (0, 0, 1))
+    )
+    for light in (inside, LIGHTS["spot"]):
+        _check(scene_with([ball32], light, camera), light)
