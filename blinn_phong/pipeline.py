@@ -213,14 +213,14 @@ def _traced_hard(
     mesh_of: np.ndarray,
     culling: list[object],
 ) -> np.ndarray:
-    """Ray-traced hard visibility of one light, tracing only the rays that may be occluded.
+    """Ray-traced hard visibility of one light, tracing only the rays geometry cannot answer.
 
-    :mod:`blinn_phong.ray_culling` proves the other rays unoccluded (visibility 1, Embree's
-    answer too); the rest go to :func:`blinn_phong.shadows.light_visibility` in one batch.
+    :mod:`blinn_phong.ray_culling` proves most rays lit or shadowed (the answers Embree gives);
+    the rest go to :func:`blinn_phong.shadows.light_visibility` in one batch.
     ``culling`` caches the frame's caster tables between lights.
     """
     from blinn_phong import raytrace  # Embree: imported only when used
-    from blinn_phong.ray_culling import caster_tables, rays_to_trace
+    from blinn_phong.ray_culling import LIT, TRACE, caster_tables, rays_to_trace
 
     bvh = raytrace.cached_ray_scene(tris)
     if not culling:
@@ -232,11 +232,11 @@ def _traced_hard(
     else:
         vec, positional = np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
     ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
-    trace = rays_to_trace(
+    answer = rays_to_trace(
         world, normal, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps, culling[0]
     )  # type: ignore[arg-type]
-    out = np.ones(len(world))
-    index = np.flatnonzero(trace)
+    out = (answer == LIT).astype(np.float64)
+    index = np.flatnonzero(answer == TRACE)
     if len(index):
         p, n = world[index], normal[index]
         with trusted_arrays(p, n):
