@@ -407,7 +407,9 @@ def resolve_frame(
     weights = sort_key = None
     if fragments.n_transparent and method == "weighted_blended":
         weights = wboit_weights(rgba[tr, 3], wboit_equation, window_depth=f.depth[tr])
-    tri_dist = -prepared.face_eye_centroid[:, 2]
+    sorted_drawing = fragments.n_transparent and method in ("draw_last", "sort_objects", "sort_triangles")
+    # the centroids' eye distances order the sorted-drawing methods only (a gather of every triangle)
+    tri_dist = -prepared.face_eye_centroid[:, 2] if sorted_drawing else np.zeros(len(prepared.triangles))
     if engine != "numpy" and numba_available():
         code, max_layers = RESOLVE_CODES["zbuffer"], 0
         n = len(f)

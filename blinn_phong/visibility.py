@@ -161,21 +161,23 @@ class FrameFragments:
         """The fragments of pixel rows ``[row0, row1)`` as a frame of ``row1 − row0`` rows (a band)."""
         f = self.fragments
         o0, o1, t0, t1 = self.fragment_range(row0, row1)
-        index: slice | np.ndarray = slice(o0, o1)  # opaque fragments only: views, no copies
-        if t1 > t0:
-            index = np.concatenate([np.arange(o0, o1), np.arange(self.n_opaque + t0, self.n_opaque + t1)])
+        opaque, transparent = slice(o0, o1), slice(self.n_opaque + t0, self.n_opaque + t1)
+
+        def part(a: np.ndarray) -> np.ndarray:  # opaque fragments only: views, no copies
+            return np.concatenate([a[opaque], a[transparent]]) if t1 > t0 else a[opaque]
+
         k0 = row0 * f.width * f.samples
         k1 = row1 * f.width * f.samples
         band = Fragments(
             f.width,
             row1 - row0,
             f.samples,
-            f.pixel[index] - row0 * f.width,
-            f.sample[index],
-            f.depth[index],
-            f.triangle[index],
-            f.bary[index],
-            f.front_facing[index],
+            part(f.pixel) - row0 * f.width,
+            part(f.sample),
+            part(f.depth),
+            part(f.triangle),
+            part(f.bary),
+            part(f.front_facing),
         )
         opaque_of = self.opaque_of[k0:k1] - o0
         opaque_of[opaque_of < 0] = -1  # (−1 − o0 for empty samples)
