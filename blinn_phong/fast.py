@@ -47,6 +47,8 @@ __all__ = [
 ]
 
 
+#: The fused kernel's interpolation of per-vertex terms, set by :func:`_plain_kernel`.
+_lerp: object = None
 #: The z-buffer kernels' inlined helpers, set by :func:`_kernel`.
 _triangle_setup: object = None
 _sample_depth: object = None
@@ -1025,11 +1027,18 @@ def _plain_kernel() -> object:  # a numba dispatcher
     with open(lighting.__file__, "rb") as source:
         lighting_stamp = int(hashlib.sha256(source.read()).hexdigest()[:15], 16)
 
+    @numba.njit(inline="always", cache=True)
+    def lerp(values, side, v0, v1, v2, b0, b1, b2, j):  # pragma: no cover - compiled
+        return (b0 * values[side, v0, j] + b1 * values[side, v1, j]) + b2 * values[side, v2, j]
+
+    global _lerp
+    _lerp = lerp
+
     @numba.njit(parallel=True, cache=True)
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
-        geometry, materials, lights, flags, fog, has_vis, vis, vis_mean, vis_index,
+        geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
@@ -1047,6 +1056,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
+        mode_of, face_terms, vertex_terms, face_normal = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
         covered = np.zeros(height, np.int64)
         covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
@@ -1088,24 +1098,43 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
                 py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
                 pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
-                ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
-                nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
-                length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
-                nx, ny, nz = nx * scale, ny * scale, nz * scale
-                wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
-                wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
-                wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
-                length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                scale = 1.0 / length if length > 0 else 0.0
-                wx, wy, wz = wx * scale, wy * scale, wz * scale
-                mid = 2 * triangle_mesh[src] + back
-                ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                    v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-                    pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                    has_vis, vis,
-                )  # fmt: skip
+                mesh = triangle_mesh[src]
+                mid = 2 * mesh + back
+                mode = mode_of[mesh]
+                if mode == 1:  # flat: the face's terms (lit once at its centroid), its world normal
+                    ar, ag, ab = face_terms[back, src, 0], face_terms[back, src, 1], face_terms[back, src, 2]
+                    dr, dg, db = face_terms[back, src, 3], face_terms[back, src, 4], face_terms[back, src, 5]
+                    sr, sg, sb = face_terms[back, src, 6], face_terms[back, src, 7], face_terms[back, src, 8]
+                    wx, wy, wz = face_normal[src, 0], face_normal[src, 1], face_normal[src, 2]
+                else:
+                    wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+                    wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+                    wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                    scale = 1.0 / length if length > 0 else 0.0
+                    wx, wy, wz = wx * scale, wy * scale, wz * scale
+                if mode == 2:  # gouraud: the vertices' terms interpolated (raster.interpolate's sums)
+                    ar = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 0)
+                    ag = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 1)
+                    ab = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 2)
+                    dr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 3)
+                    dg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 4)
+                    db = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 5)
+                    sr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 6)
+                    sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
+                    sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
+                elif mode == 0:
+                    nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                    ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                    nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
+                    nx, ny, nz = nx * scale, ny * scale, nz * scale
+                    ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                        v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                        has_vis, vis,
+                    )  # fmt: skip
                 r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
                 if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
                     if separate:
@@ -1163,11 +1192,13 @@ def _row_order(height: int) -> np.ndarray:
 
 
 #: What the fused plain kernels read of a prepared scene: ``(two_sided, geometry, materials,
-#: lights, flags)`` with geometry ``(triangles, triangle_mesh, eye_position, eye_normal,
+#: lights, flags, frequencies)`` with geometry ``(triangles, triangle_mesh, eye_position, eye_normal,
 #: world_normal)``, materials and lights as :func:`blinn_phong.lighting.material_tables` and
 #: :func:`blinn_phong.lighting.light_tables` give them, flags ``(local_viewer, blinn,
-#: gl_compat, separate_specular)``.
-PlainTables = tuple[bool, tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple]
+#: gl_compat, separate_specular)``, frequencies ``(mode, face_terms, vertex_terms, face_normal)`` as
+#: :func:`blinn_phong.shading.plain_tables` gives them (per mesh: 0 phong, 1 flat, 2 gouraud).
+_Arrays = tuple[np.ndarray, ...]
+PlainTables = tuple[bool, _Arrays, _Arrays, _Arrays, tuple, _Arrays]
 
 
 def shade_plain_fragments_compiled(
@@ -1197,14 +1228,14 @@ def shade_plain_fragments_compiled(
     :func:`resolve_plain_compiled` writes them: the same images as the separate shading,
     colour and resolve stages, without their (N, 3) float64 arrays.
     """
-    two_sided, geometry, materials, lights, flags = tables
+    two_sided, geometry, materials, lights, flags, frequencies = tables
     fragments = (
         np.ascontiguousarray(triangle, dtype=np.int64), np.ascontiguousarray(bary),
         np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_),
     )  # fmt: skip
     _plain_kernel()(
         width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
-        geometry, materials, lights, flags, _fog_scalars(fog), visibility is not None,
+        geometry, materials, lights, flags, frequencies, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
         _NO_INDEX, *out,
@@ -1243,7 +1274,7 @@ def shade_plain_winners_compiled(
     Returns the number of covered pixels (fragments shaded)."""
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
-    two_sided, geometry, materials, lights, flags = tables
+    two_sided, geometry, materials, lights, flags, frequencies = tables
     sub = (
         setup.source, setup.front, setup.x_exact, setup.y_exact, setup.area, setup.a, setup.b, setup.c,
         setup.z, setup.w, np.ascontiguousarray(setup.weights),
@@ -1257,8 +1288,8 @@ def shade_plain_winners_compiled(
     return int(
         _plain_kernel()(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
-            two_sided, geometry, materials, lights, flags, _fog_scalars(fog), visibility is not None,
-            vis, vis_mean, rank, *out,
+            two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
+            visibility is not None, vis, vis_mean, rank, *out,
         )
     )  # fmt: skip
 

@@ -322,6 +322,7 @@ def _opaque_from_winners(
     width: int,
     height: int,
     lit: list[tuple[object, object]] | None,
+    shading: str,
     gl_compat: bool,
     cull_backfaces: bool,
     fog: tuple | None,
@@ -361,7 +362,7 @@ def _opaque_from_winners(
         say("shadows", 0.6)
     t = time.perf_counter()
     image = _empty_frame(height, width, lit is not None)
-    tables = plain_tables(prepared, gl_compat)
+    tables = plain_tables(prepared, gl_compat, shading)
     shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
     seconds["shade"] = time.perf_counter() - t
     seconds["resolve_samples"] = 0.0
@@ -434,11 +435,13 @@ def render_frame(
     fog_args = None if fog_parameters is None else fog_parameters.compiled_args()
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog.
-    fused = compiled and fused_shading_applies(scene, shading, samples)
+    lit = _shadow_lights(scene, the_plan)
+    fused = compiled and fused_shading_applies(
+        scene, shading, samples, gl_compat=gl_compat, shadows=lit is not None
+    )
     if fused and method == "zbuffer":
-        lit = _shadow_lights(scene, the_plan)
         return _opaque_from_winners(
-            prepared, width, height, lit, gl_compat, cull_backfaces, fog_args, seconds, say
+            prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say
         )
 
     t = time.perf_counter()
@@ -469,7 +472,7 @@ def render_frame(
         f = visible.fragments
         shade_plain_fragments_compiled(
             width, height, visible.opaque_of, f.triangle, f.bary, f.depth, f.front_facing,
-            plain_tables(prepared, gl_compat),
+            plain_tables(prepared, gl_compat, shading),
             None if visibility is None else (visibility if visibility.ndim == 3 else visibility[:, :, None]),
             None if visibility is None else shadow_pass_values(visibility),
             _targets(image),

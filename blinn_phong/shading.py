@@ -185,20 +185,24 @@ def _shade_phong(
     return FragmentShading(rgb, terms.alpha, terms.ambient, terms.diffuse, terms.specular, world_n)
 
 
-def fused_shading_applies(scene: Scene, shading: str, samples: int) -> bool:
+def fused_shading_applies(
+    scene: Scene, shading: str, samples: int, *, gl_compat: bool = False, shadows: bool = False
+) -> bool:
     """True when the compiled engine may shade and resolve the frame in one fused pass.
 
     That is: one sample per pixel (fogged or not: the pass applies fog), every mesh shaded per
-    pixel (``phong``), no image texture, and every material's fragment colour the
-    partial-occlusion ``(α·c, α)`` (no Kay–Greenberg opacity, no specular wash-out, no
-    emission/absorption model). Transparency resolves are checked by the caller (none may be
-    needed). The fused pass (:func:`blinn_phong.fast.shade_plain_fragments_compiled`) gives the images of
+    pixel (``phong``) — or, without ``gl_compat`` and without ``shadows``, per face (``flat``)
+    or per vertex (``gouraud``) from the tables of :func:`plain_tables` —, no image texture,
+    and every material's fragment colour the partial-occlusion ``(α·c, α)`` (no Kay–Greenberg
+    opacity, no specular wash-out, no emission/absorption model). Transparency resolves are
+    checked by the caller (none may be needed). The fused pass
+    (:func:`blinn_phong.fast.shade_plain_fragments_compiled`) gives the images of
     :func:`shade_fragments`, :func:`blinn_phong.texturing.texture_fragments` and
     :func:`blinn_phong.resolve.resolve_frame` for these frames.
     """
     if samples != 1:
         return False
-    if any((mesh.shading or shading) != "phong" for mesh in scene.meshes):
+    if any((mesh.shading or shading) != "phong" for mesh in scene.meshes) and (gl_compat or shadows):
         return False
     materials = [m for mesh in scene.meshes for m in (mesh.material, mesh.back_material or mesh.material)]
     return all(
@@ -210,10 +214,61 @@ def fused_shading_applies(scene: Scene, shading: str, samples: int) -> bool:
     )
 
 
-def plain_tables(prepared: PreparedScene, gl_compat: bool) -> PlainTables:
+def _frequency_tables(prepared: PreparedScene, shading: str) -> tuple[np.ndarray, ...]:
+    """``(mode, face_terms, vertex_terms, face_normal)`` of the fused kernels' flat and Gouraud
+    meshes.
+
+    ``mode`` (M,) int64 per mesh: 0 phong, 1 flat, 2 gouraud (``mesh.shading or shading``).
+    ``face_terms`` (2, T, 9) / ``vertex_terms`` (2, V, 9): the ambient, diffuse and specular
+    RGB of :func:`blinn_phong.lighting.shade` per face (at its eye-space centroid, with its face
+    normal) of flat meshes, per vertex (with its normal) of Gouraud meshes, for the front
+    ``[0]`` and, under two-sided lighting, the back ``[1]`` side (negated normal, back
+    material): the evaluations :func:`shade_fragments` makes, which the fused pass carries to
+    each pixel (flat: its face's; Gouraud: interpolated). Empty (2, 0, 9) where no mesh
+    needs them; ``face_normal`` (T, 3) the unit world face normals when a mesh is flat.
+    """
+    scene = prepared.scene
+    model = scene.light_model
+    modes = np.array([("phong", "flat", "gouraud").index(mesh.shading or shading) for mesh in scene.meshes])
+    modes = modes.astype(np.int64)
+    sides = 2 if model.two_sided else 1
+    flat, gouraud = bool((modes == 1).any()), bool((modes == 2).any())
+    face_terms = np.zeros((2, len(prepared.triangles) if flat else 0, 9))
+    vertex_terms = np.zeros((2, len(prepared.eye_position) if gouraud else 0, 9))
+    face_normal = prepared.face_world_normal if flat else np.zeros((0, 3))
+    if not (flat or gouraud):
+        return modes, face_terms, vertex_terms, face_normal
+    t_offset = np.searchsorted(prepared.triangle_mesh, np.arange(len(scene.meshes) + 1))
+    for m, mesh in enumerate(scene.meshes):
+        if modes[m] == 0:
+            continue
+        for side in range(sides):
+            material = mesh.material if side == 0 else (mesh.back_material or mesh.material)
+            sign = -1.0 if side else 1.0
+            if modes[m] == 1:
+                a, b = t_offset[m], t_offset[m + 1]
+                points, normals = prepared.face_eye_centroid[a:b], prepared.face_eye_normal[a:b]
+                target = face_terms
+            else:
+                a, b = prepared.vertex_offset[m], prepared.vertex_offset[m + 1]
+                points, normals = prepared.eye_position[a:b], prepared.eye_normal[a:b]
+                target = vertex_terms
+            terms = shade(
+                points, sign * normals, material, prepared.lights,
+                global_ambient=scene.ambient, model=model, engine="auto",
+            )  # fmt: skip
+            target[side, a:b, 0:3] = terms.ambient
+            target[side, a:b, 3:6] = terms.diffuse
+            target[side, a:b, 6:9] = terms.specular
+    return modes, face_terms, vertex_terms, np.ascontiguousarray(face_normal)
+
+
+def plain_tables(prepared: PreparedScene, gl_compat: bool, shading: str = "phong") -> PlainTables:
     """The arrays the fused frame kernels of :mod:`blinn_phong.fast` read (see ``PlainTables`` there):
     geometry in eye and world space, per-side material tables (index ``2·mesh + back``), the
-    eye-space lights and the light model's flags."""
+    eye-space lights, the light model's flags, and each mesh's shading frequency with its
+    per-face or per-vertex terms (:func:`_frequency_tables`; ``shading`` as for
+    :func:`shade_fragments`)."""
     scene = prepared.scene
     model = scene.light_model
     materials = [mat for mesh in scene.meshes for mat in (mesh.material, mesh.back_material or mesh.material)]
@@ -235,6 +290,7 @@ def plain_tables(prepared: PreparedScene, gl_compat: bool) -> PlainTables:
         material_tables(materials, prepared.lights, scene.ambient),
         light_tables(prepared.lights),
         flags,
+        _frequency_tables(prepared, _check_shading(shading)),
     )
 
 

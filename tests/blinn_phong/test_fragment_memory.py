@@ -145,9 +145,10 @@ def test_an_opaque_frame_holds_one_band_of_shading_arrays(monkeypatch: pytest.Mo
     prepared = bp.prepare_scene(scene)
     visible = frame_fragments(prepared.clip, prepared.triangles, width, height, engine="numba")
     peaks = {}
-    # Gouraud shading: the staged path, shading array by band (per-pixel shading of a plain frame
-    # is fused into one pass with no per-fragment array; checked below).
-    options = {"shadows": "none", "shading": "gouraud"}
+    # Gouraud shading with the GL preset's per-vertex clamps: the staged path, shading array by
+    # band (the other plain frames are fused into one pass with no per-fragment array; checked
+    # below).
+    options = {"shadows": "none", "shading": "gouraud", "gl_compat": True}
     for band_samples in (band, 1 << 22):  # bands of 512 samples; one band for the whole frame
         monkeypatch.setattr(pipeline, "BAND_SAMPLES", band_samples)
         bp.render(scene, width, height, **options)  # compile, warm up
@@ -166,6 +167,8 @@ def test_an_opaque_frame_holds_one_band_of_shading_arrays(monkeypatch: pytest.Mo
     assert peaks[1 << 22] > bound
     # The fused plain frame (per-pixel shading) holds no per-fragment array at all: the frame's
     # buffers, the per-sample z-buffer (winner and depth, 16 bytes per sample) and the set-up.
-    bp.render(scene, width, height, shadows="none")
-    _, fused_peak = traced_peak(lambda: bp.render(scene, width, height, shadows="none"))
-    assert fused_peak <= image + 32 * width * height + 1000 * len(prepared.triangles) < bound
+    for shading in ("phong", "gouraud"):
+        fused = {"shadows": "none", "shading": shading}
+        bp.render(scene, width, height, **fused)
+        _, fused_peak = traced_peak(lambda f=fused: bp.render(scene, width, height, **f))
+        assert fused_peak <= image + 32 * width * height + 1000 * len(prepared.triangles) < bound

@@ -5,7 +5,8 @@
 * the fused frame (one pass per pixel: interpolation, the lighting equation, the frame
   buffers) equals the numpy reference engine's frame within 1e-6 on a scene with every light
   type, two-sided lighting with back materials, near-plane clipping, empty pixels and both
-  viewer models, with and without the GL-compatibility clamps and with shadows;
+  viewer models, with and without the GL-compatibility clamps and with shadows; flat and
+  Gouraud meshes (lit per face or per vertex, carried to the pixels by the same pass) too;
 * fogged frames (linear, exp and exp2 fog, eye-plane and radial distance, with and without
   shadows, both viewer models) stay on the fused pass and equal the numpy engine's
   (which fogs by :mod:`blinn_phong.fog`'s numpy formulas) within 1e-6 (fog is refused with
@@ -90,6 +91,10 @@ CASES = [
     {"shadows": bp.ShadowOptions("shadow_map", resolution=128)},
     {"shadows": "ray_traced"},
     {"shadows": "shadow_volume"},
+    {"shading": "flat"},
+    {"shading": "gouraud"},
+    {"shading": "gouraud", "local_viewer": False, "specular": "phong"},
+    {"shading": "mixed"},
 ]
 
 
@@ -103,6 +108,11 @@ def test_fused_frame_equals_the_numpy_reference(case: dict, monkeypatch: pytest.
     # could differ, far below float32's step near 1 (6e-8): 1e-6 leaves room for that.
     case = dict(case)
     s = scene(case.pop("local_viewer", True), case.pop("specular", "blinn"))
+    if case.get("shading") == "mixed":  # each mesh its own frequency (Mesh.shading wins)
+        frequencies = ("flat", "gouraud", "phong", "gouraud")
+        meshes = tuple(dataclasses.replace(m, shading=f) for m, f in zip(s.meshes, frequencies, strict=True))
+        s = dataclasses.replace(s, meshes=meshes)
+        case["shading"] = "phong"
     options = {"shadows": "none", "shading": "phong", "transparency": "zbuffer", **case}
     ref = bp.render(s, 64, 48, engine="numpy", **options)
     from blinn_phong import pipeline
