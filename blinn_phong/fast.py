@@ -1056,7 +1056,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
-        mode_of, face_terms, vertex_terms, face_normal = frequencies
+        mode_of, vertex_terms, winding, view_t = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
         covered = np.zeros(height, np.int64)
         covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
@@ -1101,11 +1101,42 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 mesh = triangle_mesh[src]
                 mid = 2 * mesh + back
                 mode = mode_of[mesh]
-                if mode == 1:  # flat: the face's terms (lit once at its centroid), its world normal
-                    ar, ag, ab = face_terms[back, src, 0], face_terms[back, src, 1], face_terms[back, src, 2]
-                    dr, dg, db = face_terms[back, src, 3], face_terms[back, src, 4], face_terms[back, src, 5]
-                    sr, sg, sb = face_terms[back, src, 6], face_terms[back, src, 7], face_terms[back, src, 8]
-                    wx, wy, wz = face_normal[src, 0], face_normal[src, 1], face_normal[src, 2]
+                if mode == 1:  # flat: lit at the face's eye-space centroid with its face normal
+                    px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
+                    py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
+                    pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
+                    ux, uy, uz = (
+                        eye_pos[v1, 0] - eye_pos[v0, 0],
+                        eye_pos[v1, 1] - eye_pos[v0, 1],
+                        eye_pos[v1, 2] - eye_pos[v0, 2],
+                    )
+                    qx, qy, qz = (
+                        eye_pos[v2, 0] - eye_pos[v0, 0],
+                        eye_pos[v2, 1] - eye_pos[v0, 1],
+                        eye_pos[v2, 2] - eye_pos[v0, 2],
+                    )
+                    nx, ny, nz = uy * qz - uz * qy, uz * qx - ux * qz, ux * qy - uy * qx
+                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    scale = (1.0 / length if length > 0 else 0.0) * winding[mesh]
+                    nx, ny, nz = nx * scale, ny * scale, nz * scale
+                    # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
+                    wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
+                    wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
+                    wz = view_t[2, 0] * nx + view_t[2, 1] * ny + view_t[2, 2] * nz
+                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                    scale = 1.0 / length if length > 0 else 0.0
+                    wx, wy, wz = wx * scale, wy * scale, wz * scale
+                    if back:
+                        nx, ny, nz = -nx, -ny, -nz
+                    ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                        v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                        has_vis, vis,
+                    )  # fmt: skip
+                    # fog is a function of the fragment's own point
+                    px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                    py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                    pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
                 else:
                     wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
                     wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
@@ -1195,7 +1226,7 @@ def _row_order(height: int) -> np.ndarray:
 #: lights, flags, frequencies)`` with geometry ``(triangles, triangle_mesh, eye_position, eye_normal,
 #: world_normal)``, materials and lights as :func:`blinn_phong.lighting.material_tables` and
 #: :func:`blinn_phong.lighting.light_tables` give them, flags ``(local_viewer, blinn,
-#: gl_compat, separate_specular)``, frequencies ``(mode, face_terms, vertex_terms, face_normal)`` as
+#: gl_compat, separate_specular)``, frequencies ``(mode, vertex_terms, winding, view_t)`` as
 #: :func:`blinn_phong.shading.plain_tables` gives them (per mesh: 0 phong, 1 flat, 2 gouraud).
 _Arrays = tuple[np.ndarray, ...]
 PlainTables = tuple[bool, _Arrays, _Arrays, _Arrays, tuple, _Arrays]

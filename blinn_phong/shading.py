@@ -215,52 +215,46 @@ def fused_shading_applies(
 
 
 def _frequency_tables(prepared: PreparedScene, shading: str) -> tuple[np.ndarray, ...]:
-    """``(mode, face_terms, vertex_terms, face_normal)`` of the fused kernels' flat and Gouraud
+    """``(mode, vertex_terms, winding, view_t)``: what the fused kernels need for flat and Gouraud
     meshes.
 
     ``mode`` (M,) int64 per mesh: 0 phong, 1 flat, 2 gouraud (``mesh.shading or shading``).
-    ``face_terms`` (2, T, 9) / ``vertex_terms`` (2, V, 9): the ambient, diffuse and specular
-    RGB of :func:`blinn_phong.lighting.shade` per face (at its eye-space centroid, with its face
-    normal) of flat meshes, per vertex (with its normal) of Gouraud meshes, for the front
-    ``[0]`` and, under two-sided lighting, the back ``[1]`` side (negated normal, back
-    material): the evaluations :func:`shade_fragments` makes, which the fused pass carries to
-    each pixel (flat: its face's; Gouraud: interpolated). Empty (2, 0, 9) where no mesh
-    needs them; ``face_normal`` (T, 3) the unit world face normals when a mesh is flat.
+    ``vertex_terms`` (2, V, 9): the ambient, diffuse and specular RGB of
+    :func:`blinn_phong.lighting.shade` at each vertex (with its normal) of Gouraud meshes, for the
+    front ``[0]`` and, under two-sided lighting, the back ``[1]`` side (negated normal, back
+    material) — the evaluations :func:`shade_fragments` makes, which the fused pass
+    interpolates; empty (2, 0, 9) when no mesh is Gouraud-shaded. Flat meshes are lit per pixel
+    at their face's eye-space centroid with the face normal, which the pass forms from the
+    eye-space corners: ``winding`` (M,) is the sign of ``det(view · model)`` (the corners' cross
+    product is ``det M · M⁻ᵀ`` times the object-space one, so it points along the transformed
+    normal up to that sign), ``view_t`` (3, 3) the view matrix's rotation part transposed (the
+    world normal is ``Vᵀ`` times the eye normal, up to length).
     """
     scene = prepared.scene
     model = scene.light_model
     modes = np.array([("phong", "flat", "gouraud").index(mesh.shading or shading) for mesh in scene.meshes])
     modes = modes.astype(np.int64)
-    sides = 2 if model.two_sided else 1
-    flat, gouraud = bool((modes == 1).any()), bool((modes == 2).any())
-    face_terms = np.zeros((2, len(prepared.triangles) if flat else 0, 9))
+    view = scene.camera.view
+    winding = np.array(
+        [np.sign(np.linalg.det(view[:3, :3] @ mesh.transform[:3, :3])) for mesh in scene.meshes]
+    )
+    view_t = np.ascontiguousarray(view[:3, :3].T, dtype=np.float64)
+    gouraud = bool((modes == 2).any())
     vertex_terms = np.zeros((2, len(prepared.eye_position) if gouraud else 0, 9))
-    face_normal = prepared.face_world_normal if flat else np.zeros((0, 3))
-    if not (flat or gouraud):
-        return modes, face_terms, vertex_terms, face_normal
-    t_offset = np.searchsorted(prepared.triangle_mesh, np.arange(len(scene.meshes) + 1))
     for m, mesh in enumerate(scene.meshes):
-        if modes[m] == 0:
+        if modes[m] != 2:
             continue
-        for side in range(sides):
+        a, b = prepared.vertex_offset[m], prepared.vertex_offset[m + 1]
+        for side in range(2 if model.two_sided else 1):
             material = mesh.material if side == 0 else (mesh.back_material or mesh.material)
-            sign = -1.0 if side else 1.0
-            if modes[m] == 1:
-                a, b = t_offset[m], t_offset[m + 1]
-                points, normals = prepared.face_eye_centroid[a:b], prepared.face_eye_normal[a:b]
-                target = face_terms
-            else:
-                a, b = prepared.vertex_offset[m], prepared.vertex_offset[m + 1]
-                points, normals = prepared.eye_position[a:b], prepared.eye_normal[a:b]
-                target = vertex_terms
             terms = shade(
-                points, sign * normals, material, prepared.lights,
-                global_ambient=scene.ambient, model=model, engine="auto",
+                prepared.eye_position[a:b], (-1.0 if side else 1.0) * prepared.eye_normal[a:b], material,
+                prepared.lights, global_ambient=scene.ambient, model=model, engine="auto",
             )  # fmt: skip
-            target[side, a:b, 0:3] = terms.ambient
-            target[side, a:b, 3:6] = terms.diffuse
-            target[side, a:b, 6:9] = terms.specular
-    return modes, face_terms, vertex_terms, np.ascontiguousarray(face_normal)
+            vertex_terms[side, a:b, 0:3] = terms.ambient
+            vertex_terms[side, a:b, 3:6] = terms.diffuse
+            vertex_terms[side, a:b, 6:9] = terms.specular
+    return modes, vertex_terms, winding.astype(np.float64), view_t
 
 
 def plain_tables(prepared: PreparedScene, gl_compat: bool, shading: str = "phong") -> PlainTables:

@@ -158,6 +158,8 @@ FOG_EXTRAS = {
     "plain": {},
     "infinite_viewer-phong": {"local_viewer": False, "specular": "phong"},
     "shadows": {"shadows": "shadow_map"},
+    "flat": {"shading": "flat"},
+    "gouraud": {"shading": "gouraud"},
 }
 
 
