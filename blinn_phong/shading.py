@@ -363,6 +363,7 @@ def _shade_side(
             material,
             prepared.lights,
             per_light=vis is not None,
+            engine="numpy" if vis is not None or engine == "numpy" else "auto",
             **common,
         )
         local = Fragments(
@@ -387,6 +388,7 @@ def _shade_side(
         material,
         prepared.lights,
         per_light=vis is not None,
+        engine="numpy" if vis is not None or engine == "numpy" else "auto",
         **common,
     )
     local_tris = tris - v0  # valid for this mesh's triangles
