@@ -1039,34 +1039,45 @@ def _plain_kernel() -> object:  # a numba dispatcher
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
+        n_opaque, offsets, max_layers, max_list,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
-        # Per pixel, its one visible fragment: ``index[pixel]`` is the z-buffer's winning
+        # Per pixel, its visible fragments: ``index[pixel]`` is the z-buffer's winning
         # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
-        # fragment's index into (tri, bary, frag_depth, frag_front); −1 where empty. Its row of
-        # (vis, vis_mean) is ``o`` for fragments, ``vis_index[pixel]`` for winners. Then
-        # surface_at_fragments_compiled's interpolation, the lighting kernel's equation
-        # (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat) and
-        # resolve_plain's float32 writes, with the same operations in the same order; with fog
-        # (mode >= 0) the colour stage's per-fragment fog (_fogged) on the premultiplied colour
-        # before the float32 write, as fragment_colours_compiled and resolve_frame_compiled do.
-        # One loop body, no calls per pixel: a compiled call per pixel would pay a reference
-        # count per array argument; tuples are unpacked once, outside the parallel loop.
+        # opaque fragment's index into (tri, bary, frag_depth, frag_front); −1 where none. Its row
+        # of (vis, vis_mean) is ``o`` for fragments, ``vis_index[pixel]`` for winners. Each
+        # fragment: surface_at_fragments_compiled's interpolation, the lighting kernel's
+        # equation (point_terms), shading._shade_phong's colour (gl_clamp under gl_compat), the
+        # colour stage's premultiplied (α·c, α) and per-fragment fog (_fogged) — _shade_fragment,
+        # inlined. With transparent fragments (``offsets`` non-empty: the pixel's fragments
+        # ``n_opaque + offsets[pixel] ...`` in draw order), resolve_frame_compiled's A-buffer:
+        # sorted by depth (stable), the nearest ``max_layers`` composited front to back, over
+        # the opaque colour; the passes, normal and depth of the nearest. Then resolve's float32
+        # writes, with the same operations in the same order. Tuples are unpacked once, outside
+        # the parallel loop.
         triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         local_viewer, blinn, gl_compat, separate = flags
         mode_of, vertex_terms, winding, view_t = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
+        lists = offsets.shape[0] > 0
         covered = np.zeros(height, np.int64)
         covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
         for i_row in numba.prange(height):
             row = row_order[i_row]  # rows interleaved over the threads (balanced work)
+            order = np.empty(max(max_list, 1), np.int64)  # scratch of the row's thread
             n_row = 0
             cy = row + 0.5
             for col in range(width):
-                o = index[row * width + col]
-                if o < 0:
+                key = row * width + col
+                o = index[key]
+                count = 0
+                first = 0
+                if lists:
+                    first = n_opaque + offsets[key]
+                    count = offsets[key + 1] - offsets[key]
+                if o < 0 and count == 0:
                     for ch in range(4):
                         o_rgba[row, col, ch] = 0.0
                     for ch in range(3):
@@ -1079,114 +1090,162 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         o_shadow[row, col, 0] = 0.0
                     continue
                 n_row += 1
-                v = o
-                if from_winners and has_vis:
-                    v = vis_index[row * width + col]
-                if from_winners:
-                    t = o
-                    cx = col + 0.5
-                    depth, b0, b1, b2 = _winner_point(t, cx, cy, xe, ye, area, ea, eb, ec, z, w, weights)
-                    src = source[t]
-                    front = sub_front[t]
-                else:
-                    b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
-                    depth = frag_depth[o]
-                    src = tri[o]
-                    front = frag_front[o]
-                back = 1 if two_sided and not front else 0
-                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
-                px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
-                py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
-                pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                mesh = triangle_mesh[src]
-                mid = 2 * mesh + back
-                mode = mode_of[mesh]
-                if mode == 1:  # flat: lit at the face's eye-space centroid with its face normal
-                    px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
-                    py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
-                    pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
-                    ux, uy, uz = (
-                        eye_pos[v1, 0] - eye_pos[v0, 0],
-                        eye_pos[v1, 1] - eye_pos[v0, 1],
-                        eye_pos[v1, 2] - eye_pos[v0, 2],
-                    )
-                    qx, qy, qz = (
-                        eye_pos[v2, 0] - eye_pos[v0, 0],
-                        eye_pos[v2, 1] - eye_pos[v0, 1],
-                        eye_pos[v2, 2] - eye_pos[v0, 2],
-                    )
-                    nx, ny, nz = uy * qz - uz * qy, uz * qx - ux * qz, ux * qy - uy * qx
-                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                    scale = (1.0 / length if length > 0 else 0.0) * winding[mesh]
-                    nx, ny, nz = nx * scale, ny * scale, nz * scale
-                    # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
-                    wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
-                    wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
-                    wz = view_t[2, 0] * nx + view_t[2, 1] * ny + view_t[2, 2] * nz
-                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                    scale = 1.0 / length if length > 0 else 0.0
-                    wx, wy, wz = wx * scale, wy * scale, wz * scale
-                    if back:
-                        nx, ny, nz = -nx, -ny, -nz
-                    ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                        v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-                        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                        has_vis, vis,
-                    )  # fmt: skip
-                    # fog is a function of the fragment's own point
+                # The pixel's fragments, front to back: the nearest ``max_layers`` transparent ones
+                # sorted by depth (stable in draw order), then the opaque one; each composited
+                # under the ones before it (resolve's "B over A": acc = c·(1 − acc_α) + acc, and
+                # the opaque one as src-over's acc + c·(1 − acc_α), the same sum). The first gives
+                # the passes, normal and depth.
+                for j in range(count):  # insertion sort by depth, stable in draw order
+                    f = first + j
+                    p = j
+                    while p > 0 and frag_depth[order[p - 1]] > frag_depth[f]:
+                        order[p] = order[p - 1]
+                        p -= 1
+                    order[p] = f
+                layers = min(count, max_layers)
+                acc0 = acc1 = acc2 = acc3 = 0.0
+                n_a = n_ar = n_ag = n_ab = n_dr = n_dg = n_db = n_sr = n_sg = n_sb = 0.0
+                n_wx = n_wy = n_wz = n_depth = 0.0
+                n_v = 0
+                for step in range(layers + (1 if o >= 0 else 0)):
+                    if step < layers:
+                        f = order[step]
+                        v = f
+                        b0, b1, b2 = bary[f, 0], bary[f, 1], bary[f, 2]
+                        depth = frag_depth[f]
+                        src = tri[f]
+                        front = frag_front[f]
+                    elif from_winners:
+                        v = vis_index[key] if has_vis else o
+                        depth, b0, b1, b2 = _winner_point(
+                            o, col + 0.5, cy, xe, ye, area, ea, eb, ec, z, w, weights
+                        )
+                        src = source[o]
+                        front = sub_front[o]
+                    else:
+                        v = o
+                        b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
+                        depth = frag_depth[o]
+                        src = tri[o]
+                        front = frag_front[o]
+                    back = 1 if two_sided and not front else 0
+                    v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
                     px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
                     py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
                     pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                else:
-                    wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
-                    wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
-                    wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
-                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                    scale = 1.0 / length if length > 0 else 0.0
-                    wx, wy, wz = wx * scale, wy * scale, wz * scale
-                if mode == 2:  # gouraud: the vertices' terms interpolated (raster.interpolate's sums)
-                    ar = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 0)
-                    ag = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 1)
-                    ab = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 2)
-                    dr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 3)
-                    dg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 4)
-                    db = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 5)
-                    sr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 6)
-                    sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
-                    sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
-                elif mode == 0:
-                    nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
-                    ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
-                    nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
-                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                    scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
-                    nx, ny, nz = nx * scale, ny * scale, nz * scale
-                    ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                        v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-                        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                        has_vis, vis,
-                    )  # fmt: skip
-                r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
-                if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
-                    if separate:
-                        r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
-                        g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
-                        b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
+                    mesh = triangle_mesh[src]
+                    mid = 2 * mesh + back
+                    mode = mode_of[mesh]
+                    if mode == 1:  # flat: lit at the face's eye-space centroid with its face normal
+                        px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
+                        py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
+                        pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
+                        ux, uy, uz = (
+                            eye_pos[v1, 0] - eye_pos[v0, 0],
+                            eye_pos[v1, 1] - eye_pos[v0, 1],
+                            eye_pos[v1, 2] - eye_pos[v0, 2],
+                        )
+                        qx, qy, qz = (
+                            eye_pos[v2, 0] - eye_pos[v0, 0],
+                            eye_pos[v2, 1] - eye_pos[v0, 1],
+                            eye_pos[v2, 2] - eye_pos[v0, 2],
+                        )
+                        nx, ny, nz = uy * qz - uz * qy, uz * qx - ux * qz, ux * qy - uy * qx
+                        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                        scale = (1.0 / length if length > 0 else 0.0) * winding[mesh]
+                        nx, ny, nz = nx * scale, ny * scale, nz * scale
+                        # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
+                        wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
+                        wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
+                        wz = view_t[2, 0] * nx + view_t[2, 1] * ny + view_t[2, 2] * nz
+                        length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                        scale = 1.0 / length if length > 0 else 0.0
+                        wx, wy, wz = wx * scale, wy * scale, wz * scale
+                        if back:
+                            nx, ny, nz = -nx, -ny, -nz
+                        ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                            v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                            pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                            has_vis, vis,
+                        )  # fmt: skip
+                        # fog is a function of the fragment's own point
+                        px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                        py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                        pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
                     else:
-                        r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                        g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                        b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                a = opacity[mid]
-                pr, pg, pb = a * r, a * g, a * b  # premultiplied (α·c, α): fragment_colours' order
-                if fog_mode >= 0:
-                    pr, pg, pb = _fogged(
-                        fog_mode, fog_radial, density, start, end, cr, cg, cb, px, py, pz, pr, pg, pb, a
-                    )
-                # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve_plain does.
+                        wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+                        wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+                        wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+                        length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                        scale = 1.0 / length if length > 0 else 0.0
+                        wx, wy, wz = wx * scale, wy * scale, wz * scale
+                    if mode == 2:  # gouraud: the vertices' terms interpolated (raster.interpolate's sums)
+                        ar = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 0)
+                        ag = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 1)
+                        ab = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 2)
+                        dr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 3)
+                        dg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 4)
+                        db = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 5)
+                        sr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 6)
+                        sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
+                        sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
+                    elif mode == 0:
+                        nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                        ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                        nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                        scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
+                        nx, ny, nz = nx * scale, ny * scale, nz * scale
+                        ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                            v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                            pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                            has_vis, vis,
+                        )  # fmt: skip
+                    r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
+                    if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
+                        if separate:
+                            r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
+                            g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
+                            b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
+                        else:
+                            r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                            g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                            b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                    a = opacity[mid]
+                    pr, pg, pb = a * r, a * g, a * b  # premultiplied (α·c, α): fragment_colours' order
+                    if fog_mode >= 0:
+                        pr, pg, pb = _fogged(
+                            fog_mode, fog_radial, density, start, end, cr, cg, cb, px, py, pz, pr, pg, pb, a
+                        )
+                    cover = 1.0 - acc3
+                    acc0 = pr * cover + acc0
+                    acc1 = pg * cover + acc1
+                    acc2 = pb * cover + acc2
+                    acc3 = a * cover + acc3
+                    if step == 0:  # the nearest fragment: passes, normal, depth, shadow
+                        n_a = a
+                        n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb = (
+                            ar,
+                            ag,
+                            ab,
+                            dr,
+                            dg,
+                            db,
+                            sr,
+                            sg,
+                            sb,
+                        )
+                        n_wx, n_wy, n_wz = wx, wy, wz
+                        n_depth = depth
+                        n_v = v
+                pr, pg, pb, a_over, a = acc0, acc1, acc2, acc3, n_a
+                ar, ag, ab, dr, dg, db, sr, sg, sb = n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb
+                wx, wy, wz, depth, v = n_wx, n_wy, n_wz, n_depth, n_v
+                # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve does.
                 o_rgba[row, col, 0] = 0.0 + np.float32(pr)
                 o_rgba[row, col, 1] = 0.0 + np.float32(pg)
                 o_rgba[row, col, 2] = 0.0 + np.float32(pb)
-                o_rgba[row, col, 3] = 0.0 + np.float32(a)
+                o_rgba[row, col, 3] = 0.0 + np.float32(a_over)
                 o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
                 o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
                 o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
@@ -1245,8 +1304,9 @@ def shade_plain_fragments_compiled(
     vis_mean: np.ndarray | None,
     out: tuple[np.ndarray, ...],
     fog: FogArgs = None,
+    transparent: tuple[int, np.ndarray, int] | None = None,
 ) -> None:
-    """The plain frame's shading and resolve fused: each pixel's one fragment shaded and written.
+    """The frame's shading and resolve fused: each pixel's fragments shaded, resolved and written.
 
     For one sample per pixel, no transparency resolve, per-pixel (phong) shading and
     partial-occlusion colours ``(α·c, α)``: per pixel, the fragment ``opaque_of[pixel]`` (−1:
@@ -1258,18 +1318,34 @@ def shade_plain_fragments_compiled(
     ``out = (rgba, ambient, diffuse, specular, normal, depth, shadow)`` buffers as
     :func:`resolve_plain_compiled` writes them: the same images as the separate shading,
     colour and resolve stages, without their (N, 3) float64 arrays.
+
+    ``transparent``: ``(n_opaque, offsets, max_layers)`` of a frame with transparent fragments
+    (:class:`blinn_phong.visibility.FrameFragments`: the fragments ``n_opaque + offsets[p] …
+    n_opaque + offsets[p + 1]`` of pixel ``p``, in draw order, in front of its opaque one),
+    resolved as the A-buffer (``max_layers`` ≥ the longest list) or depth peeling
+    (``max_layers`` = the layers) of :func:`resolve_frame_compiled`: sorted by depth, the
+    nearest ``max_layers`` composited front to back over the opaque colour; passes, normal and
+    depth of the nearest fragment.
     """
     two_sided, geometry, materials, lights, flags, frequencies = tables
     fragments = (
         np.ascontiguousarray(triangle, dtype=np.int64), np.ascontiguousarray(bary),
         np.ascontiguousarray(depth), np.ascontiguousarray(front_facing, dtype=np.bool_),
     )  # fmt: skip
+    lists: tuple[int, np.ndarray, int, int] = (0, _NO_INDEX, 0, 0)
+    if transparent is not None:
+        n_opaque, offsets, max_layers = transparent
+        offsets = np.ascontiguousarray(offsets, dtype=np.int64)
+        longest = int(np.diff(offsets).max(initial=0))
+        if max_layers < 1:
+            raise ValueError(f"transparent: max_layers must be >= 1, got {max_layers}")
+        lists = (int(n_opaque), offsets, int(max_layers), longest)
     _plain_kernel()(
         width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
         geometry, materials, lights, flags, frequencies, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
-        _NO_INDEX, *out,
+        _NO_INDEX, *lists, *out,
     )  # fmt: skip
 
 
@@ -1320,7 +1396,7 @@ def shade_plain_winners_compiled(
         _plain_kernel()(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
             two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
-            visibility is not None, vis, vis_mean, rank, *out,
+            visibility is not None, vis, vis_mean, rank, 0, _NO_INDEX, 0, 0, *out,
         )
     )  # fmt: skip
 

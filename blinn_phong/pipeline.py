@@ -465,11 +465,17 @@ def render_frame(
         seconds["shadows"] = time.perf_counter() - t
         say("shadows", 0.6)
 
-    if fused and (method == "zbuffer" or not visible.n_transparent):
-        # One fused pass over the pixels (no per-fragment shading arrays, so no bands needed).
+    sorted_resolve = method in ("a_buffer", "depth_peeling")
+    if fused and (method == "zbuffer" or not visible.n_transparent or sorted_resolve):
+        # One fused pass over the pixels (no per-fragment shading arrays, so no bands needed); the
+        # A-buffer and depth peeling sort and composite each pixel's transparent fragments in it.
         t = time.perf_counter()
         image = _empty_frame(height, width, visibility is not None)
         f = visible.fragments
+        transparent = None
+        if visible.n_transparent and sorted_resolve:
+            layers = the_plan.transparency.params.get("layers") if method == "depth_peeling" else None
+            transparent = (visible.n_opaque, visible.offsets, int(layers) if layers else len(f))  # type: ignore[call-overload]
         shade_plain_fragments_compiled(
             width, height, visible.opaque_of, f.triangle, f.bary, f.depth, f.front_facing,
             plain_tables(prepared, gl_compat, shading),
@@ -477,6 +483,7 @@ def render_frame(
             None if visibility is None else shadow_pass_values(visibility),
             _targets(image),
             fog_args,
+            transparent,
         )  # fmt: skip
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0

@@ -6,7 +6,8 @@
   buffers) equals the numpy reference engine's frame within 1e-6 on a scene with every light
   type, two-sided lighting with back materials, near-plane clipping, empty pixels and both
   viewer models, with and without the GL-compatibility clamps and with shadows; flat and
-  Gouraud meshes (lit per face or per vertex, carried to the pixels by the same pass) too;
+  Gouraud meshes (lit per face or per vertex, carried to the pixels by the same pass) too, and
+  frames whose transparent fragments the pass sorts and composites (A-buffer, depth peeling);
 * fogged frames (linear, exp and exp2 fog, eye-plane and radial distance, with and without
   shadows, both viewer models) stay on the fused pass and equal the numpy engine's
   (which fogs by :mod:`blinn_phong.fog`'s numpy formulas) within 1e-6 (fog is refused with
@@ -95,6 +96,11 @@ CASES = [
     {"shading": "gouraud"},
     {"shading": "gouraud", "local_viewer": False, "specular": "phong"},
     {"shading": "mixed"},
+    {"transparency": "a_buffer"},
+    {"transparency": "a_buffer", "shading": "mixed"},
+    {"transparency": "a_buffer", "shadows": "ray_traced"},
+    {"transparency": "depth_peeling", "peel_layers": 1},
+    {"transparency": "depth_peeling", "peel_layers": 2, "shading": "flat"},
 ]
 
 
@@ -122,7 +128,9 @@ def test_fused_frame_equals_the_numpy_reference(case: dict, monkeypatch: pytest.
         original = getattr(pipeline, name)
         monkeypatch.setattr(pipeline, name, lambda *a, f=original, n=name: used.append(n) or f(*a))
     fast = bp.render(s, 64, 48, engine="numba", **options)
-    assert used == ["shade_plain_winners_compiled"]  # opaque frames, shadowed or not: from the z-buffer
+    # opaque frames, shadowed or not: from the z-buffer; sorted transparency: from the kept fragments
+    opaque = options["transparency"] == "zbuffer"
+    assert used == ["shade_plain_winners_compiled" if opaque else "shade_plain_fragments_compiled"]
     assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
     assert ref.stats.shaded == fast.stats.shaded
     assert set(fast.passes) == set(ref.passes)
@@ -160,6 +168,7 @@ FOG_EXTRAS = {
     "shadows": {"shadows": "shadow_map"},
     "flat": {"shading": "flat"},
     "gouraud": {"shading": "gouraud"},
+    "a_buffer": {"transparency": "a_buffer"},
 }
 
 
@@ -179,13 +188,15 @@ def test_fogged_frame_stays_fused_and_equals_the_numpy_reference(
     ref = bp.render(s, 64, 48, engine="numpy", fog=fog, **options)
     used = _record_fused(monkeypatch)
     fast = bp.render(s, 64, 48, engine="numba", fog=fog, **options)
-    assert used == ["shade_plain_winners_compiled"]
+    opaque = options["transparency"] == "zbuffer"
+    assert used == ["shade_plain_winners_compiled" if opaque else "shade_plain_fragments_compiled"]
     unfogged = bp.render(s, 64, 48, engine="numpy", **options)
     # The fog really acts, and only on the colour (the light passes and alpha are not fogged).
     assert np.abs(ref.rgba[..., :3] - unfogged.rgba[..., :3]).max() > 0.05
     np.testing.assert_array_equal(ref.rgba[..., 3], unfogged.rgba[..., 3])
     assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
-    assert (ref.rgba[..., 3][ref.rgba[..., 3] > 0] < 1).any()  # premultiplied: α·C_f with α < 1
+    if opaque:  # (the A-buffer composites the glass over the floor: α = 1 wherever it is seen)
+        assert (ref.rgba[..., 3][ref.rgba[..., 3] > 0] < 1).any()  # premultiplied: α·C_f with α < 1
     assert set(fast.passes) == set(ref.passes)
     pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
     pairs.append(("normal", ref.normal, fast.normal))
