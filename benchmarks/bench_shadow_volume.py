@@ -195,6 +195,7 @@ def crossover(repeat: int, quick: bool) -> list[dict]:
         for width, height in sizes:
             points, normals = _samples(scene, width, height)
             args = (light, tris, points, normals)
+
             def traced(args=args):
                 return light_visibility("ray_traced", *args)
 

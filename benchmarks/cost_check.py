@@ -7,8 +7,9 @@ models predict (:mod:`blinn_phong.calibration`, fitted by :mod:`benchmarks.error
 
 * shadows, per light (the other lights without shadows): Embree ray tracing (the reference),
   shadow volumes (:func:`~blinn_phong.calibration.shadow_volume_cost`) and, for directional
-  lights, shadow maps (:func:`~blinn_phong.calibration.shadow_map_cost`); measured on the
-  ``shadows`` stage of ``RenderStats.seconds``;
+  lights, shadow maps (:func:`~blinn_phong.calibration.shadow_map_cost`), with the planner's
+  estimate of the rays a frame traces (:func:`~blinn_phong.planner.traced_share`); measured on
+  the ``shadows`` stage of ``RenderStats.seconds``;
 * transparency: the A-buffer (reference), draw-last, sorted objects and depth peeling with 1,
   2, 4 layers (:func:`~blinn_phong.calibration.transparency_seconds`,
   :func:`~blinn_phong.calibration.depth_peeling_cost`);
@@ -46,7 +47,7 @@ from benchmarks._util import machine_info, markdown_table, write_json
 from benchmarks.bench_frame import issue_scene
 from benchmarks.tradeoffs import layered_scene, shadow_scene
 from blinn_phong import calibration as cal
-from blinn_phong.planner import shadow_map_geometry
+from blinn_phong.planner import shadow_map_geometry, traced_share
 
 __all__ = ["check_frame", "main", "run"]
 
@@ -132,7 +133,8 @@ def check_frame(
                     runs[f"shadow_map {res}"] = _uncached(functools.partial(render, shadows=only(options)))
             t = _timed(runs, repeat)
             ref = t["ray_traced"]["shadows"]
-            volume = cal.shadow_volume_cost(models, triangles, samples)
+            share = traced_share(scene, models=models)  # the planner's estimate, as it plans
+            volume = cal.shadow_volume_cost(models, triangles, samples, share)
             if volume is not None:
                 rows.append(
                     _row(
@@ -146,7 +148,7 @@ def check_frame(
                 )
             for res in MAP_RESOLUTIONS if isinstance(light, bp.DirectionalLight) else ():
                 geometry = shadow_map_geometry(scene, j)
-                predicted = cal.shadow_map_cost(models, res, samples, geometry.triangles)
+                predicted = cal.shadow_map_cost(models, res, samples, geometry.triangles, share)
                 rows.append(
                     _row(
                         name,

@@ -169,6 +169,20 @@ def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
     return model
 
 
+def _fit_frame_shadows(rows: list[dict]) -> dict:
+    """The frame's shadow passes per receiver, relative to one Embree ray
+    (:func:`benchmarks.tradeoffs.shadow_frame_constants`): the medians of ``surface_ratio`` and
+    ``cull_ratio``, and the largest traced share beyond the receivers on meshes the culling never
+    answers (``rim``)."""
+    return {
+        "cost": "in a frame, per receiver: surface (every method) + cull + traced share, × one ray's cost",
+        "surface": float(np.median([r["surface_ratio"] for r in rows])),
+        "cull": float(np.median([r["cull_ratio"] for r in rows])),
+        "rim": float(max(max(r["traced_share"] - r["general_share"], 0.0) for r in rows)),
+        "cases": len(rows),
+    }
+
+
 def _fit_shading(data: dict) -> dict:
     out: dict[str, dict] = {}
     for method in ("flat", "gouraud", "phong"):
@@ -280,6 +294,8 @@ def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
     if "shadows" in families:
         # the planner's own inputs: the map's span and the thinnest caster seen from the light
         models["shadow_map"] = _fit_shadow_map(families["shadows"], shadow_map_geometry(shadow_scene(), 0))
+        if families["shadows"].get("frame_constants"):
+            models["frame_shadows"] = _fit_frame_shadows(families["shadows"]["frame_constants"])
     if "shading" in families:
         models["shading"] = _fit_shading(families["shading"])
     if "frame_costs" in families:

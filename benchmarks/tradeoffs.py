@@ -323,6 +323,7 @@ def shadows(quick: bool = False, repeat: int = 3) -> dict:
         "family": "shadows",
         "title": "Shadow maps: resolution × PCF × bias",
         "frame_cost": frame_cost,
+        "frame_constants": shadow_frame_constants(quick=quick, repeat=min(repeat, 3)),
         "scene": "sphere and box over a ground plane, directional light; visible points facing the light",
         "size": [size, size],
         "points": len(points),
@@ -385,6 +386,82 @@ def shadow_frame_cost(
                 }
                 for res in resolutions
             ]
+    return rows
+
+
+def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
+    """What a ``render()`` frame adds to, and saves from, the per-receiver cost of Embree ray tracing.
+
+    In a frame the compiled engine first forms every covered pixel's world point and face normal
+    (``surface``, shared by every shadow method), and traces only the shadow rays
+    :mod:`blinn_phong.ray_culling` cannot answer (its pass: ``cull``; the rays left: the
+    ``traced`` share). Per scene, frame and light: the seconds of those passes and of Embree
+    tracing every ray (BVH cached, as within a frame), their ratios per receiver to Embree's
+    (``surface_ratio``, ``cull_ratio``), the traced share and the share of receivers on meshes
+    whose rays the culling never answers (``general_share``). Scenes: the shadow calibration
+    scene and the frame benchmark's, whose casters are convex or planar.
+    """
+    from benchmarks.bench_frame import issue_scene
+    from blinn_phong import raytrace
+    from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
+    from blinn_phong.pipeline import _world_triangles, _world_vertices
+    from blinn_phong.ray_culling import GENERAL, TRACE, caster_tables, rays_to_trace
+    from blinn_phong.scene import DirectionalLight
+
+    frames = [("shadow calibration", shadow_scene(), 256, 256)]
+    frames.append(("frame benchmark", issue_scene(48 if quick else 96, 24 if quick else 48), 640, 360))
+    rows = []
+    for name, scene, width, height in frames:
+        prepared = bp.prepare_scene(scene)
+        setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, False)
+        winner = nearest_winners_compiled(setup)
+        verts = _world_vertices(scene)
+        every = np.concatenate(verts)
+
+        def surfaces(setup=setup, winner=winner, prepared=prepared, every=every):
+            return winner_surfaces_compiled(setup, winner, prepared.triangles, every, prepared.triangle_mesh)
+
+        points, normals, _, mesh_of = surfaces()
+        tris = _world_triangles(scene, verts)
+        bvh = raytrace.cached_ray_scene(tris)
+        tables = caster_tables(scene, bvh.centre)
+        general = float(np.mean(tables[0][mesh_of] == GENERAL))
+        ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
+        for j, light in enumerate(scene.lights):
+            directional = isinstance(light, DirectionalLight)
+            if directional:
+                vec = -np.asarray(light.direction, dtype=np.float64)
+                vec = vec / np.linalg.norm(vec)
+
+                def trace_all(points=points, normals=normals, vec=vec, bvh=bvh):
+                    return raytrace.directional_light_visibility(bvh, points, normals, vec)
+            else:
+                vec = np.asarray(light.position, dtype=np.float64)
+
+                def trace_all(points=points, normals=normals, vec=vec, bvh=bvh):
+                    return raytrace.point_light_visibility(bvh, points, normals, vec)
+
+            cull = functools.partial(
+                rays_to_trace, points, normals, mesh_of, vec, not directional, bvh.centre,
+                raytrace.HARD_SHADOW_OFFSET, ulps, tables,
+            )  # fmt: skip
+            times = time_interleaved({"surface": surfaces, "cull": cull, "embree": trace_all}, repeat=repeat)
+            traced = float(np.mean(cull() == TRACE))
+            rows.append(
+                {
+                    "scene": name,
+                    "width": width,
+                    "height": height,
+                    "light": j,
+                    "receivers": len(points),
+                    "triangles": len(tris),
+                    **{f"{k}_s": times[k]["min_s"] for k in ("surface", "cull", "embree")},
+                    "surface_ratio": times["surface"]["min_s"] / times["embree"]["min_s"],
+                    "cull_ratio": times["cull"]["min_s"] / times["embree"]["min_s"],
+                    "traced_share": traced,
+                    "general_share": general,
+                }
+            )
     return rows
 
 

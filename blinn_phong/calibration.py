@@ -318,11 +318,24 @@ def predict_shadow_map(
     return 255.0 * models["shadow_map"]["c"] * shadowed_share * span / (caster_size * resolution)
 
 
+def _frame_terms(models: dict, ray_per_receiver: float, receivers: int, traced_share: float | None) -> tuple:
+    """``(ray_term, shared)`` seconds of a frame's ray tracing per-receiver term and of the surface
+    pass every shadow method shares (:func:`shadow_volume_cost`); ``(N·r, 0)`` without a frame."""
+    fs = models.get("frame_shadows")
+    if traced_share is None or fs is None:
+        return ray_per_receiver * receivers, 0.0
+    if not (0.0 <= traced_share <= 1.0):
+        raise ValueError(f"traced_share: expected a value in [0, 1], got {traced_share!r}")
+    factor = min(1.0, fs["cull"] + traced_share)
+    return ray_per_receiver * receivers * factor, ray_per_receiver * receivers * fs["surface"]
+
+
 def shadow_map_cost(
     models: dict,
     resolution: int,
     receivers: int | None = None,
     triangles: int | None = None,
+    traced_share: float | None = None,
 ) -> float:
     """Predicted time of a ``resolution``² shadow map relative to Embree ray tracing.
 
@@ -339,6 +352,10 @@ def shadow_map_cost(
     view rasterize slower (24 slats, 12k receivers: measured 2.6–3.9× ray tracing at 128² on a
     loaded machine, predicted 1.8×).
     Without that fit, ``t₀ + t₂·R²``.
+
+    ``traced_share`` (a frame of the compiled engine, see :func:`shadow_volume_cost`): ray
+    tracing's per-receiver term becomes ``bn·N·min(1, cull + f)`` and both sides gain the shared
+    surface pass ``bn·N·surface``.
     """
     m = models["shadow_map"]
     if "m0" not in m:
@@ -346,8 +363,9 @@ def shadow_map_cost(
     n = m["receivers"] if receivers is None else receivers
     if "mt" in m:
         t = m["triangles"] if triangles is None else triangles
-        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t) / (
-            m["b0"] + m["bn"] * n + m["bt"] * t
+        rays, shared = _frame_terms(models, m["bn"], n, traced_share)
+        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t + shared) / (
+            m["b0"] + rays + m["bt"] * t + shared
         )
     tau = 1.0 if triangles is None else triangles / m["triangles"]
     return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n) / (m["b0"] * tau + m["bn"] * n)
@@ -363,6 +381,7 @@ def choose_shadow_map(
     *,
     receivers: int | None = None,
     triangles: int | None = None,
+    traced_share: float | None = None,
 ) -> dict:
     """The cheapest power-of-two map (64–4096) that resolves every caster and is faster than ray tracing.
 
@@ -391,7 +410,7 @@ def choose_shadow_map(
     for res in SHADOW_MAP_RESOLUTIONS:
         if span / res > caster_size / 2:
             continue
-        cost = shadow_map_cost(models, res, receivers, triangles)
+        cost = shadow_map_cost(models, res, receivers, triangles, traced_share)
         if cost >= 1.0:
             break
         mean = weight * predict_shadow_map(models, res, span, caster_size, shadowed_share)
@@ -408,13 +427,20 @@ def choose_shadow_map(
 # --------------------------------------------------------------------------- shadow volumes
 
 
-def shadow_volume_cost(models: dict, triangles: int, receivers: int) -> dict | None:
+def shadow_volume_cost(
+    models: dict, triangles: int, receivers: int, traced_share: float | None = None
+) -> dict | None:
     """Predicted times (seconds) of the two exact hard-shadow methods for one light.
 
     Args:
         models: from :func:`load` or :func:`shipped_models`.
         triangles: ``T``, triangles in the scene (≥ 0).
         receivers: ``N``, receiver samples of the frame (``width·height·samples``, ≥ 0).
+        traced_share: in a frame of the compiled engine, the share ``f`` of the receivers whose
+            shadow rays :mod:`blinn_phong.ray_culling` leaves to Embree (None: every ray traced,
+            no frame terms). With the ``frame_shadows`` fit (per receiver, in units of one
+            ray: the shared ``surface`` pass and the ``cull`` pass) ray tracing's ``r_N·N``
+            becomes ``r_N·N·min(1, cull + f)`` and both methods gain ``r_N·N·surface``.
 
     Returns:
         ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
@@ -428,8 +454,9 @@ def shadow_volume_cost(models: dict, triangles: int, receivers: int) -> dict | N
     for name, value in (("triangles", triangles), ("receivers", receivers)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise ValueError(f"{name}: expected an integer >= 0, got {value!r}")
-    volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers
-    traced = m["r0"] + m["rt"] * triangles + m["rn"] * receivers
+    rays, shared = _frame_terms(models, m["rn"], receivers, traced_share)
+    volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers + shared
+    traced = m["r0"] + m["rt"] * triangles + rays + shared
     return {"shadow_volume": volume, "ray_traced": traced, "ratio": volume / traced}
 
 

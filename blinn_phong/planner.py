@@ -91,6 +91,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import calibration
+from ._numba import numba_available
 from .mesh_facts import (
     _beyond_near_plane,
     _light_side_distance,
@@ -115,6 +116,7 @@ __all__ = [
     "embree_available",
     "plan",
     "shadow_map_geometry",
+    "traced_share",
 ]
 
 _EPS = 1e-9
@@ -718,7 +720,8 @@ def _plan_shadow(
     # lit-minus-shadowed contribution there, so such a method is allowed only when that fits.
     weight = _shadow_weight(scene, light, facts, factors, fog, index)
     worst = 255.0 * weight
-    exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst)
+    share = traced_share(scene, facts, models)
+    exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst, share)
     if tolerance <= 0:
         return exact
     if not isinstance(light, DirectionalLight):
@@ -748,6 +751,7 @@ def _plan_shadow(
         weight,
         receivers=frame.receivers,
         triangles=geometry.triangles,
+        traced_share=share,
     )
     exact_cost = 1.0 if exact.relative_cost is None else exact.relative_cost
     if pick["method"] == "shadow_map" and pick["predicted_cost"] < exact_cost:
@@ -839,8 +843,47 @@ def embree_available() -> bool:
 NO_EMBREE = "Embree (embreex) is not installed: shadow volumes, exact too"
 
 
+def traced_share(
+    scene: Scene, facts: list[_MeshFacts] | None = None, models: dict | None = None
+) -> float | None:
+    """Estimated share of a frame's receivers whose hard shadow rays the compiled engine traces.
+
+    :mod:`blinn_phong.ray_culling` answers the rays of receivers on planar and convex meshes
+    (and all rays that miss every caster) without Embree; it never answers those of receivers
+    on other meshes that cast shadows. The estimate is the screen share of those meshes (their
+    normalised-device bounding rectangles, clipped to the screen, summed, at most 1) plus the
+    ``rim`` the calibration measured (rays that pass close to a convex caster), at most 1.
+    None without numba (the numpy engine traces every ray) or without the ``frame_shadows``
+    fit.
+
+    Args:
+        scene: the scene.
+        facts: its mesh facts (computed when None).
+        models: the cost models (the shipped ones when None).
+    """
+    models = calibration.shipped_models() if models is None else models
+    if "frame_shadows" not in models or not numba_available():
+        return None
+    facts = [_mesh_facts(m) for m in scene.meshes] if facts is None else facts
+    share = 0.0
+    for mesh, f in zip(scene.meshes, facts, strict=True):
+        if not mesh.casts_shadows or f.planar or f.convex or len(f.world) == 0:
+            continue
+        rect, _ = _screen_rect_and_depth(f, scene)
+        width = min(rect[2], 1.0) - max(rect[0], -1.0)
+        height = min(rect[3], 1.0) - max(rect[1], -1.0)
+        share += max(width, 0.0) * max(height, 0.0) / 4.0
+    return min(1.0, share + float(models["frame_shadows"]["rim"]))
+
+
 def _exact_shadow(
-    what: str, models: dict, frame: _Frame, triangles: int, tolerance: float, worst: float
+    what: str,
+    models: dict,
+    frame: _Frame,
+    triangles: int,
+    tolerance: float,
+    worst: float,
+    share: float | None = None,
 ) -> Choice:
     """The cheaper predicted exact hard-shadow method: Embree ray tracing or shadow volumes.
 
@@ -856,7 +899,7 @@ def _exact_shadow(
     ``worst`` — 255 times the light's whole lit-minus-shadowed contribution, what one
     differently classified sample can cost a pixel — is within ``tolerance``.
     """
-    costs = calibration.shadow_volume_cost(models, triangles, frame.receivers)
+    costs = calibration.shadow_volume_cost(models, triangles, frame.receivers, share)
     where = f"for {triangles} triangles and {frame.receivers} receiver samples"
     if not embree_available():
         predicted = f" (predicted {costs['shadow_volume'] * 1e3:.3g} ms {where})" if costs is not None else ""
