@@ -17,7 +17,7 @@ models predict (:mod:`blinn_phong.calibration`, fitted by :mod:`benchmarks.error
   and fog against no fog (:func:`~blinn_phong.calibration.fog_cost`).
 
 Shadows are measured on the ``shadows`` stage's wall time (tens to hundreds of milliseconds),
-with Embree's scene (BVH) built in every frame, as the models assume (:func:`_uncached`),
+with Embree's scene (BVH) built in every frame, as the models assume (:func:`benchmarks.tradeoffs.uncached`),
 the others on the whole frame's process CPU time (what their models predict; their stages
 take milliseconds, which preemption on a loaded machine swamps). Each is the fastest of the
 interleaved rounds.
@@ -45,7 +45,7 @@ from pathlib import Path
 import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, write_json
 from benchmarks.bench_frame import issue_scene
-from benchmarks.tradeoffs import layered_scene, shadow_scene
+from benchmarks.tradeoffs import layered_scene, shadow_scene, uncached
 from blinn_phong import calibration as cal
 from blinn_phong.planner import shadow_map_geometry, traced_share
 
@@ -67,22 +67,6 @@ def _timed(runs: dict[str, Callable[[], bp.RenderResult]], repeat: int) -> dict[
         name: {key[: -len("_s")]: value for key, value in table.items() if not key.endswith("_median_s")}
         for name, table in timed_renders(runs, repeat).items()
     }
-
-
-def _uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]:
-    """``fn`` run with the ray tracer's scene cache and the shadow volumes' adjacency and volume
-    caches emptied first: every frame builds its BVH and its volumes, as the first frame of a
-    scene or every frame of an animation does and as the shadow cost models assume (``render()``
-    reuses both while the same triangles come back)."""
-    from blinn_phong import raytrace, shadow_volume
-
-    def run() -> bp.RenderResult:
-        raytrace._SCENE_CACHE.clear()
-        shadow_volume._TOPOLOGY_CACHE.clear()
-        shadow_volume._DERIVED_CACHE.clear()
-        return fn()
-
-    return run
 
 
 def _row(scene: str, frame: str, concern: str, method: str, predicted: float, measured: float) -> dict:
@@ -124,13 +108,13 @@ def check_frame(
                 return [method if i == j else "none" for i in range(len(scene.lights))]
 
             runs = {
-                "ray_traced": _uncached(functools.partial(render, shadows=only("ray_traced"))),
-                "shadow_volume": _uncached(functools.partial(render, shadows=only("shadow_volume"))),
+                "ray_traced": uncached(functools.partial(render, shadows=only("ray_traced"))),
+                "shadow_volume": uncached(functools.partial(render, shadows=only("shadow_volume"))),
             }
             if isinstance(light, bp.DirectionalLight):
                 for res in MAP_RESOLUTIONS:
                     options = bp.ShadowOptions("shadow_map", resolution=res)
-                    runs[f"shadow_map {res}"] = _uncached(functools.partial(render, shadows=only(options)))
+                    runs[f"shadow_map {res}"] = uncached(functools.partial(render, shadows=only(options)))
             t = _timed(runs, repeat)
             ref = t["ray_traced"]["shadows"]
             share = traced_share(scene, models=models)  # the planner's estimate, as it plans

@@ -57,6 +57,7 @@ __all__ = [
     "load",
     "main",
     "save",
+    "shadow_stage_designs",
     "shadow_volume_cost_design",
 ]
 
@@ -275,7 +276,33 @@ def _fit_frame_cost(data: dict) -> dict:
         kind, name = key.split("/")
         y = [r["cpu_s"] for r in rows if r["kind"] == kind and r["method"] == name]
         model[kind][name] = [float(v) for v in _nonnegative_lstsq(design, y)]  # type: ignore[index]
+    stage = [r for r in rows if r["kind"] == "shadows"]
+    if stage:
+        model["shadows"] = {
+            "cost": "shadows-stage wall seconds of one light in a render() frame, BVH and volumes built: "
+            "ray_traced x0 + xs*S + xt*T + xf*f*S (f the planner's traced share), shadow_volume "
+            "x0 + xs*S + xt*T, shadow_map x0 + xs*S + xt*T + xr*R^2",
+        }
+        for name, design in shadow_stage_designs(stage).items():
+            y = [r["shadows_s"] for r in stage if r["method"] == name]
+            model["shadows"][name] = [float(v) for v in _nonnegative_lstsq(design, y)]
     return model
+
+
+def shadow_stage_designs(rows: list[dict]) -> dict[str, np.ndarray]:
+    """Design matrices of the frame-stage shadow cost fit (``kind == "shadows"`` rows of
+    ``frame_costs``): ``[1, S, T]`` per method, plus ``f·S`` for ``ray_traced`` and ``R²`` for
+    ``shadow_map`` (``S`` samples, ``T`` triangles, ``f`` traced share, ``R`` resolution)."""
+    out: dict[str, np.ndarray] = {}
+    for name in ("ray_traced", "shadow_volume", "shadow_map"):
+        sel = [r for r in rows if r["method"] == name]
+        cols = [np.ones(len(sel)), [r["samples"] for r in sel], [r["triangles"] for r in sel]]
+        if name == "ray_traced":
+            cols.append([(r["traced_share"] or 1.0) * r["samples"] for r in sel])
+        if name == "shadow_map":
+            cols.append([r["resolution"] ** 2 for r in sel])
+        out[name] = np.c_[tuple(cols)].astype(float)
+    return out
 
 
 def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:

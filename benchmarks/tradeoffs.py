@@ -790,6 +790,89 @@ def timed_renders(
     return out
 
 
+#: Shadow-map resolutions timed per directional light by :func:`shadow_stage_rows`.
+STAGE_MAP_RESOLUTIONS = (256, 1024)
+
+
+def uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]:
+    """``fn`` run with the ray tracer's scene cache and the shadow volumes' adjacency and volume
+    caches emptied first: every frame builds its BVH and its volumes, as the first frame of a
+    scene or every frame of an animation does (``render()`` reuses both while the same
+    triangles come back)."""
+    from blinn_phong import raytrace, shadow_volume
+
+    def run() -> bp.RenderResult:
+        raytrace._SCENE_CACHE.clear()
+        shadow_volume._TOPOLOGY_CACHE.clear()
+        shadow_volume._DERIVED_CACHE.clear()
+        return fn()
+
+    return run
+
+
+def shadow_stage_rows(quick: bool = False, repeat: int = 3) -> list[dict]:
+    """``shadows``-stage seconds of whole ``render()`` frames, one light shadowed at a time.
+
+    For the shadow calibration scene (:func:`shadow_scene`) and the frame benchmark's opaque scene
+    (:func:`benchmarks.bench_frame.issue_scene`, two sizes of spheres) at a few sizes: Embree
+    ray tracing, shadow volumes and, for directional lights, shadow maps (256², 1024²), each
+    frame building its BVH and volumes (:func:`uncached`), interleaved; with the frame's
+    samples ``N``, triangles ``T`` and the planner's estimate of the traced share
+    (:func:`blinn_phong.planner.traced_share`) — the data of the frame-stage cost fit
+    (:func:`blinn_phong.calibration.shadow_volume_cost`, :func:`blinn_phong.calibration.shadow_map_cost`).
+    """
+    from benchmarks.bench_frame import issue_scene
+    from blinn_phong.planner import traced_share
+
+    frames = [
+        ("shadow calibration", shadow_scene(), 128, 128),
+        ("shadow calibration", shadow_scene(), 384, 384),
+        ("issue", issue_scene(48 if quick else 96, 24 if quick else 48), 320, 180),
+        ("issue", issue_scene(48 if quick else 96, 24 if quick else 48), 640, 360),
+    ]
+    if not quick:
+        frames.append(("issue 256", issue_scene(256, 128), 320, 180))
+    rows = []
+    for name, scene, w, h in frames:
+        render = functools.partial(bp.render, scene, w, h)
+        share = traced_share(scene)
+        for j, light in enumerate(scene.lights):
+            if isinstance(light, bp.AmbientLight):
+                continue
+
+            def only(method: object, j: int = j, n: int = len(scene.lights)) -> list[object]:
+                return [method if i == j else "none" for i in range(n)]
+
+            runs = {
+                "ray_traced": uncached(functools.partial(render, shadows=only("ray_traced"))),
+                "shadow_volume": uncached(functools.partial(render, shadows=only("shadow_volume"))),
+            }
+            if isinstance(light, bp.DirectionalLight):
+                for res in STAGE_MAP_RESOLUTIONS:
+                    options = bp.ShadowOptions("shadow_map", resolution=res)
+                    runs[f"shadow_map {res}"] = uncached(functools.partial(render, shadows=only(options)))
+            times = timed_renders(runs, repeat)
+            for label, t in times.items():
+                method, _, res = label.partition(" ")
+                rows.append(
+                    {
+                        "kind": "shadows",
+                        "scene": name,
+                        "light": j,
+                        "method": method,
+                        **({"resolution": int(res)} if res else {}),
+                        "width": w,
+                        "height": h,
+                        "samples": w * h,
+                        "triangles": sum(len(m.triangles) for m in scene.meshes),
+                        "traced_share": share,
+                        "shadows_s": t["shadows_s"],
+                        "shadows_median_s": t["shadows_median_s"],
+                    }
+                )
+    return rows
+
+
 #: Transparency methods timed per frame by :func:`frame_costs` (``depth_peeling`` with these layers).
 FRAME_COST_PEEL = (1, 2, 4)
 
@@ -888,6 +971,7 @@ def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
                     "ratio_to_phong": t["cpu_s"] / times["phong"]["cpu_s"],
                 }
             )
+    rows += shadow_stage_rows(quick=quick, repeat=repeat)
     return {
         "family": "frame_costs",
         "title": "Frame costs: transparency resolve, shading and fog in whole render() calls",

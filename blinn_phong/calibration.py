@@ -72,6 +72,7 @@ __all__ = [
     "scene_extent",
     "shading_cost",
     "shadow_map_cost",
+    "shadow_stage_seconds",
     "shadow_volume_cost",
     "shipped_models",
     "transparency_seconds",
@@ -318,6 +319,35 @@ def predict_shadow_map(
     return 255.0 * models["shadow_map"]["c"] * shadowed_share * span / (caster_size * resolution)
 
 
+def shadow_stage_seconds(
+    models: dict,
+    method: str,
+    samples: int,
+    triangles: int,
+    traced_share: float = 1.0,
+    resolution: int = 0,
+) -> float | None:
+    """Predicted ``shadows``-stage seconds of one light in a compiled ``render()`` frame; None
+    without the frame-stage fit.
+
+    ``x₀ + x_S·S + x_T·T`` per method, plus ``x_f·f·S`` for ``ray_traced`` (``f`` the traced
+    share, :func:`blinn_phong.planner.traced_share`) and ``x_R·R²`` for ``shadow_map``; ``S``
+    samples, ``T`` triangles. Fitted by :mod:`benchmarks.error_models` to the ``frame_costs``
+    family's shadow rows (the BVH and the volumes built in every frame): ratios carry over to
+    other machines, seconds do not.
+    """
+    table = models.get("frame_cost", {}).get("shadows")
+    if table is None or method not in table:
+        return None
+    c = table[method]
+    value = c[0] + c[1] * samples + c[2] * triangles
+    if method == "ray_traced":
+        value += c[3] * traced_share * samples
+    elif method == "shadow_map":
+        value += c[3] * resolution**2
+    return float(value)
+
+
 def _frame_terms(models: dict, ray_per_receiver: float, receivers: int, traced_share: float | None) -> tuple:
     """``(ray_term, shared)`` seconds of a frame's ray tracing per-receiver term and of the surface
     pass every shadow method shares (:func:`shadow_volume_cost`); ``(N·r, 0)`` without a frame."""
@@ -353,14 +383,20 @@ def shadow_map_cost(
     loaded machine, predicted 1.8×).
     Without that fit, ``t₀ + t₂·R²``.
 
-    ``traced_share`` (a frame of the compiled engine, see :func:`shadow_volume_cost`): ray
-    tracing's per-receiver term becomes ``bn·N·min(1, cull + f)`` and both sides gain the shared
-    surface pass ``bn·N·surface``.
+    ``traced_share`` (a frame of the compiled engine, see :func:`shadow_volume_cost`): with the
+    frame-stage fit the ratio of the two stage predictions (:func:`shadow_stage_seconds`);
+    otherwise ray tracing's per-receiver term becomes ``bn·N·min(1, cull + f)`` and both sides
+    gain the shared surface pass ``bn·N·surface``.
     """
     m = models["shadow_map"]
     if "m0" not in m:
         return m["t0"] + m["t2"] * resolution**2
     n = m["receivers"] if receivers is None else receivers
+    if traced_share is not None and triangles is not None:
+        stage_map = shadow_stage_seconds(models, "shadow_map", n, triangles, resolution=resolution)
+        stage_ray = shadow_stage_seconds(models, "ray_traced", n, triangles, traced_share)
+        if stage_map is not None and stage_ray is not None and stage_ray > 0:
+            return stage_map / stage_ray
     if "mt" in m:
         t = m["triangles"] if triangles is None else triangles
         rays, shared = _frame_terms(models, m["bn"], n, traced_share)
@@ -440,7 +476,8 @@ def shadow_volume_cost(
             shadow rays :mod:`blinn_phong.ray_culling` leaves to Embree (None: every ray traced,
             no frame terms). With the ``frame_shadows`` fit (per receiver, in units of one
             ray: the shared ``surface`` pass and the ``cull`` pass) ray tracing's ``r_N·N``
-            becomes ``r_N·N·min(1, cull + f)`` and both methods gain ``r_N·N·surface``.
+            becomes ``r_N·N·min(1, cull + f)`` and both methods gain ``r_N·N·surface``; with
+            the frame-stage fit (:func:`shadow_stage_seconds`) the two stage predictions.
 
     Returns:
         ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
@@ -454,6 +491,11 @@ def shadow_volume_cost(
     for name, value in (("triangles", triangles), ("receivers", receivers)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise ValueError(f"{name}: expected an integer >= 0, got {value!r}")
+    if traced_share is not None:
+        volume = shadow_stage_seconds(models, "shadow_volume", receivers, triangles)
+        traced = shadow_stage_seconds(models, "ray_traced", receivers, triangles, traced_share)
+        if volume is not None and traced is not None and traced > 0:
+            return {"shadow_volume": volume, "ray_traced": traced, "ratio": volume / traced}
     rays, shared = _frame_terms(models, m["rn"], receivers, traced_share)
     volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers + shared
     traced = m["r0"] + m["rt"] * triangles + rays + shared
