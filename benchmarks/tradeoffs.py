@@ -883,7 +883,8 @@ def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
 
     Transparency rows: the transparency calibration scene (:func:`layered_scene`, 4 and 12
     layers) and the frame benchmark's scene with its transparent sphere
-    (:func:`benchmarks.bench_frame.issue_scene`, 96 × 48 segments), each at two sizes, rendered
+    (:func:`benchmarks.bench_frame.issue_scene`, 96 × 48 segments), each at two sizes (and the
+    benchmark's 256 × 128-segment scene at 320×180, for the triangle terms), rendered
     with the A-buffer, draw-last, sorted objects and depth peeling (1, 2, 4 layers), no shadows:
     the whole frame's process CPU time (the fits' data; the methods differ in the
     ``resolve_samples`` stage only, whose wall times are kept but, a few milliseconds, are
@@ -904,6 +905,8 @@ def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
         ("issue transparent", issue_scene(48 if small else 96, 24 if small else 48, True), 320, 180, 1),
         ("issue transparent", issue_scene(48 if small else 96, 24 if small else 48, True), 640, 360, 1),
     ]
+    if not small:  # the benchmark's own triangle count: anchors the triangle terms
+        transparent_frames.append(("issue 256 transparent", issue_scene(256, 128, True), 320, 180, 1))
     opaque_frames = [
         ("sphere 32", sphere_scene(32), 128, 128, 1),
         ("sphere 32", sphere_scene(32), 256, 256, 1),
@@ -911,6 +914,8 @@ def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
         ("issue", issue_scene(48 if small else 96, 24 if small else 48), 320, 180, 2),
         ("issue", issue_scene(48 if small else 96, 24 if small else 48), 640, 360, 1),
     ]
+    if not small:
+        opaque_frames.append(("issue 256", issue_scene(256, 128), 320, 180, 1))
     rows = []
     for name, scene, w, h, k in transparent_frames:
         frame = functools.partial(bp.render, scene, w, h, samples=k * k, shadows="none")
