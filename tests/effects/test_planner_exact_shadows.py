@@ -44,7 +44,10 @@ def test_where_volumes_are_predicted_cheaper_the_plan_picks_them_and_matches_emb
     models = calibration.shipped_models()
     triangles = sum(len(m.triangles) for m in scene.meshes)
     sizes = [(32, 32), (64, 60), (96, 90), (128, 120), (192, 180), (320, 300), (480, 450), (640, 600)]
-    ratio = {s: calibration.shadow_volume_cost(models, triangles, s[0] * s[1])["ratio"] for s in sizes}
+    share = planner.traced_share(
+        scene
+    )  # the rays a compiled frame leaves to Embree, as the planner estimates
+    ratio = {s: calibration.shadow_volume_cost(models, triangles, s[0] * s[1], share)["ratio"] for s in sizes}
     cheaper = [s for s in sizes if ratio[s] < 1 and s[0] >= 96]  # ≥ 96² pixels: a real shadow to compare
     dearer = [s for s in sizes if ratio[s] > 1]
     assert cheaper and dearer, ratio  # the fit has a crossover inside these frames
