@@ -47,6 +47,9 @@ for options in (
     {"shading": "gouraud", "shadows": "none", "samples": 4},
 ):
     result = bp.render(scene, 48, 48, **options)
+opaque = bp.Scene(meshes=[bp.Mesh(plane, ptri, pnrm), ball], lights=lights, camera=camera)
+for options in ({"shadows": "ray_traced", "shading": "flat"}, {"shadows": "none", "shading": "gouraud"}):
+    bp.render(opaque, 48, 48, **options)  # culled shadow rays; flat and Gouraud on the fused pass
 compositing.composite(result.rgba, result.rgba, "src_over", engine="numba")
 missed = sorted(
     f"{o.py_func.__module__}.{o.py_func.__qualname__}"
