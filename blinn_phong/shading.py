@@ -191,8 +191,9 @@ def fused_shading_applies(
     """True when the compiled engine may shade and resolve the frame in one fused pass.
 
     That is: one sample per pixel (fogged or not: the pass applies fog), every mesh shaded per
-    pixel (``phong``) — or, without ``gl_compat`` and without ``shadows``, per face (``flat``)
-    or per vertex (``gouraud``) from the tables of :func:`plain_tables` —, no image texture,
+    pixel (``phong``) — or, without ``gl_compat``, per face (``flat``, lit per pixel at the
+    face's centroid) or, without ``shadows`` too, per vertex (``gouraud``, from the tables of
+    :func:`plain_tables`) —, no image texture,
     and every material's fragment colour the partial-occlusion ``(α·c, α)`` (no Kay–Greenberg
     opacity, no specular wash-out, no emission/absorption model). Transparency resolves are
     checked by the caller (none may be needed). The fused pass
@@ -202,7 +203,8 @@ def fused_shading_applies(
     """
     if samples != 1:
         return False
-    if any((mesh.shading or shading) != "phong" for mesh in scene.meshes) and (gl_compat or shadows):
+    modes = {mesh.shading or shading for mesh in scene.meshes}
+    if (gl_compat and modes != {"phong"}) or (shadows and "gouraud" in modes):
         return False
     materials = [m for mesh in scene.meshes for m in (mesh.material, mesh.back_material or mesh.material)]
     return all(

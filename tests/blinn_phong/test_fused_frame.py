@@ -93,6 +93,7 @@ CASES = [
     {"shadows": "ray_traced"},
     {"shadows": "shadow_volume"},
     {"shading": "flat"},
+    {"shading": "flat", "shadows": "ray_traced"},
     {"shading": "gouraud"},
     {"shading": "gouraud", "local_viewer": False, "specular": "phong"},
     {"shading": "mixed"},
