@@ -40,10 +40,8 @@ stored depth, or a snapped vertex sits on a rounding boundary.
 
 from __future__ import annotations
 
-import functools
 import math
 import os
-from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -56,6 +54,7 @@ __all__ = [
     "fragment_surface",
     "hard_shadow_rays",
     "lookup_compiled",
+    "receiver_visibility_compiled",
     "visibility_at",
 ]
 
@@ -115,27 +114,23 @@ def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma
     return True
 
 
-@numba.njit(cache=True, nogil=True)  # serial: ~100 ns a triangle; nogil: a cube's faces set up on threads
-def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
-    # slots are filled in order (k counts them), so only the rows of drawn triangles are touched
-    n = world.shape[0]
+@numba.njit(cache=True, inline="always")
+def _overlaps(box, s, rect):  # pragma: no cover - compiled
+    # the triangle's texel box meets the rectangle (r0, r1, c0, c1) of texels to render
+    return box[s, 2] <= rect[1] and box[s, 3] >= rect[0] and box[s, 0] <= rect[3] and box[s, 1] >= rect[2]
+
+
+@numba.njit(cache=True)
+def _setup_range(
+    world, t0, t1, vp, res, slope_bias, rect, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, bias, base
+):  # pragma: no cover - compiled
+    # triangles t0..t1-1 into slots base, base+1, ... (at most two a triangle: near clipping);
+    # only triangles whose texel box meets ``rect`` are kept. Returns the number of slots filled.
     c = np.empty((3, 4))
     cv = np.empty((3, 4))
     w = np.zeros((5, 3))
-    k = 0
-    sx = np.empty((2 * n, 3))
-    sy = np.empty((2 * n, 3))
-    sz = np.empty((2 * n, 3))
-    qx = np.empty((2 * n, 3))
-    qy = np.empty((2 * n, 3))
-    ea = np.empty((2 * n, 4))  # edge a (3) and the snapped signed area (column 3)
-    eb = np.empty((2 * n, 3))
-    ec = np.empty((2 * n, 3))
-    etl = np.empty((2 * n, 3), np.bool_)
-    box = np.empty((2 * n, 4), np.int64)
-    valid = np.zeros(2 * n, np.bool_)
-    bias = np.empty(2 * n)
-    for t in range(n):
+    k = base
+    for t in range(t0, t1):
         for j in range(3):
             x, y, z = world[t, j, 0], world[t, j, 1], world[t, j, 2]
             for ch in range(4):
@@ -149,34 +144,16 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
                 out = True
         if out:
             continue
-        # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
-        slope = 0.0
-        if c[0, 3] > 0 and c[1, 3] > 0 and c[2, 3] > 0:
-            xw0 = (c[0, 0] / c[0, 3] + 1) * 0.5 * res
-            yw0 = (c[0, 1] / c[0, 3] + 1) * 0.5 * res
-            zw0 = (c[0, 2] / c[0, 3] + 1) * 0.5
-            xw1 = (c[1, 0] / c[1, 3] + 1) * 0.5 * res
-            yw1 = (c[1, 1] / c[1, 3] + 1) * 0.5 * res
-            zw1 = (c[1, 2] / c[1, 3] + 1) * 0.5
-            xw2 = (c[2, 0] / c[2, 3] + 1) * 0.5 * res
-            yw2 = (c[2, 1] / c[2, 3] + 1) * 0.5 * res
-            zw2 = (c[2, 2] / c[2, 3] + 1) * 0.5
-            e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
-            e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
-            det = e1x * e2y - e2x * e1y
-            if det != 0:
-                slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
-        b = slope_bias * slope
-        # near clipping, as raster._clip_near
+        # near clipping, as raster._clip_near; the depth slope is computed below, only for a
+        # triangle that draws something in the rectangle
         d0 = c[0, 2] + c[0, 3]
         d1 = c[1, 2] + c[1, 3]
         d2 = c[2, 2] + c[2, 3]
         inside0, inside1, inside2 = d0 >= 0, d1 >= 0, d2 >= 0
         n_in = int(inside0) + int(inside1) + int(inside2)
+        first = k
         if n_in == 3:
-            if _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
-                bias[k] = b
-                valid[k] = True
+            if _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k) and _overlaps(box, k, rect):
                 k += 1
         elif n_in > 0:
             lone_inside = n_in == 1
@@ -209,19 +186,86 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
                     r = corners[q][j]
                     for ch in range(4):
                         cv[j, ch] = w[r, 0] * c[0, ch] + w[r, 1] * c[1, ch] + w[r, 2] * c[2, ch]
-                if _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
-                    bias[k] = b
-                    valid[k] = True
+                drawn = _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k)
+                if drawn and _overlaps(box, k, rect):
                     k += 1
-    return valid, bias, sx, sy, sz, ea, eb, ec, etl, box
+        if k == first:
+            continue
+        # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
+        slope = 0.0
+        if c[0, 3] > 0 and c[1, 3] > 0 and c[2, 3] > 0:
+            xw0 = (c[0, 0] / c[0, 3] + 1) * 0.5 * res
+            yw0 = (c[0, 1] / c[0, 3] + 1) * 0.5 * res
+            zw0 = (c[0, 2] / c[0, 3] + 1) * 0.5
+            xw1 = (c[1, 0] / c[1, 3] + 1) * 0.5 * res
+            yw1 = (c[1, 1] / c[1, 3] + 1) * 0.5 * res
+            zw1 = (c[1, 2] / c[1, 3] + 1) * 0.5
+            xw2 = (c[2, 0] / c[2, 3] + 1) * 0.5 * res
+            yw2 = (c[2, 1] / c[2, 3] + 1) * 0.5 * res
+            zw2 = (c[2, 2] / c[2, 3] + 1) * 0.5
+            e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
+            e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
+            det = e1x * e2y - e2x * e1y
+            if det != 0:
+                slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
+        b = slope_bias * slope
+        for s in range(first, k):
+            bias[s] = b
+    return k - base
+
+
+@numba.njit(parallel=True, cache=True)
+def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - compiled
+    # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
+    # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
+    # empty (r0 > r1) are skipped. Returns the per-slot arrays (F, 2n, ·), the slots drawn per
+    # face (F, 2n; the first count[f] of row f) and count (F,).
+    n_faces = vps.shape[0]
+    n = world.shape[0]
+    sx = np.empty((n_faces, 2 * n, 3))
+    sy = np.empty((n_faces, 2 * n, 3))
+    sz = np.empty((n_faces, 2 * n, 3))
+    qx = np.empty((n_faces, 2 * n, 3))
+    qy = np.empty((n_faces, 2 * n, 3))
+    ea = np.empty((n_faces, 2 * n, 4))  # edge a (3) and the snapped signed area (column 3)
+    eb = np.empty((n_faces, 2 * n, 3))
+    ec = np.empty((n_faces, 2 * n, 3))
+    etl = np.empty((n_faces, 2 * n, 3), np.bool_)
+    box = np.empty((n_faces, 2 * n, 4), np.int64)
+    bias = np.empty((n_faces, 2 * n))
+    filled = np.zeros((n_faces, n_chunks), np.int64)
+    for task in numba.prange(n_faces * n_chunks):
+        f = task % n_faces
+        ch = task // n_faces
+        if rects[f, 0] > rects[f, 1] or rects[f, 2] > rects[f, 3]:
+            continue
+        t0 = ch * n // n_chunks
+        t1 = (ch + 1) * n // n_chunks
+        filled[f, ch] = _setup_range(
+            world, t0, t1, vps[f], res, slope_bias, rects[f], sx[f], sy[f], sz[f], qx[f], qy[f],
+            ea[f], eb[f], ec[f], etl[f], box[f], bias[f], 2 * t0,
+        )  # fmt: skip
+    slots = np.empty((n_faces, 2 * n), np.int64)
+    count = np.zeros(n_faces, np.int64)
+    for f in range(n_faces):
+        k = 0
+        for ch in range(n_chunks):
+            base = 2 * (ch * n // n_chunks)
+            for s in range(base, base + filled[f, ch]):
+                slots[f, k] = s
+                k += 1
+        count[f] = k
+    return bias, sx, sy, sz, ea, eb, ec, etl, box, slots, count
 
 
 @numba.njit(cache=True)
 def _scan_rows(
-    depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+    depth, r0, r1, c0, c1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
 ):  # pragma: no cover
-    # rows r0..r1 (inclusive) of one map: fill with 1, then keep the smallest biased depth
-    depth[r0 : r1 + 1, :] = 1.0
+    # texels (r0..r1, c0..c1) (inclusive) of one map: fill with 1, then keep the smallest biased
+    # depth; every texel's value is the one a scan of the whole map gives it (a minimum over the
+    # same triangles, whatever the order)
+    depth[r0 : r1 + 1, c0 : c1 + 1] = 1.0
     for q in range(slots.shape[0]):
         s = slots[q]
         lo = max(box[s, 2], r0)
@@ -235,8 +279,8 @@ def _scan_rows(
         exact = ex_area * area > 0 and abs(ex_area) > 1e-12
         abs_area = abs(area)
         b = bias[s]
-        bx0 = float(box[s, 0])
-        bx1 = float(box[s, 1])
+        bx0 = float(max(box[s, 0], c0))
+        bx1 = float(min(box[s, 1], c1))
         for py in range(lo, hi + 1):
             cy = py + 0.5
             # the row's span: each edge function is linear in x, so its sign changes once; the
@@ -290,40 +334,52 @@ def _scan_rows(
 
 
 @numba.njit(parallel=True, cache=True)
-def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box):  # pragma: no cover
-    res = depth.shape[0]
-    band_h = (res + n_bands - 1) // n_bands
-    for band in numba.prange(n_bands):
-        r0 = band * band_h
-        r1 = min(res, r0 + band_h) - 1
-        _scan_rows(depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
-
-
-@numba.njit(parallel=True, cache=True)
-def _scan_faces(
-    out, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
+def _scan(
+    out, rects, n_bands, slots, count, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
 ):  # pragma: no cover - compiled
-    # every (face, band of rows) is one task, faces interleaved so that each thread gets a share
-    # of every face (one face may hold most of the work: the one looking at the ground); the
-    # per-face arrays come as tuples, one entry per face, so nothing is copied into one block
+    # every (face, band of the face's rows) is one task, faces interleaved so that each thread
+    # gets a share of every face (one face may hold most of the work: the one looking at the
+    # ground); faces with an empty rectangle are left unwritten
     n_faces = out.shape[0]
-    res = out.shape[1]
-    band_h = (res + n_bands - 1) // n_bands
     for task in numba.prange(n_faces * n_bands):
         f = task % n_faces
-        r0 = (task // n_faces) * band_h
-        r1 = min(res, r0 + band_h) - 1
+        band = task // n_faces
+        r_lo, r_hi, c0, c1 = rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3]
+        if r_lo > r_hi or c0 > c1:
+            continue
+        band_h = (r_hi - r_lo + n_bands) // n_bands
+        r0 = r_lo + band * band_h
+        r1 = min(r_hi, r0 + band_h - 1)
         if r0 <= r1:
             _scan_rows(
-                out[f], r0, r1, slots[f], bias[f], constant_bias,
+                out[f], r0, r1, c0, c1, slots[f, : count[f]], bias[f], constant_bias,
                 sx[f], sy[f], sz[f], ea[f], eb[f], ec[f], etl[f], box[f],
             )  # fmt: skip
 
 
-@functools.lru_cache(maxsize=1)
-def _setup_pool() -> ThreadPoolExecutor:
-    """Threads for the per-face set-up of a cube (``_setup`` releases the GIL)."""
-    return ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="shadow-setup")
+def _render_maps(
+    world: np.ndarray,
+    vps: np.ndarray,
+    rects: np.ndarray,
+    constant_bias: float,
+    slope_bias: float,
+    out: np.ndarray,
+) -> np.ndarray:
+    """Depth maps of the casters seen by F cameras, each only over its rectangle of texels.
+
+    ``world``: (n, 3, 3) contiguous float64; ``vps``: (F, 4, 4); ``rects``: (F, 4) int64 texel
+    rectangles ``(r0, r1, c0, c1)`` (inclusive; r0 > r1 or c0 > c1: the face is not rendered);
+    ``out``: (F, R, R) float64. Texels outside a face's rectangle are left as they were.
+    """
+    res = out.shape[1]
+    threads = _threads()
+    n_chunks = max(1, min(len(world), 4 * threads))
+    bias, sx, sy, sz, ea, eb, ec, etl, box, slots, count = _setup(
+        world, vps, rects, float(res), float(slope_bias), n_chunks
+    )
+    n_bands = max(1, min(res, 2 * threads if len(vps) > 1 else 4 * threads))
+    _scan(out, rects, n_bands, slots, count, bias, float(constant_bias), sx, sy, sz, ea, eb, ec, etl, box)
+    return out
 
 
 def cube_maps_compiled(
@@ -335,9 +391,9 @@ def cube_maps_compiled(
 ) -> np.ndarray:
     """:func:`depth_map_compiled` for several cameras at once (a cube's six faces).
 
-    Each face's triangle set-up runs on a thread of its own (the compiled set-up releases the
-    GIL); then every (face, band of rows) pair is one task of a parallel scan, so that a face
-    holding most of the work is shared by every thread.
+    The triangle set-up runs in parallel over (face, chunk of triangles) tasks; then every
+    (face, band of rows) pair is one task of a parallel scan, so that a face holding most of
+    the work is shared by every thread.
 
     Args:
         world_triangles: (n, 3, 3) float64 world-space casters.
@@ -354,19 +410,15 @@ def cube_maps_compiled(
         out[:] = 1.0
         return out
     vps = np.ascontiguousarray(view_projections, dtype=np.float64)
-    res = float(out.shape[1])
+    return _render_maps(world, vps, _full_rects(len(vps), out.shape[1]), constant_bias, slope_bias, out)
 
-    def setup(f: int) -> tuple[np.ndarray, ...]:
-        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], res, float(slope_bias))
-        k = int(np.count_nonzero(valid))  # slots are filled in order: the first k are the drawn ones
-        return tuple(a[:k] for a in (bias, sx, sy, sz, ea, eb, ec, etl, box))
 
-    faces = list(_setup_pool().map(setup, range(len(vps))))
-    slots = tuple(np.arange(len(face[0]), dtype=np.int64) for face in faces)
-    per_face = [tuple(face[j] for face in faces) for j in range(9)]
-    n_bands = max(1, min(out.shape[1], 2 * _threads()))
-    _scan_faces(out, n_bands, slots, per_face[0], float(constant_bias), *per_face[1:])
-    return out
+def _full_rects(n_faces: int, res: int) -> np.ndarray:
+    """(F, 4) rectangles ``(0, R − 1, 0, R − 1)``: every texel of every face."""
+    rects = np.empty((n_faces, 4), np.int64)
+    rects[:, 0::2] = 0
+    rects[:, 1::2] = res - 1
+    return rects
 
 
 def depth_map_compiled(
@@ -397,11 +449,8 @@ def depth_map_compiled(
     if len(world) == 0:
         depth[:] = 1.0
         return depth
-    vp = np.ascontiguousarray(view_projection, dtype=np.float64)
-    valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vp, float(res), float(slope_bias))
-    slots = np.flatnonzero(valid).astype(np.int64)
-    n_bands = max(1, min(res, 4 * _threads()))
-    _scan(depth, n_bands, slots, bias, float(constant_bias), sx, sy, sz, ea, eb, ec, etl, box)
+    vp = np.ascontiguousarray(view_projection, dtype=np.float64).reshape(1, 4, 4)
+    _render_maps(world, vp, _full_rects(1, res), constant_bias, slope_bias, depth.reshape(1, res, res))
     return depth
 
 
@@ -410,6 +459,65 @@ def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
     c = min(max(col, 0.0), res_x - 1.0)
     r = min(max(row, 0.0), res_y - 1.0)
     return 1.0 if z <= depth[f, int(r), int(c)] else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _locate(
+    px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+):  # pragma: no cover - compiled
+    # (face, x, y, z, found): the texel coordinates (x right, y down from the top) and window
+    # depth of a receiver in its map; found is False where the map is not read (lit)
+    f = 0
+    if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
+        rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
+        ax, best, val = 0, abs(rx), rx
+        if abs(ry) > best:
+            ax, best, val = 1, abs(ry), ry
+        if abs(rz) > best:
+            ax, best, val = 2, abs(rz), rz
+        if val == 0:
+            return 0, 0.0, 0.0, 0.0, False
+        f = 2 * ax + (0 if val > 0 else 1)
+    if normal_offset != 0.0:
+        length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+        nx, ny, nz = nx / length, ny / length, nz / length
+        if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
+            nx, ny, nz = -nx, -ny, -nz
+        px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
+    m = vp[f]
+    cx = ((m[0, 0] * px + m[0, 1] * py) + m[0, 2] * pz) + m[0, 3]
+    cy = ((m[1, 0] * px + m[1, 1] * py) + m[1, 2] * pz) + m[1, 3]
+    cz = ((m[2, 0] * px + m[2, 1] * py) + m[2, 2] * pz) + m[2, 3]
+    cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
+    if not cw > 0:
+        return f, 0.0, 0.0, 0.0, False
+    nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
+    z = (nzd + 1) * 0.5
+    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
+        return f, 0.0, 0.0, 0.0, False
+    x = (nxd + 1) * 0.5 * res_x
+    y = res_y - (nyd + 1) * 0.5 * res_y
+    return f, x, y, z, True
+
+
+@numba.njit(cache=True, inline="always")
+def _tap_span(x, y, kernel, res_x, res_y):  # pragma: no cover - compiled
+    # (c0, c1, r0, r1): the texel columns and rows the taps of ``kernel`` read at (x, y), as
+    # visibility_at clamps them
+    if kernel == 0:
+        c_lo, c_hi, r_lo, r_hi = math.floor(x), math.floor(x), math.floor(y), math.floor(y)
+    elif kernel == 1:
+        x0, y0 = math.floor(x - 0.5), math.floor(y - 0.5)
+        c_lo, c_hi, r_lo, r_hi = x0, x0 + 1, y0, y0 + 1
+    else:
+        h = (kernel - 1) // 2
+        col, row = math.floor(x), math.floor(y)
+        c_lo, c_hi, r_lo, r_hi = col - h, col + h, row - h, row + h
+    c0 = int(min(max(c_lo, 0.0), res_x - 1.0))
+    c1 = int(min(max(c_hi, 0.0), res_x - 1.0))
+    r0 = int(min(max(r_lo, 0.0), res_y - 1.0))
+    r1 = int(min(max(r_hi, 0.0), res_y - 1.0))
+    return c0, c1, r0, r1
 
 
 @numba.njit(cache=True, inline="always")  # inlined: a call per point costs more than its body
@@ -427,36 +535,11 @@ def visibility_at(
     """
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
-    f = 0
-    if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
-        rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
-        ax, best, val = 0, abs(rx), rx
-        if abs(ry) > best:
-            ax, best, val = 1, abs(ry), ry
-        if abs(rz) > best:
-            ax, best, val = 2, abs(rz), rz
-        if val == 0:
-            return 1.0
-        f = 2 * ax + (0 if val > 0 else 1)
-    if normal_offset != 0.0:
-        length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
-        nx, ny, nz = nx / length, ny / length, nz / length
-        if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
-            nx, ny, nz = -nx, -ny, -nz
-        px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
-    m = vp[f]
-    cx = ((m[0, 0] * px + m[0, 1] * py) + m[0, 2] * pz) + m[0, 3]
-    cy = ((m[1, 0] * px + m[1, 1] * py) + m[1, 2] * pz) + m[1, 3]
-    cz = ((m[2, 0] * px + m[2, 1] * py) + m[2, 2] * pz) + m[2, 3]
-    cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
-    if not cw > 0:
+    f, x, y, z, found = _locate(
+        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+    )
+    if not found:
         return 1.0
-    nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
-    z = (nzd + 1) * 0.5
-    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
-        return 1.0
-    x = (nxd + 1) * 0.5 * res_x
-    y = res_y - (nyd + 1) * 0.5 * res_y
     if kernel == 0:
         return _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
     if kernel == 1:
@@ -477,6 +560,46 @@ def visibility_at(
         for ox in range(-h, h + 1):
             total += _lit(depth, f, col + ox, row + oy, z, res_x, res_y)
     return total / (kernel * kernel)
+
+
+@numba.njit(parallel=True, cache=True)
+def _receiver_rects(
+    points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks
+):  # pragma: no cover - compiled
+    # per face, the rectangle (r0, r1, c0, c1) of the texels the look-ups of the points read
+    # (r0 > r1: none); per chunk of points in parallel, then merged
+    n = points.shape[0]
+    with_normals = normal_offset != 0.0
+    part = np.empty((n_chunks, n_faces, 4), np.int64)
+    for ch in numba.prange(n_chunks):
+        for f in range(n_faces):
+            part[ch, f, 0] = res
+            part[ch, f, 1] = -1
+            part[ch, f, 2] = res
+            part[ch, f, 3] = -1
+        for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
+            nx = normals[i, 0] if with_normals else 0.0
+            ny = normals[i, 1] if with_normals else 0.0
+            nz = normals[i, 2] if with_normals else 0.0
+            f, x, y, _, found = _locate(
+                points[i, 0], points[i, 1], points[i, 2], nx, ny, nz,
+                vp, view_z, face_mode, light_pos, normal_offset, float(res), float(res),
+            )  # fmt: skip
+            if not found:
+                continue
+            c0, c1, r0, r1 = _tap_span(x, y, kernel, float(res), float(res))
+            part[ch, f, 0] = min(part[ch, f, 0], r0)
+            part[ch, f, 1] = max(part[ch, f, 1], r1)
+            part[ch, f, 2] = min(part[ch, f, 2], c0)
+            part[ch, f, 3] = max(part[ch, f, 3], c1)
+    rects = part[0].copy()
+    for ch in range(1, n_chunks):
+        for f in range(n_faces):
+            rects[f, 0] = min(rects[f, 0], part[ch, f, 0])
+            rects[f, 1] = max(rects[f, 1], part[ch, f, 1])
+            rects[f, 2] = min(rects[f, 2], part[ch, f, 2])
+            rects[f, 3] = max(rects[f, 3], part[ch, f, 3])
+    return rects
 
 
 @numba.njit(parallel=True, cache=True)
@@ -539,6 +662,72 @@ def lookup_compiled(
         KERNEL_CODES[kernel],
         out,
     )
+    return out
+
+
+def receiver_visibility_compiled(
+    world_triangles: np.ndarray,
+    view_projection: np.ndarray,
+    view: np.ndarray,
+    resolution: int,
+    points: np.ndarray,
+    normals: np.ndarray | None,
+    *,
+    constant_bias: float,
+    slope_bias: float,
+    light_position: np.ndarray | None,
+    normal_offset: float,
+    kernel: str,
+) -> np.ndarray:
+    """Shadow-map visibility of points, rendering only the texels their look-ups read.
+
+    The value of :func:`lookup_compiled` on the maps of :func:`depth_map_compiled` /
+    :func:`cube_maps_compiled`, bit for bit: a first parallel pass over the points finds, per
+    map, the rectangle of texels their percentage-closer taps read (the same inlined
+    projection and clamping as the look-up); a map no point reads is not rendered at all,
+    the others only over their rectangle, and only with the triangles whose texel box meets
+    it. A texel's depth is a minimum over the triangles that cover it, so it is the same
+    whether or not the texels around it are rendered.
+
+    Args:
+        world_triangles: (n, 3, 3) float64 world-space casters.
+        view_projection: (F, 4, 4) world → clip matrices (F = 1, or 6 cube faces in the
+            order of :data:`blinn_phong.shadows._CUBE_FACES`).
+        view: (F, 4, 4) world → light-eye matrices (row 2 orients the normal offset).
+        resolution: texels per map side.
+        points: (m, 3) float64 world-space receivers.
+        normals: (m, 3) float64 normals, or None when ``normal_offset`` is 0.
+        constant_bias: window-depth units added to every caster fragment.
+        slope_bias: multiple of the triangle's depth slope per texel added.
+        light_position: the point light's position for a cube (F = 6), else None.
+        normal_offset: world units along the light-facing unit normal.
+        kernel: one of :data:`blinn_phong.shadows.PCF_KERNELS`.
+
+    Returns:
+        (m,) float64 visibility in [0, 1].
+    """
+    out = np.empty(len(points))
+    if len(points) == 0:
+        return out
+    res = int(resolution)
+    world = np.ascontiguousarray(world_triangles, dtype=np.float64).reshape(-1, 3, 3)
+    vps = np.ascontiguousarray(view_projection, dtype=np.float64)
+    view_z = np.ascontiguousarray(np.asarray(view, dtype=np.float64)[:, 2, :3])
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    nrm = np.zeros((1, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    cube = len(vps) == 6
+    lp = np.zeros(3) if light_position is None else np.asarray(light_position, dtype=np.float64)
+    code = KERNEL_CODES[kernel]
+    n_chunks = max(1, min(len(p), 4 * _threads()))
+    rects = _receiver_rects(
+        p, nrm, len(vps), res, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, n_chunks
+    )
+    depth = np.empty((len(vps), res, res))  # texels outside the rectangles are never read
+    if len(world) == 0:
+        depth[:] = 1.0
+    else:
+        _render_maps(world, vps, rects, constant_bias, slope_bias, depth)
+    _lookup(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out)
     return out
 
 
