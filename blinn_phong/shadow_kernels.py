@@ -66,51 +66,69 @@ def _threads() -> int:
     return max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
 
 
+#: Columns of a set-up triangle's record (one float64 row per drawn triangle): window x, y and
+#: depth of its corners (unsnapped), the edge functions' a (3) and the snapped signed area, b,
+#: c, the slope bias, the top-left flags (1.0 / 0.0) and the unsnapped signed area.
+_SX, _SY, _SZ, _EA, _AREA, _EB, _EC, _BIAS, _ETL, _EXAREA, _NREC = 0, 3, 6, 9, 12, 13, 16, 19, 20, 23, 24
+
+
 @numba.njit(cache=True, inline="always")
-def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma: no cover - compiled
-    # cv: (3, 4) clip vertices of one (sub-)triangle; fills slot s; False when it draws nothing.
-    for j in range(3):
-        if not cv[j, 3] > 0:
-            return False
+def _snap_setup(
+    x0c, y0c, z0c, w0c, x1c, y1c, z1c, w1c, x2c, y2c, z2c, w2c, res, rec, box, s
+):  # pragma: no cover - compiled
+    # clip corners of one (sub-)triangle (scalars); fills slot s; False when it draws nothing
+    if not (w0c > 0 and w1c > 0 and w2c > 0):
+        return False
     scale = 256.0
-    for j in range(3):
-        w = cv[j, 3]
-        nx = cv[j, 0] / w
-        ny = cv[j, 1] / w
-        nz = cv[j, 2] / w
-        xe = (nx + 1.0) * (0.5 * res)
-        ye = res - (ny + 1.0) * (0.5 * res)
-        sx[s, j] = xe
-        sy[s, j] = ye
-        sz[s, j] = (nz + 1.0) * 0.5
-        qx[s, j] = np.rint(xe * scale) / scale
-        qy[s, j] = res - np.rint((res - ye) * scale) / scale
-    x_0, x_1, x_2 = qx[s, 0], qx[s, 1], qx[s, 2]
-    y_0, y_1, y_2 = qy[s, 0], qy[s, 1], qy[s, 2]
+    half = 0.5 * res
+    r = rec[s]
+    xe0 = (x0c / w0c + 1.0) * half
+    xe1 = (x1c / w1c + 1.0) * half
+    xe2 = (x2c / w2c + 1.0) * half
+    ye0 = res - (y0c / w0c + 1.0) * half
+    ye1 = res - (y1c / w1c + 1.0) * half
+    ye2 = res - (y2c / w2c + 1.0) * half
+    r[_SX], r[_SX + 1], r[_SX + 2] = xe0, xe1, xe2
+    r[_SY], r[_SY + 1], r[_SY + 2] = ye0, ye1, ye2
+    r[_SZ] = (z0c / w0c + 1.0) * 0.5
+    r[_SZ + 1] = (z1c / w1c + 1.0) * 0.5
+    r[_SZ + 2] = (z2c / w2c + 1.0) * 0.5
+    x_0 = np.rint(xe0 * scale) / scale
+    x_1 = np.rint(xe1 * scale) / scale
+    x_2 = np.rint(xe2 * scale) / scale
+    y_0 = res - np.rint((res - ye0) * scale) / scale
+    y_1 = res - np.rint((res - ye1) * scale) / scale
+    y_2 = res - np.rint((res - ye2) * scale) / scale
     area = (x_1 - x_0) * (y_2 - y_0) - (x_2 - x_0) * (y_1 - y_0)
     if area == 0:
         return False
-    x0 = max(np.ceil(min(x_0, x_1, x_2) - 0.5), 0.0)
-    x1 = min(np.floor(max(x_0, x_1, x_2) - 0.5), res - 1.0)
-    y0 = max(np.ceil(min(y_0, y_1, y_2) - 0.5), 0.0)
-    y1 = min(np.floor(max(y_0, y_1, y_2) - 0.5), res - 1.0)
-    if not (x0 <= x1 and y0 <= y1):  # NaN-safe: no box, no integer cast
+    bx0 = max(np.ceil(min(x_0, x_1, x_2) - 0.5), 0.0)
+    bx1 = min(np.floor(max(x_0, x_1, x_2) - 0.5), res - 1.0)
+    by0 = max(np.ceil(min(y_0, y_1, y_2) - 0.5), 0.0)
+    by1 = min(np.floor(max(y_0, y_1, y_2) - 0.5), res - 1.0)
+    if not (bx0 <= bx1 and by0 <= by1):  # NaN-safe: no box, no integer cast
         return False
-    box[s, 0] = int(x0)
-    box[s, 1] = int(x1)
-    box[s, 2] = int(y0)
-    box[s, 3] = int(y1)
+    box[s, 0] = int(bx0)
+    box[s, 1] = int(bx1)
+    box[s, 2] = int(by0)
+    box[s, 3] = int(by1)
     sign = -1.0 if area < 0 else 1.0
-    ea[s, 3] = area
+    r[_AREA] = area
+    # edge i runs from corner j = i + 1 to corner k = i + 2
     for i in range(3):
-        j = (i + 1) % 3
-        k = (i + 2) % 3
-        a = -(qy[s, k] - qy[s, j]) * sign
-        b = (qx[s, k] - qx[s, j]) * sign
-        ea[s, i] = a
-        eb[s, i] = b
-        ec[s, i] = ((qy[s, k] - qy[s, j]) * qx[s, j] - (qx[s, k] - qx[s, j]) * qy[s, j]) * sign
-        etl[s, i] = (a > 0) or (a == 0 and b < 0)
+        if i == 0:
+            xj, yj, xk, yk = x_1, y_1, x_2, y_2
+        elif i == 1:
+            xj, yj, xk, yk = x_2, y_2, x_0, y_0
+        else:
+            xj, yj, xk, yk = x_0, y_0, x_1, y_1
+        a = -(yk - yj) * sign
+        b = (xk - xj) * sign
+        r[_EA + i] = a
+        r[_EB + i] = b
+        r[_EC + i] = ((yk - yj) * xj - (xk - xj) * yj) * sign
+        r[_ETL + i] = 1.0 if (a > 0) or (a == 0 and b < 0) else 0.0
+    r[_EXAREA] = (xe1 - xe0) * (ye2 - ye0) - (xe2 - xe0) * (ye1 - ye0)
     return True
 
 
@@ -120,10 +138,13 @@ def _overlaps(box, s, rect):  # pragma: no cover - compiled
     return box[s, 2] <= rect[1] and box[s, 3] >= rect[0] and box[s, 0] <= rect[3] and box[s, 1] >= rect[2]
 
 
+@numba.njit(cache=True, inline="always")
+def _clip_row(vp, ch, x, y, z):  # pragma: no cover - compiled
+    return ((vp[ch, 0] * x + vp[ch, 1] * y) + vp[ch, 2] * z) + vp[ch, 3]
+
+
 @numba.njit(cache=True)
-def _setup_range(
-    world, t0, t1, vp, res, slope_bias, rect, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, bias, base
-):  # pragma: no cover - compiled
+def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # pragma: no cover - compiled
     # triangles t0..t1-1 into slots base, base+1, ... (at most two a triangle: near clipping);
     # only triangles whose texel box meets ``rect`` are kept. Returns the number of slots filled.
     c = np.empty((3, 4))
@@ -131,31 +152,40 @@ def _setup_range(
     w = np.zeros((5, 3))
     k = base
     for t in range(t0, t1):
-        for j in range(3):
-            x, y, z = world[t, j, 0], world[t, j, 1], world[t, j, 2]
-            for ch in range(4):
-                c[j, ch] = ((vp[ch, 0] * x + vp[ch, 1] * y) + vp[ch, 2] * z) + vp[ch, 3]
+        v = world[t]
+        x0c = _clip_row(vp, 0, v[0, 0], v[0, 1], v[0, 2])
+        x1c = _clip_row(vp, 0, v[1, 0], v[1, 1], v[1, 2])
+        x2c = _clip_row(vp, 0, v[2, 0], v[2, 1], v[2, 2])
+        w0c = _clip_row(vp, 3, v[0, 0], v[0, 1], v[0, 2])
+        w1c = _clip_row(vp, 3, v[1, 0], v[1, 1], v[1, 2])
+        w2c = _clip_row(vp, 3, v[2, 0], v[2, 1], v[2, 2])
         # trivially outside one side of the light's frustum: nothing to draw
-        out = False
-        for ch in range(2):
-            if (c[0, ch] > c[0, 3] and c[1, ch] > c[1, 3] and c[2, ch] > c[2, 3]) or (
-                c[0, ch] < -c[0, 3] and c[1, ch] < -c[1, 3] and c[2, ch] < -c[2, 3]
-            ):
-                out = True
-        if out:
+        if (x0c > w0c and x1c > w1c and x2c > w2c) or (x0c < -w0c and x1c < -w1c and x2c < -w2c):
             continue
+        y0c = _clip_row(vp, 1, v[0, 0], v[0, 1], v[0, 2])
+        y1c = _clip_row(vp, 1, v[1, 0], v[1, 1], v[1, 2])
+        y2c = _clip_row(vp, 1, v[2, 0], v[2, 1], v[2, 2])
+        if (y0c > w0c and y1c > w1c and y2c > w2c) or (y0c < -w0c and y1c < -w1c and y2c < -w2c):
+            continue
+        z0c = _clip_row(vp, 2, v[0, 0], v[0, 1], v[0, 2])
+        z1c = _clip_row(vp, 2, v[1, 0], v[1, 1], v[1, 2])
+        z2c = _clip_row(vp, 2, v[2, 0], v[2, 1], v[2, 2])
         # near clipping, as raster._clip_near; the depth slope is computed below, only for a
         # triangle that draws something in the rectangle
-        d0 = c[0, 2] + c[0, 3]
-        d1 = c[1, 2] + c[1, 3]
-        d2 = c[2, 2] + c[2, 3]
+        d0 = z0c + w0c
+        d1 = z1c + w1c
+        d2 = z2c + w2c
         inside0, inside1, inside2 = d0 >= 0, d1 >= 0, d2 >= 0
         n_in = int(inside0) + int(inside1) + int(inside2)
         first = k
         if n_in == 3:
-            if _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k) and _overlaps(box, k, rect):
+            drawn = _snap_setup(x0c, y0c, z0c, w0c, x1c, y1c, z1c, w1c, x2c, y2c, z2c, w2c, res, rec, box, k)
+            if drawn and _overlaps(box, k, rect):
                 k += 1
         elif n_in > 0:
+            c[0, 0], c[0, 1], c[0, 2], c[0, 3] = x0c, y0c, z0c, w0c
+            c[1, 0], c[1, 1], c[1, 2], c[1, 3] = x1c, y1c, z1c, w1c
+            c[2, 0], c[2, 1], c[2, 2], c[2, 3] = x2c, y2c, z2c, w2c
             lone_inside = n_in == 1
             ins = (inside0, inside1, inside2)
             odd = 0
@@ -186,23 +216,26 @@ def _setup_range(
                     r = corners[q][j]
                     for ch in range(4):
                         cv[j, ch] = w[r, 0] * c[0, ch] + w[r, 1] * c[1, ch] + w[r, 2] * c[2, ch]
-                drawn = _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k)
+                drawn = _snap_setup(
+                    cv[0, 0], cv[0, 1], cv[0, 2], cv[0, 3], cv[1, 0], cv[1, 1], cv[1, 2], cv[1, 3],
+                    cv[2, 0], cv[2, 1], cv[2, 2], cv[2, 3], res, rec, box, k,
+                )  # fmt: skip
                 if drawn and _overlaps(box, k, rect):
                     k += 1
         if k == first:
             continue
         # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
         slope = 0.0
-        if c[0, 3] > 0 and c[1, 3] > 0 and c[2, 3] > 0:
-            xw0 = (c[0, 0] / c[0, 3] + 1) * 0.5 * res
-            yw0 = (c[0, 1] / c[0, 3] + 1) * 0.5 * res
-            zw0 = (c[0, 2] / c[0, 3] + 1) * 0.5
-            xw1 = (c[1, 0] / c[1, 3] + 1) * 0.5 * res
-            yw1 = (c[1, 1] / c[1, 3] + 1) * 0.5 * res
-            zw1 = (c[1, 2] / c[1, 3] + 1) * 0.5
-            xw2 = (c[2, 0] / c[2, 3] + 1) * 0.5 * res
-            yw2 = (c[2, 1] / c[2, 3] + 1) * 0.5 * res
-            zw2 = (c[2, 2] / c[2, 3] + 1) * 0.5
+        if w0c > 0 and w1c > 0 and w2c > 0:
+            xw0 = (x0c / w0c + 1) * 0.5 * res
+            yw0 = (y0c / w0c + 1) * 0.5 * res
+            zw0 = (z0c / w0c + 1) * 0.5
+            xw1 = (x1c / w1c + 1) * 0.5 * res
+            yw1 = (y1c / w1c + 1) * 0.5 * res
+            zw1 = (z1c / w1c + 1) * 0.5
+            xw2 = (x2c / w2c + 1) * 0.5 * res
+            yw2 = (y2c / w2c + 1) * 0.5 * res
+            zw2 = (z2c / w2c + 1) * 0.5
             e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
             e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
             det = e1x * e2y - e2x * e1y
@@ -210,7 +243,7 @@ def _setup_range(
                 slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
         b = slope_bias * slope
         for s in range(first, k):
-            bias[s] = b
+            rec[s, _BIAS] = b
     return k - base
 
 
@@ -218,21 +251,12 @@ def _setup_range(
 def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - compiled
     # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
     # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
-    # empty (r0 > r1) are skipped. Returns the per-slot arrays (F, 2n, ·), the slots drawn per
-    # face (F, 2n; the first count[f] of row f) and count (F,).
+    # empty (r0 > r1) are skipped. Returns the records (F, 2n, _NREC), the texel boxes (F, 2n,
+    # 4), the slots drawn per face (F, 2n; the first count[f] of row f) and count (F,).
     n_faces = vps.shape[0]
     n = world.shape[0]
-    sx = np.empty((n_faces, 2 * n, 3))
-    sy = np.empty((n_faces, 2 * n, 3))
-    sz = np.empty((n_faces, 2 * n, 3))
-    qx = np.empty((n_faces, 2 * n, 3))
-    qy = np.empty((n_faces, 2 * n, 3))
-    ea = np.empty((n_faces, 2 * n, 4))  # edge a (3) and the snapped signed area (column 3)
-    eb = np.empty((n_faces, 2 * n, 3))
-    ec = np.empty((n_faces, 2 * n, 3))
-    etl = np.empty((n_faces, 2 * n, 3), np.bool_)
-    box = np.empty((n_faces, 2 * n, 4), np.int64)
-    bias = np.empty((n_faces, 2 * n))
+    rec = np.empty((n_faces, 2 * n, _NREC))
+    box = np.empty((n_faces, 2 * n, 4), np.int32)
     filled = np.zeros((n_faces, n_chunks), np.int64)
     for task in numba.prange(n_faces * n_chunks):
         f = task % n_faces
@@ -241,10 +265,7 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - 
             continue
         t0 = ch * n // n_chunks
         t1 = (ch + 1) * n // n_chunks
-        filled[f, ch] = _setup_range(
-            world, t0, t1, vps[f], res, slope_bias, rects[f], sx[f], sy[f], sz[f], qx[f], qy[f],
-            ea[f], eb[f], ec[f], etl[f], box[f], bias[f], 2 * t0,
-        )  # fmt: skip
+        filled[f, ch] = _setup_range(world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0)
     slots = np.empty((n_faces, 2 * n), np.int64)
     count = np.zeros(n_faces, np.int64)
     for f in range(n_faces):
@@ -255,13 +276,11 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - 
                 slots[f, k] = s
                 k += 1
         count[f] = k
-    return bias, sx, sy, sz, ea, eb, ec, etl, box, slots, count
+    return rec, box, slots, count
 
 
 @numba.njit(cache=True)
-def _scan_rows(
-    depth, r0, r1, c0, c1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
-):  # pragma: no cover
+def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma: no cover - compiled
     # texels (r0..r1, c0..c1) (inclusive) of one map: fill with 1, then keep the smallest biased
     # depth; every texel's value is the one a scan of the whole map gives it (a minimum over the
     # same triangles, whatever the order)
@@ -272,13 +291,19 @@ def _scan_rows(
         hi = min(box[s, 3], r1)
         if lo > hi:
             continue
-        area = ea[s, 3]
-        ex_area = (sx[s, 1] - sx[s, 0]) * (sy[s, 2] - sy[s, 0]) - (sx[s, 2] - sx[s, 0]) * (
-            sy[s, 1] - sy[s, 0]
-        )
+        r = rec[s]
+        sx0, sx1, sx2 = r[_SX], r[_SX + 1], r[_SX + 2]
+        sy0, sy1, sy2 = r[_SY], r[_SY + 1], r[_SY + 2]
+        sz0, sz1, sz2 = r[_SZ], r[_SZ + 1], r[_SZ + 2]
+        a0, a1, a2 = r[_EA], r[_EA + 1], r[_EA + 2]
+        b0, b1, b2 = r[_EB], r[_EB + 1], r[_EB + 2]
+        k0, k1, k2 = r[_EC], r[_EC + 1], r[_EC + 2]
+        tl0, tl1, tl2 = r[_ETL] != 0.0, r[_ETL + 1] != 0.0, r[_ETL + 2] != 0.0
+        area = r[_AREA]
+        ex_area = r[_EXAREA]
         exact = ex_area * area > 0 and abs(ex_area) > 1e-12
         abs_area = abs(area)
-        b = bias[s]
+        b = r[_BIAS]
         bx0 = float(max(box[s, 0], c0))
         bx1 = float(min(box[s, 1], c1))
         for py in range(lo, hi + 1):
@@ -289,42 +314,43 @@ def _scan_rows(
             x_lo, x_hi = bx0, bx1
             empty = False
             for i in range(3):
-                a = ea[s, i]
-                k = eb[s, i] * cy + ec[s, i]
+                if i == 0:
+                    a, k, tl = a0, b0 * cy + k0, tl0
+                elif i == 1:
+                    a, k, tl = a1, b1 * cy + k1, tl1
+                else:
+                    a, k, tl = a2, b2 * cy + k2, tl2
                 if a > 0:
                     x_lo = max(x_lo, math.ceil(-k / a - 0.5) - 1.0)
                 elif a < 0:
                     x_hi = min(x_hi, math.floor(-k / a - 0.5) + 1.0)
-                elif k < 0 or (k == 0 and not etl[s, i]):
+                elif k < 0 or (k == 0 and not tl):
                     empty = True
             if empty or not x_lo <= x_hi:
                 continue
+            row0 = b0 * cy + k0
+            row1 = b1 * cy + k1
+            row2 = b2 * cy + k2
             for px in range(int(x_lo), int(x_hi) + 1):
                 cx = px + 0.5
-                e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
-                if e0 < 0 or (e0 == 0 and not etl[s, 0]):
+                e0 = a0 * cx + row0
+                if e0 < 0 or (e0 == 0 and not tl0):
                     continue
-                e1 = ea[s, 1] * cx + (eb[s, 1] * cy + ec[s, 1])
-                if e1 < 0 or (e1 == 0 and not etl[s, 1]):
+                e1 = a1 * cx + row1
+                if e1 < 0 or (e1 == 0 and not tl1):
                     continue
-                e2 = ea[s, 2] * cx + (eb[s, 2] * cy + ec[s, 2])
-                if e2 < 0 or (e2 == 0 and not etl[s, 2]):
+                e2 = a2 * cx + row2
+                if e2 < 0 or (e2 == 0 and not tl2):
                     continue
                 if exact:
-                    l0 = (
-                        (sx[s, 2] - sx[s, 1]) * (cy - sy[s, 1]) - (sy[s, 2] - sy[s, 1]) * (cx - sx[s, 1])
-                    ) / ex_area
-                    l1 = (
-                        (sx[s, 0] - sx[s, 2]) * (cy - sy[s, 2]) - (sy[s, 0] - sy[s, 2]) * (cx - sx[s, 2])
-                    ) / ex_area
-                    l2 = (
-                        (sx[s, 1] - sx[s, 0]) * (cy - sy[s, 0]) - (sy[s, 1] - sy[s, 0]) * (cx - sx[s, 0])
-                    ) / ex_area
+                    l0 = ((sx2 - sx1) * (cy - sy1) - (sy2 - sy1) * (cx - sx1)) / ex_area
+                    l1 = ((sx0 - sx2) * (cy - sy2) - (sy0 - sy2) * (cx - sx2)) / ex_area
+                    l2 = ((sx1 - sx0) * (cy - sy0) - (sy1 - sy0) * (cx - sx0)) / ex_area
                 else:
                     l0 = e0 / abs_area
                     l1 = e1 / abs_area
                     l2 = e2 / abs_area
-                z = l0 * sz[s, 0] + l1 * sz[s, 1] + l2 * sz[s, 2]
+                z = l0 * sz0 + l1 * sz1 + l2 * sz2
                 if z > 1.0:
                     continue
                 z = max(z, 0.0)
@@ -334,9 +360,7 @@ def _scan_rows(
 
 
 @numba.njit(parallel=True, cache=True)
-def _scan(
-    out, rects, n_bands, slots, count, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
-):  # pragma: no cover - compiled
+def _scan(out, rects, n_bands, slots, count, constant_bias, rec, box):  # pragma: no cover - compiled
     # every (face, band of the face's rows) is one task, faces interleaved so that each thread
     # gets a share of every face (one face may hold most of the work: the one looking at the
     # ground); faces with an empty rectangle are left unwritten
@@ -351,10 +375,7 @@ def _scan(
         r0 = r_lo + band * band_h
         r1 = min(r_hi, r0 + band_h - 1)
         if r0 <= r1:
-            _scan_rows(
-                out[f], r0, r1, c0, c1, slots[f, : count[f]], bias[f], constant_bias,
-                sx[f], sy[f], sz[f], ea[f], eb[f], ec[f], etl[f], box[f],
-            )  # fmt: skip
+            _scan_rows(out[f], r0, r1, c0, c1, slots[f, : count[f]], constant_bias, rec[f], box[f])
 
 
 def _render_maps(
@@ -374,11 +395,9 @@ def _render_maps(
     res = out.shape[1]
     threads = _threads()
     n_chunks = max(1, min(len(world), 4 * threads))
-    bias, sx, sy, sz, ea, eb, ec, etl, box, slots, count = _setup(
-        world, vps, rects, float(res), float(slope_bias), n_chunks
-    )
+    rec, box, slots, count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks)
     n_bands = max(1, min(res, 2 * threads if len(vps) > 1 else 4 * threads))
-    _scan(out, rects, n_bands, slots, count, bias, float(constant_bias), sx, sy, sz, ea, eb, ec, etl, box)
+    _scan(out, rects, n_bands, slots, count, float(constant_bias), rec, box)
     return out
 
 
