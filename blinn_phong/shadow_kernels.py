@@ -585,39 +585,82 @@ def visibility_at(
 def _receiver_rects(
     points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks
 ):  # pragma: no cover - compiled
-    # per face, the rectangle (r0, r1, c0, c1) of the texels the look-ups of the points read
-    # (r0 > r1: none); per chunk of points in parallel, then merged
+    # per face, a rectangle (r0, r1, c0, c1) holding every texel the look-ups of the points read
+    # (r0 > r1: none). The face and the normal offset are chosen as visibility_at chooses them
+    # (exactly: a point must be counted in its own face); the projection is then bounded from
+    # outside: one reciprocal instead of three divisions (a few ulp off), no depth test, the
+    # frustum test widened by 1e-9, and two texels of margin beyond the taps' reach, so the
+    # rectangle can only be larger than the exact one. Per chunk of points in parallel: the
+    # extreme normalised coordinates per face, merged and turned into texels at the end.
     n = points.shape[0]
     with_normals = normal_offset != 0.0
-    part = np.empty((n_chunks, n_faces, 4), np.int64)
+    part = np.empty((n_chunks, n_faces, 4))  # min x, max x, min y, max y (normalised device)
+    lim = 1.0 + 1e-9
     for ch in numba.prange(n_chunks):
         for f in range(n_faces):
-            part[ch, f, 0] = res
-            part[ch, f, 1] = -1
-            part[ch, f, 2] = res
-            part[ch, f, 3] = -1
+            part[ch, f, 0] = np.inf
+            part[ch, f, 1] = -np.inf
+            part[ch, f, 2] = np.inf
+            part[ch, f, 3] = -np.inf
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
-            nx = normals[i, 0] if with_normals else 0.0
-            ny = normals[i, 1] if with_normals else 0.0
-            nz = normals[i, 2] if with_normals else 0.0
-            f, x, y, _, found = _locate(
-                points[i, 0], points[i, 1], points[i, 2], nx, ny, nz,
-                vp, view_z, face_mode, light_pos, normal_offset, float(res), float(res),
-            )  # fmt: skip
-            if not found:
+            px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+            f = 0
+            if face_mode == 1:  # as _locate
+                rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
+                ax, best, val = 0, abs(rx), rx
+                if abs(ry) > best:
+                    ax, best, val = 1, abs(ry), ry
+                if abs(rz) > best:
+                    ax, best, val = 2, abs(rz), rz
+                if val == 0:
+                    continue
+                f = 2 * ax + (0 if val > 0 else 1)
+            if with_normals:  # as _locate
+                nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+                length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+                nx, ny, nz = nx / length, ny / length, nz / length
+                if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
+                    nx, ny, nz = -nx, -ny, -nz
+                px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
+            cw = ((vp[f, 3, 0] * px + vp[f, 3, 1] * py) + vp[f, 3, 2] * pz) + vp[f, 3, 3]
+            if not cw > 0:
                 continue
-            c0, c1, r0, r1 = _tap_span(x, y, kernel, float(res), float(res))
-            part[ch, f, 0] = min(part[ch, f, 0], r0)
-            part[ch, f, 1] = max(part[ch, f, 1], r1)
-            part[ch, f, 2] = min(part[ch, f, 2], c0)
-            part[ch, f, 3] = max(part[ch, f, 3], c1)
-    rects = part[0].copy()
-    for ch in range(1, n_chunks):
-        for f in range(n_faces):
-            rects[f, 0] = min(rects[f, 0], part[ch, f, 0])
-            rects[f, 1] = max(rects[f, 1], part[ch, f, 1])
-            rects[f, 2] = min(rects[f, 2], part[ch, f, 2])
-            rects[f, 3] = max(rects[f, 3], part[ch, f, 3])
+            inv = 1.0 / cw
+            nxd = (((vp[f, 0, 0] * px + vp[f, 0, 1] * py) + vp[f, 0, 2] * pz) + vp[f, 0, 3]) * inv
+            nyd = (((vp[f, 1, 0] * px + vp[f, 1, 1] * py) + vp[f, 1, 2] * pz) + vp[f, 1, 3]) * inv
+            if not (nxd >= -lim and nxd <= lim and nyd >= -lim and nyd <= lim):
+                continue
+            if nxd < part[ch, f, 0]:
+                part[ch, f, 0] = nxd
+            if nxd > part[ch, f, 1]:
+                part[ch, f, 1] = nxd
+            if nyd < part[ch, f, 2]:
+                part[ch, f, 2] = nyd
+            if nyd > part[ch, f, 3]:
+                part[ch, f, 3] = nyd
+    reach = 2 + (0 if kernel <= 1 else (kernel - 1) // 2)  # texels beyond floor(x) a tap may read
+    rects = np.empty((n_faces, 4), np.int64)
+    for f in range(n_faces):
+        x_lo, x_hi, y_lo, y_hi = np.inf, -np.inf, np.inf, -np.inf
+        for ch in range(n_chunks):
+            x_lo = min(x_lo, part[ch, f, 0])
+            x_hi = max(x_hi, part[ch, f, 1])
+            y_lo = min(y_lo, part[ch, f, 2])
+            y_hi = max(y_hi, part[ch, f, 3])
+        if not x_lo <= x_hi:
+            rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3] = res, -1, res, -1
+            continue
+        x_lo, x_hi = max(x_lo, -1.0), min(x_hi, 1.0)
+        y_lo, y_hi = max(y_lo, -1.0), min(y_hi, 1.0)
+        # columns from x = (nx + 1)·R/2, rows from y = R − (ny + 1)·R/2 (rows grow as ny falls)
+        c0 = math.floor((x_lo + 1) * 0.5 * res) - reach
+        c1 = math.floor((x_hi + 1) * 0.5 * res) + reach
+        r0 = math.floor(res - (y_hi + 1) * 0.5 * res) - reach
+        r1 = math.floor(res - (y_lo + 1) * 0.5 * res) + reach
+        rects[f, 0] = max(r0, 0)
+        rects[f, 1] = min(r1, res - 1)
+        rects[f, 2] = max(c0, 0)
+        rects[f, 3] = min(c1, res - 1)
     return rects
 
 
