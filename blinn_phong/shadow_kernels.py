@@ -248,15 +248,15 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
 
 
 @numba.njit(parallel=True, cache=True)
-def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - compiled
+def _setup(world, vps, rects, res, slope_bias, n_chunks, rec, box, slots):  # pragma: no cover - compiled
     # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
     # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
-    # empty (r0 > r1) are skipped. Returns the records (F, 2n, _NREC), the texel boxes (F, 2n,
-    # 4), the slots drawn per face (F, 2n; the first count[f] of row f) and count (F,).
+    # empty (r0 > r1) are skipped. Fills the records ``rec`` (F, 2n, _NREC), the texel boxes
+    # ``box`` (F, 2n, 4) and the slots drawn per face ``slots`` (F, 2n; the first count[f] of
+    # row f); returns count (F,). The arrays come from numpy, whose large allocations get
+    # transparent huge pages: a fresh 20 MB of 4 KiB pages costs milliseconds of page faults.
     n_faces = vps.shape[0]
     n = world.shape[0]
-    rec = np.empty((n_faces, 2 * n, _NREC))
-    box = np.empty((n_faces, 2 * n, 4), np.int32)
     filled = np.zeros((n_faces, n_chunks), np.int64)
     for task in numba.prange(n_faces * n_chunks):
         f = task % n_faces
@@ -266,7 +266,6 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - 
         t0 = ch * n // n_chunks
         t1 = (ch + 1) * n // n_chunks
         filled[f, ch] = _setup_range(world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0)
-    slots = np.empty((n_faces, 2 * n), np.int64)
     count = np.zeros(n_faces, np.int64)
     for f in range(n_faces):
         k = 0
@@ -276,7 +275,7 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks):  # pragma: no cover - 
                 slots[f, k] = s
                 k += 1
         count[f] = k
-    return rec, box, slots, count
+    return count
 
 
 @numba.njit(cache=True)
@@ -395,7 +394,11 @@ def _render_maps(
     res = out.shape[1]
     threads = _threads()
     n_chunks = max(1, min(len(world), 4 * threads))
-    rec, box, slots, count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks)
+    shape = (len(vps), 2 * len(world))
+    rec = np.empty((*shape, _NREC))
+    box = np.empty((*shape, 4), np.int32)
+    slots = np.empty(shape, np.int64)
+    count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, rec, box, slots)
     n_bands = max(1, min(res, 2 * threads if len(vps) > 1 else 4 * threads))
     _scan(out, rects, n_bands, slots, count, float(constant_bias), rec, box)
     return out
