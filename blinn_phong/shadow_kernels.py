@@ -305,6 +305,11 @@ def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma
         b = r[_BIAS]
         bx0 = float(max(box[s, 0], c0))
         bx1 = float(min(box[s, 1], c1))
+        # reciprocals of the edges' a (|a| ≥ 1/256 or 0: snapped coordinates): the row spans
+        # below multiply instead of dividing, a few ulp off, well inside their texel of margin
+        i0 = 1.0 / a0 if a0 != 0 else 0.0
+        i1 = 1.0 / a1 if a1 != 0 else 0.0
+        i2 = 1.0 / a2 if a2 != 0 else 0.0
         for py in range(lo, hi + 1):
             cy = py + 0.5
             # the row's span: each edge function is linear in x, so its sign changes once; the
@@ -314,15 +319,15 @@ def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma
             empty = False
             for i in range(3):
                 if i == 0:
-                    a, k, tl = a0, b0 * cy + k0, tl0
+                    a, inv, k, tl = a0, i0, b0 * cy + k0, tl0
                 elif i == 1:
-                    a, k, tl = a1, b1 * cy + k1, tl1
+                    a, inv, k, tl = a1, i1, b1 * cy + k1, tl1
                 else:
-                    a, k, tl = a2, b2 * cy + k2, tl2
+                    a, inv, k, tl = a2, i2, b2 * cy + k2, tl2
                 if a > 0:
-                    x_lo = max(x_lo, math.ceil(-k / a - 0.5) - 1.0)
+                    x_lo = max(x_lo, math.ceil(-k * inv - 0.5) - 1.0)
                 elif a < 0:
-                    x_hi = min(x_hi, math.floor(-k / a - 0.5) + 1.0)
+                    x_hi = min(x_hi, math.floor(-k * inv - 0.5) + 1.0)
                 elif k < 0 or (k == 0 and not tl):
                     empty = True
             if empty or not x_lo <= x_hi:
