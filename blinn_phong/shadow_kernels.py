@@ -749,15 +749,16 @@ def receiver_visibility_compiled(
     normal_offset: float,
     kernel: str,
 ) -> np.ndarray:
-    """Shadow-map visibility of points, rendering only the texels their look-ups read.
+    """Shadow-map visibility of points, a cube's faces rendered only where their look-ups read.
 
     The value of :func:`lookup_compiled` on the maps of :func:`depth_map_compiled` /
-    :func:`cube_maps_compiled`, bit for bit: a first parallel pass over the points finds, per
-    map, the rectangle of texels their percentage-closer taps read (the same inlined
-    projection and clamping as the look-up); a map no point reads is not rendered at all,
-    the others only over their rectangle, and only with the triangles whose texel box meets
-    it. A texel's depth is a minimum over the triangles that cover it, so it is the same
-    whether or not the texels around it are rendered.
+    :func:`cube_maps_compiled`, bit for bit. For a cube (F = 6) a first parallel pass over the
+    points finds, per face, a rectangle holding every texel their percentage-closer taps read
+    (the look-up's face choice, and its projection bounded from outside); a face no point
+    reads is not rendered at all, the others only over their rectangle, and only with the
+    triangles whose texel box meets it. A texel's depth is a minimum over the triangles that
+    cover it, so it is the same whether or not the texels around it are rendered. A single
+    map is rendered whole.
 
     Args:
         world_triangles: (n, 3, 3) float64 world-space casters.
@@ -788,10 +789,15 @@ def receiver_visibility_compiled(
     cube = len(vps) == 6
     lp = np.zeros(3) if light_position is None else np.asarray(light_position, dtype=np.float64)
     code = KERNEL_CODES[kernel]
-    n_chunks = max(1, min(len(p), 4 * _threads()))
-    rects = _receiver_rects(
-        p, nrm, len(vps), res, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, n_chunks
-    )
+    if cube:
+        # which faces the receivers use, and where: most points of a frame fall in two or three
+        # faces, each over part of its rows
+        n_chunks = max(1, min(len(p), 4 * _threads()))
+        rects = _receiver_rects(p, nrm, 6, res, vps, view_z, 1, lp, float(normal_offset), code, n_chunks)
+    else:
+        # one map fitted to the casters: the receivers cover most of it, and the pre-pass would
+        # cost more than the texels it saves
+        rects = _full_rects(len(vps), res)
     depth = np.empty((len(vps), res, res))  # texels outside the rectangles are never read
     if len(world) == 0:
         depth[:] = 1.0
