@@ -79,20 +79,29 @@ def _snap_setup(
     # clip corners of one (sub-)triangle (scalars); fills slot s; False when it draws nothing
     if not (w0c > 0 and w1c > 0 and w2c > 0):
         return False
+    return _snap_ndc(
+        x0c / w0c, y0c / w0c, z0c / w0c, x1c / w1c, y1c / w1c, z1c / w1c,
+        x2c / w2c, y2c / w2c, z2c / w2c, res, rec, box, s,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _snap_ndc(nx0, ny0, nz0, nx1, ny1, nz1, nx2, ny2, nz2, res, rec, box, s):  # pragma: no cover - compiled
+    # normalised device corners (w > 0) of one (sub-)triangle; fills slot s; False when it draws nothing
     scale = 256.0
     half = 0.5 * res
     r = rec[s]
-    xe0 = (x0c / w0c + 1.0) * half
-    xe1 = (x1c / w1c + 1.0) * half
-    xe2 = (x2c / w2c + 1.0) * half
-    ye0 = res - (y0c / w0c + 1.0) * half
-    ye1 = res - (y1c / w1c + 1.0) * half
-    ye2 = res - (y2c / w2c + 1.0) * half
+    xe0 = (nx0 + 1.0) * half
+    xe1 = (nx1 + 1.0) * half
+    xe2 = (nx2 + 1.0) * half
+    ye0 = res - (ny0 + 1.0) * half
+    ye1 = res - (ny1 + 1.0) * half
+    ye2 = res - (ny2 + 1.0) * half
     r[_SX], r[_SX + 1], r[_SX + 2] = xe0, xe1, xe2
     r[_SY], r[_SY + 1], r[_SY + 2] = ye0, ye1, ye2
-    r[_SZ] = (z0c / w0c + 1.0) * 0.5
-    r[_SZ + 1] = (z1c / w1c + 1.0) * 0.5
-    r[_SZ + 2] = (z2c / w2c + 1.0) * 0.5
+    r[_SZ] = (nz0 + 1.0) * 0.5
+    r[_SZ + 1] = (nz1 + 1.0) * 0.5
+    r[_SZ + 2] = (nz2 + 1.0) * 0.5
     x_0 = np.rint(xe0 * scale) / scale
     x_1 = np.rint(xe1 * scale) / scale
     x_2 = np.rint(xe2 * scale) / scale
@@ -178,10 +187,17 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
         inside0, inside1, inside2 = d0 >= 0, d1 >= 0, d2 >= 0
         n_in = int(inside0) + int(inside1) + int(inside2)
         first = k
+        # the corners' normalised device coordinates, shared by the set-up and the depth slope
+        all_w = w0c > 0 and w1c > 0 and w2c > 0
+        nx0 = ny0 = nz0 = nx1 = ny1 = nz1 = nx2 = ny2 = nz2 = 0.0
+        if all_w:
+            nx0, ny0, nz0 = x0c / w0c, y0c / w0c, z0c / w0c
+            nx1, ny1, nz1 = x1c / w1c, y1c / w1c, z1c / w1c
+            nx2, ny2, nz2 = x2c / w2c, y2c / w2c, z2c / w2c
         if n_in == 3:
-            drawn = _snap_setup(x0c, y0c, z0c, w0c, x1c, y1c, z1c, w1c, x2c, y2c, z2c, w2c, res, rec, box, k)
-            if drawn and _overlaps(box, k, rect):
-                k += 1
+            if all_w and _snap_ndc(nx0, ny0, nz0, nx1, ny1, nz1, nx2, ny2, nz2, res, rec, box, k):
+                if _overlaps(box, k, rect):
+                    k += 1
         elif n_in > 0:
             c[0, 0], c[0, 1], c[0, 2], c[0, 3] = x0c, y0c, z0c, w0c
             c[1, 0], c[1, 1], c[1, 2], c[1, 3] = x1c, y1c, z1c, w1c
@@ -226,16 +242,16 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
             continue
         # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
         slope = 0.0
-        if w0c > 0 and w1c > 0 and w2c > 0:
-            xw0 = (x0c / w0c + 1) * 0.5 * res
-            yw0 = (y0c / w0c + 1) * 0.5 * res
-            zw0 = (z0c / w0c + 1) * 0.5
-            xw1 = (x1c / w1c + 1) * 0.5 * res
-            yw1 = (y1c / w1c + 1) * 0.5 * res
-            zw1 = (z1c / w1c + 1) * 0.5
-            xw2 = (x2c / w2c + 1) * 0.5 * res
-            yw2 = (y2c / w2c + 1) * 0.5 * res
-            zw2 = (z2c / w2c + 1) * 0.5
+        if all_w:
+            xw0 = (nx0 + 1) * 0.5 * res
+            yw0 = (ny0 + 1) * 0.5 * res
+            zw0 = (nz0 + 1) * 0.5
+            xw1 = (nx1 + 1) * 0.5 * res
+            yw1 = (ny1 + 1) * 0.5 * res
+            zw1 = (nz1 + 1) * 0.5
+            xw2 = (nx2 + 1) * 0.5 * res
+            yw2 = (ny2 + 1) * 0.5 * res
+            zw2 = (nz2 + 1) * 0.5
             e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
             e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
             det = e1x * e2y - e2x * e1y
