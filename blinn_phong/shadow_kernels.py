@@ -505,22 +505,42 @@ def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, inline="always")
+def _cube_face(px, py, pz, light_pos):  # pragma: no cover - compiled
+    # cube face of the major axis of p − light (ties to the lower axis, as np.argmax); −1 at the light
+    rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
+    ax, best, val = 0, abs(rx), rx
+    if abs(ry) > best:
+        ax, best, val = 1, abs(ry), ry
+    if abs(rz) > best:
+        ax, best, val = 2, abs(rz), rz
+    if val == 0:
+        return -1
+    return 2 * ax + (0 if val > 0 else 1)
+
+
+@numba.njit(cache=True, inline="always")
+def _window(nxd, nyd, nzd, res_x, res_y):  # pragma: no cover - compiled
+    # (x, y, z, found) from normalised device coordinates (w > 0): texel coordinates (x right,
+    # y down from the top) and window depth; found is False outside the map (lit)
+    z = (nzd + 1) * 0.5
+    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
+        return 0.0, 0.0, 0.0, False
+    x = (nxd + 1) * 0.5 * res_x
+    y = res_y - (nyd + 1) * 0.5 * res_y
+    return x, y, z, True
+
+
+@numba.njit(cache=True, inline="always")
 def _locate(
     px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
 ):  # pragma: no cover - compiled
     # (face, x, y, z, found): the texel coordinates (x right, y down from the top) and window
     # depth of a receiver in its map; found is False where the map is not read (lit)
     f = 0
-    if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
-        rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
-        ax, best, val = 0, abs(rx), rx
-        if abs(ry) > best:
-            ax, best, val = 1, abs(ry), ry
-        if abs(rz) > best:
-            ax, best, val = 2, abs(rz), rz
-        if val == 0:
+    if face_mode == 1:  # cube: face of the major axis
+        f = _cube_face(px, py, pz, light_pos)
+        if f < 0:
             return 0, 0.0, 0.0, 0.0, False
-        f = 2 * ax + (0 if val > 0 else 1)
     if normal_offset != 0.0:
         length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
         nx, ny, nz = nx / length, ny / length, nz / length
@@ -534,33 +554,33 @@ def _locate(
     cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
     if not cw > 0:
         return f, 0.0, 0.0, 0.0, False
-    nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
-    z = (nzd + 1) * 0.5
-    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
-        return f, 0.0, 0.0, 0.0, False
-    x = (nxd + 1) * 0.5 * res_x
-    y = res_y - (nyd + 1) * 0.5 * res_y
-    return f, x, y, z, True
+    x, y, z, found = _window(cx / cw, cy / cw, cz / cw, res_x, res_y)
+    return f, x, y, z, found
 
 
 @numba.njit(cache=True, inline="always")
-def _tap_span(x, y, kernel, res_x, res_y):  # pragma: no cover - compiled
-    # (c0, c1, r0, r1): the texel columns and rows the taps of ``kernel`` read at (x, y), as
-    # visibility_at clamps them
+def _filtered(depth, f, x, y, z, kernel, res_x, res_y):  # pragma: no cover - compiled
+    # the percentage-closer filter of ``kernel`` at texel coordinates (x, y), receiver depth z
     if kernel == 0:
-        c_lo, c_hi, r_lo, r_hi = math.floor(x), math.floor(x), math.floor(y), math.floor(y)
-    elif kernel == 1:
-        x0, y0 = math.floor(x - 0.5), math.floor(y - 0.5)
-        c_lo, c_hi, r_lo, r_hi = x0, x0 + 1, y0, y0 + 1
-    else:
-        h = (kernel - 1) // 2
-        col, row = math.floor(x), math.floor(y)
-        c_lo, c_hi, r_lo, r_hi = col - h, col + h, row - h, row + h
-    c0 = int(min(max(c_lo, 0.0), res_x - 1.0))
-    c1 = int(min(max(c_hi, 0.0), res_x - 1.0))
-    r0 = int(min(max(r_lo, 0.0), res_y - 1.0))
-    r1 = int(min(max(r_hi, 0.0), res_y - 1.0))
-    return c0, c1, r0, r1
+        return _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
+    if kernel == 1:
+        fx, fy = x - 0.5, y - 0.5
+        x0, y0 = math.floor(fx), math.floor(fy)
+        tx, ty = fx - x0, fy - y0
+        l00 = _lit(depth, f, x0, y0, z, res_x, res_y)
+        l10 = _lit(depth, f, x0 + 1, y0, z, res_x, res_y)
+        l01 = _lit(depth, f, x0, y0 + 1, z, res_x, res_y)
+        l11 = _lit(depth, f, x0 + 1, y0 + 1, z, res_x, res_y)
+        top = l00 + tx * (l10 - l00)
+        bottom = l01 + tx * (l11 - l01)
+        return top + ty * (bottom - top)
+    h = (kernel - 1) // 2
+    col, row = math.floor(x), math.floor(y)
+    total = 0.0
+    for oy in range(-h, h + 1):
+        for ox in range(-h, h + 1):
+            total += _lit(depth, f, col + ox, row + oy, z, res_x, res_y)
+    return total / (kernel * kernel)
 
 
 @numba.njit(cache=True, inline="always")  # inlined: a call per point costs more than its body
@@ -583,26 +603,7 @@ def visibility_at(
     )
     if not found:
         return 1.0
-    if kernel == 0:
-        return _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
-    if kernel == 1:
-        fx, fy = x - 0.5, y - 0.5
-        x0, y0 = math.floor(fx), math.floor(fy)
-        tx, ty = fx - x0, fy - y0
-        l00 = _lit(depth, f, x0, y0, z, res_x, res_y)
-        l10 = _lit(depth, f, x0 + 1, y0, z, res_x, res_y)
-        l01 = _lit(depth, f, x0, y0 + 1, z, res_x, res_y)
-        l11 = _lit(depth, f, x0 + 1, y0 + 1, z, res_x, res_y)
-        top = l00 + tx * (l10 - l00)
-        bottom = l01 + tx * (l11 - l01)
-        return top + ty * (bottom - top)
-    h = (kernel - 1) // 2
-    col, row = math.floor(x), math.floor(y)
-    total = 0.0
-    for oy in range(-h, h + 1):
-        for ox in range(-h, h + 1):
-            total += _lit(depth, f, col + ox, row + oy, z, res_x, res_y)
-    return total / (kernel * kernel)
+    return _filtered(depth, f, x, y, z, kernel, res_x, res_y)
 
 
 @numba.njit(parallel=True, cache=True)
@@ -630,15 +631,9 @@ def _receiver_rects(
             px, py, pz = points[i, 0], points[i, 1], points[i, 2]
             f = 0
             if face_mode == 1:  # as _locate
-                rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
-                ax, best, val = 0, abs(rx), rx
-                if abs(ry) > best:
-                    ax, best, val = 1, abs(ry), ry
-                if abs(rz) > best:
-                    ax, best, val = 2, abs(rz), rz
-                if val == 0:
+                f = _cube_face(px, py, pz, light_pos)
+                if f < 0:
                     continue
-                f = 2 * ax + (0 if val > 0 else 1)
             if with_normals:  # as _locate
                 nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
                 length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
@@ -703,6 +698,80 @@ def _lookup(
         )  # fmt: skip
 
 
+#: Points per block of :func:`_lookup_nearest`.
+_BLOCK = 512
+
+
+@numba.njit(cache=True, inline="always")
+def _project_run(points, lo, hi, vp, f, qx, qy, qz, cws, base):  # pragma: no cover - compiled
+    # clip coordinates of points lo..hi-1 by face f's matrix and their quotients by w, into the
+    # block's scratch rows (i − base); a tight loop of independent divisions, no branches
+    m00, m01, m02, m03 = vp[f, 0, 0], vp[f, 0, 1], vp[f, 0, 2], vp[f, 0, 3]
+    m10, m11, m12, m13 = vp[f, 1, 0], vp[f, 1, 1], vp[f, 1, 2], vp[f, 1, 3]
+    m20, m21, m22, m23 = vp[f, 2, 0], vp[f, 2, 1], vp[f, 2, 2], vp[f, 2, 3]
+    m30, m31, m32, m33 = vp[f, 3, 0], vp[f, 3, 1], vp[f, 3, 2], vp[f, 3, 3]
+    for i in range(lo, hi):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        cx = ((m00 * px + m01 * py) + m02 * pz) + m03
+        cy = ((m10 * px + m11 * py) + m12 * pz) + m13
+        cz = ((m20 * px + m21 * py) + m22 * pz) + m23
+        cw = ((m30 * px + m31 * py) + m32 * pz) + m33
+        j = i - base
+        qx[j] = cx / cw
+        qy[j] = cy / cw
+        qz[j] = cz / cw
+        cws[j] = cw
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks):  # pragma: no cover - compiled
+    # visibility_at with the nearest kernel and no normal offset, per block of points in two
+    # passes: the projection (faces, then runs of one face as tight loops of divisions), then
+    # the tests and the tap — the operations of _locate / _window / _lit on the same operands,
+    # written out (a call of the tuple-returning helpers here costs a third more). The quotient
+    # of a point behind the light (w ≤ 0) is never read (numpy error model: no exception at 0).
+    n = points.shape[0]
+    res_y = float(depth.shape[1])
+    res_x = float(depth.shape[2])
+    for ch in numba.prange(n_chunks):
+        qx = np.empty(_BLOCK)
+        qy = np.empty(_BLOCK)
+        qz = np.empty(_BLOCK)
+        cws = np.empty(_BLOCK)
+        faces = np.zeros(_BLOCK, np.int64)
+        hi = (ch + 1) * n // n_chunks
+        for b0 in range(ch * n // n_chunks, hi, _BLOCK):
+            b1 = min(b0 + _BLOCK, hi)
+            if face_mode == 1:
+                for i in range(b0, b1):
+                    faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
+                j0 = b0
+                while j0 < b1:
+                    f = faces[j0 - b0]
+                    j1 = j0 + 1
+                    while j1 < b1 and faces[j1 - b0] == f:
+                        j1 += 1
+                    if f >= 0:
+                        _project_run(points, j0, j1, vp, f, qx, qy, qz, cws, b0)
+                    j0 = j1
+            else:
+                _project_run(points, b0, b1, vp, 0, qx, qy, qz, cws, b0)
+            for i in range(b0, b1):
+                j = i - b0
+                f = faces[j]
+                if f < 0 or not cws[j] > 0:
+                    out[i] = 1.0
+                    continue
+                nxd, nyd, nzd = qx[j], qy[j], qz[j]
+                z = (nzd + 1) * 0.5
+                if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):
+                    out[i] = 1.0
+                    continue
+                x = (nxd + 1) * 0.5 * res_x
+                y = res_y - (nyd + 1) * 0.5 * res_y
+                out[i] = _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
+
+
 def lookup_compiled(
     depth: np.ndarray,
     view_projection: np.ndarray,
@@ -736,7 +805,7 @@ def lookup_compiled(
     nrm = np.zeros((1, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
     cube = depth.shape[0] == 6
     lp = np.zeros(3) if light_position is None else np.asarray(light_position, dtype=np.float64)
-    _lookup(
+    _look_up(
         np.ascontiguousarray(points, dtype=np.float64),
         nrm,
         np.ascontiguousarray(depth, dtype=np.float64),
@@ -749,6 +818,26 @@ def lookup_compiled(
         out,
     )
     return out
+
+
+def _look_up(
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth: np.ndarray,
+    vps: np.ndarray,
+    view_z: np.ndarray,
+    face_mode: int,
+    light_position: np.ndarray,
+    normal_offset: float,
+    code: int,
+    out: np.ndarray,
+) -> None:
+    """``out[i]`` = :func:`visibility_at` of every point (blocked: the nearest tap, no normal offset)."""
+    if normal_offset == 0.0 and code == 0:
+        n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))
+        _lookup_nearest(points, depth, vps, face_mode, light_position, out, n_chunks)
+    else:
+        _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
 
 
 def receiver_visibility_compiled(
@@ -819,7 +908,7 @@ def receiver_visibility_compiled(
         depth[:] = 1.0
     else:
         _render_maps(world, vps, rects, constant_bias, slope_bias, depth)
-    _lookup(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out)
+    _look_up(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out)
     return out
 
 
