@@ -627,6 +627,13 @@ def _receiver_rects(
             part[ch, f, 1] = -np.inf
             part[ch, f, 2] = np.inf
             part[ch, f, 3] = -np.inf
+        # the current face's extremes and matrix rows in registers; points come in runs of one
+        # face, so they are stored and reloaded only where the face changes
+        cur = 0
+        x_lo, x_hi, y_lo, y_hi = np.inf, -np.inf, np.inf, -np.inf
+        m00, m01, m02, m03 = vp[0, 0, 0], vp[0, 0, 1], vp[0, 0, 2], vp[0, 0, 3]
+        m10, m11, m12, m13 = vp[0, 1, 0], vp[0, 1, 1], vp[0, 1, 2], vp[0, 1, 3]
+        m30, m31, m32, m33 = vp[0, 3, 0], vp[0, 3, 1], vp[0, 3, 2], vp[0, 3, 3]
         for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
             px, py, pz = points[i, 0], points[i, 1], points[i, 2]
             f = 0
@@ -634,6 +641,14 @@ def _receiver_rects(
                 f = _cube_face(px, py, pz, light_pos)
                 if f < 0:
                     continue
+            if f != cur:
+                part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
+                part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
+                cur = f
+                x_lo, x_hi, y_lo, y_hi = part[ch, f, 0], part[ch, f, 1], part[ch, f, 2], part[ch, f, 3]
+                m00, m01, m02, m03 = vp[f, 0, 0], vp[f, 0, 1], vp[f, 0, 2], vp[f, 0, 3]
+                m10, m11, m12, m13 = vp[f, 1, 0], vp[f, 1, 1], vp[f, 1, 2], vp[f, 1, 3]
+                m30, m31, m32, m33 = vp[f, 3, 0], vp[f, 3, 1], vp[f, 3, 2], vp[f, 3, 3]
             if with_normals:  # as _locate
                 nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
                 length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
@@ -641,41 +656,39 @@ def _receiver_rects(
                 if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
                     nx, ny, nz = -nx, -ny, -nz
                 px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
-            cw = ((vp[f, 3, 0] * px + vp[f, 3, 1] * py) + vp[f, 3, 2] * pz) + vp[f, 3, 3]
+            cw = ((m30 * px + m31 * py) + m32 * pz) + m33
             if not cw > 0:
                 continue
             inv = 1.0 / cw
-            nxd = (((vp[f, 0, 0] * px + vp[f, 0, 1] * py) + vp[f, 0, 2] * pz) + vp[f, 0, 3]) * inv
-            nyd = (((vp[f, 1, 0] * px + vp[f, 1, 1] * py) + vp[f, 1, 2] * pz) + vp[f, 1, 3]) * inv
+            nxd = (((m00 * px + m01 * py) + m02 * pz) + m03) * inv
+            nyd = (((m10 * px + m11 * py) + m12 * pz) + m13) * inv
             if not (nxd >= -lim and nxd <= lim and nyd >= -lim and nyd <= lim):
                 continue
-            if nxd < part[ch, f, 0]:
-                part[ch, f, 0] = nxd
-            if nxd > part[ch, f, 1]:
-                part[ch, f, 1] = nxd
-            if nyd < part[ch, f, 2]:
-                part[ch, f, 2] = nyd
-            if nyd > part[ch, f, 3]:
-                part[ch, f, 3] = nyd
+            x_lo = min(x_lo, nxd)
+            x_hi = max(x_hi, nxd)
+            y_lo = min(y_lo, nyd)
+            y_hi = max(y_hi, nyd)
+        part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
+        part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
     reach = 2 + (0 if kernel <= 1 else (kernel - 1) // 2)  # texels beyond floor(x) a tap may read
     rects = np.empty((n_faces, 4), np.int64)
-    for f in range(n_faces):
-        x_lo, x_hi, y_lo, y_hi = np.inf, -np.inf, np.inf, -np.inf
+    for f in range(n_faces):  # merged over the chunks
+        ax_lo, ax_hi, ay_lo, ay_hi = np.inf, -np.inf, np.inf, -np.inf
         for ch in range(n_chunks):
-            x_lo = min(x_lo, part[ch, f, 0])
-            x_hi = max(x_hi, part[ch, f, 1])
-            y_lo = min(y_lo, part[ch, f, 2])
-            y_hi = max(y_hi, part[ch, f, 3])
-        if not x_lo <= x_hi:
+            ax_lo = min(ax_lo, part[ch, f, 0])
+            ax_hi = max(ax_hi, part[ch, f, 1])
+            ay_lo = min(ay_lo, part[ch, f, 2])
+            ay_hi = max(ay_hi, part[ch, f, 3])
+        if not ax_lo <= ax_hi:
             rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3] = res, -1, res, -1
             continue
-        x_lo, x_hi = max(x_lo, -1.0), min(x_hi, 1.0)
-        y_lo, y_hi = max(y_lo, -1.0), min(y_hi, 1.0)
+        ax_lo, ax_hi = max(ax_lo, -1.0), min(ax_hi, 1.0)
+        ay_lo, ay_hi = max(ay_lo, -1.0), min(ay_hi, 1.0)
         # columns from x = (nx + 1)·R/2, rows from y = R − (ny + 1)·R/2 (rows grow as ny falls)
-        c0 = math.floor((x_lo + 1) * 0.5 * res) - reach
-        c1 = math.floor((x_hi + 1) * 0.5 * res) + reach
-        r0 = math.floor(res - (y_hi + 1) * 0.5 * res) - reach
-        r1 = math.floor(res - (y_lo + 1) * 0.5 * res) + reach
+        c0 = math.floor((ax_lo + 1) * 0.5 * res) - reach
+        c1 = math.floor((ax_hi + 1) * 0.5 * res) + reach
+        r0 = math.floor(res - (ay_hi + 1) * 0.5 * res) - reach
+        r1 = math.floor(res - (ay_lo + 1) * 0.5 * res) + reach
         rects[f, 0] = max(r0, 0)
         rects[f, 1] = min(r1, res - 1)
         rects[f, 2] = max(c0, 0)
