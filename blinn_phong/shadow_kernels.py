@@ -264,7 +264,7 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
 
 
 @numba.njit(parallel=True, cache=True)
-def _setup(world, vps, rects, res, slope_bias, n_chunks, rec, box, slots):  # pragma: no cover - compiled
+def _setup(world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, slots):  # pragma: no cover
     # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
     # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
     # empty (r0 > r1) are skipped. Fills the records ``rec`` (F, 2n, _NREC), the texel boxes
@@ -274,14 +274,20 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks, rec, box, slots):  # pr
     n_faces = vps.shape[0]
     n = world.shape[0]
     filled = np.zeros((n_faces, n_chunks), np.int64)
-    for task in numba.prange(n_faces * n_chunks):
-        f = task % n_faces
-        ch = task // n_faces
-        if rects[f, 0] > rects[f, 1] or rects[f, 2] > rects[f, 3]:
-            continue
-        t0 = ch * n // n_chunks
-        t1 = (ch + 1) * n // n_chunks
-        filled[f, ch] = _setup_range(world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0)
+    # worker w (of W = workers, the threads) takes the tasks w, w + W, w + 2W, ... of face-major
+    # order: every W-th chunk of every face, so that each thread gets a share of every part of
+    # the mesh list
+    for w in numba.prange(workers):
+        for task in range(w, n_faces * n_chunks, workers):
+            f = task // n_chunks
+            ch = task % n_chunks
+            if rects[f, 0] > rects[f, 1] or rects[f, 2] > rects[f, 3]:
+                continue
+            t0 = ch * n // n_chunks
+            t1 = (ch + 1) * n // n_chunks
+            filled[f, ch] = _setup_range(
+                world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0
+            )
     count = np.zeros(n_faces, np.int64)
     for f in range(n_faces):
         k = 0
@@ -380,22 +386,24 @@ def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma
 
 
 @numba.njit(parallel=True, cache=True)
-def _scan(out, rects, n_bands, slots, count, constant_bias, rec, box):  # pragma: no cover - compiled
-    # every (face, band of the face's rows) is one task, faces interleaved so that each thread
-    # gets a share of every face (one face may hold most of the work: the one looking at the
-    # ground); faces with an empty rectangle are left unwritten
+def _scan(out, rects, n_bands, workers, slots, count, constant_bias, rec, box):  # pragma: no cover
+    # every (face, band of the face's rows) is one task; worker w takes the tasks w, w + W, ...
+    # of face-major order, i.e. every W-th band of every face: the work of a map is far from
+    # uniform over its rows (a sphere in a few bands), and neighbouring bands hold similar
+    # work. Faces with an empty rectangle are left unwritten.
     n_faces = out.shape[0]
-    for task in numba.prange(n_faces * n_bands):
-        f = task % n_faces
-        band = task // n_faces
-        r_lo, r_hi, c0, c1 = rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3]
-        if r_lo > r_hi or c0 > c1:
-            continue
-        band_h = (r_hi - r_lo + n_bands) // n_bands
-        r0 = r_lo + band * band_h
-        r1 = min(r_hi, r0 + band_h - 1)
-        if r0 <= r1:
-            _scan_rows(out[f], r0, r1, c0, c1, slots[f, : count[f]], constant_bias, rec[f], box[f])
+    for w in numba.prange(workers):
+        for task in range(w, n_faces * n_bands, workers):
+            f = task // n_bands
+            band = task % n_bands
+            r_lo, r_hi, c0, c1 = rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3]
+            if r_lo > r_hi or c0 > c1:
+                continue
+            band_h = (r_hi - r_lo + n_bands) // n_bands
+            r0 = r_lo + band * band_h
+            r1 = min(r_hi, r0 + band_h - 1)
+            if r0 <= r1:
+                _scan_rows(out[f], r0, r1, c0, c1, slots[f, : count[f]], constant_bias, rec[f], box[f])
 
 
 def _render_maps(
@@ -413,15 +421,15 @@ def _render_maps(
     ``out``: (F, R, R) float64. Texels outside a face's rectangle are left as they were.
     """
     res = out.shape[1]
-    threads = _threads()
+    threads = numba.get_num_threads()
     n_chunks = max(1, min(len(world), 4 * threads))
     shape = (len(vps), 2 * len(world))
     rec = np.empty((*shape, _NREC))
     box = np.empty((*shape, 4), np.int32)
     slots = np.empty(shape, np.int64)
-    count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, rec, box, slots)
-    n_bands = max(1, min(res, 2 * threads if len(vps) > 1 else 4 * threads))
-    _scan(out, rects, n_bands, slots, count, float(constant_bias), rec, box)
+    count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, threads, rec, box, slots)
+    n_bands = max(1, min(res, 4 * threads))
+    _scan(out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box)
     return out
 
 
