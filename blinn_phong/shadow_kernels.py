@@ -5,20 +5,27 @@ of :mod:`blinn_phong.raytrace`.
 written with numpy are the reference; this module runs the same formulas in compiled loops
 that never build an array of all fragments:
 
-* :func:`depth_map_compiled` — per triangle (in parallel): the depth slope
-  ``m = max(|∂z/∂x|, |∂z/∂y|)`` of the unclipped triangle in texel units (OpenGL 2.1
-  §3.5.5), near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
-  §2.12), the viewport transform, snapping to 1/256 texel, edge functions and the top-left
-  fill rule of :mod:`blinn_phong.raster`; then per band of rows (in parallel) the
-  scan conversion (each row only over the span its three edge functions allow, plus a texel
-  of margin; every texel still takes the exact edge tests) keeps the smallest biased depth
-  ``z + constant + slope·m`` per texel (``glPolygonOffset(slope, ·)``). The result is a
-  minimum, so it does not depend on the order in which triangles are drawn.
+* :func:`depth_map_compiled` / :func:`cube_maps_compiled` — per (map, chunk of triangles)
+  in parallel: near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
+  §2.12 of OpenGL 2.1), the viewport transform, snapping to 1/256 texel, edge functions and
+  the top-left fill rule of :mod:`blinn_phong.raster`, and for a triangle that draws
+  something its depth slope ``m = max(|∂z/∂x|, |∂z/∂y|)`` in texel units (the unclipped
+  triangle, §3.5.5), each drawn triangle one float64 record; then per (map, band of rows) in
+  parallel, every thread taking every other band of every map, the scan conversion (each row
+  only over the span its three edge functions allow, plus a texel of margin; every texel
+  still takes the exact edge tests) keeps the smallest biased depth ``z + constant + slope·m``
+  per texel (``glPolygonOffset(slope, ·)``). The result is a minimum, so it does not depend
+  on the order in which triangles are drawn, nor on which other texels are rendered.
 * :func:`lookup_compiled` — per receiver point (in parallel): normal offset (Holbert 2011),
   projection into the light's clip space, the cube face of the major axis for point
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
   & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`. The per-point body is
-  :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly.
+  :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly
+  (the nearest tap without normal offset runs the same operations in blocks of points).
+* :func:`receiver_visibility_compiled` — the maps and the look-up of one light in one call,
+  for the frame pipeline: a cube face no receiver uses is not rendered, the others only over
+  a rectangle holding every texel the receivers' taps read; the visibilities are those of
+  the complete maps, bit for bit.
 * :func:`fragment_surface` — per visible fragment (in parallel): its world-space point (the
   perspective-correct barycentrics of the rasterizer applied to the world-space corners,
   ``Σ_k b_k·v_k`` — an affine map commutes with the barycentric sum, so this is the eye-space
