@@ -623,7 +623,7 @@ def visibility_at(
 
 @numba.njit(parallel=True, cache=True)
 def _receiver_rects(
-    points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks
+    points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks, faces
 ):  # pragma: no cover - compiled
     # per face, a rectangle (r0, r1, c0, c1) holding every texel the look-ups of the points read
     # (r0 > r1: none). The face and the normal offset are chosen as visibility_at chooses them
@@ -631,7 +631,8 @@ def _receiver_rects(
     # outside: one reciprocal instead of three divisions (a few ulp off), no depth test, the
     # frustum test widened by 1e-9, and two texels of margin beyond the taps' reach, so the
     # rectangle can only be larger than the exact one. Per chunk of points in parallel: the
-    # extreme normalised coordinates per face, merged and turned into texels at the end.
+    # extreme normalised coordinates per face, merged and turned into texels at the end. Each
+    # point's cube face (−1: none) is written to ``faces`` (int8) for the look-up.
     n = points.shape[0]
     with_normals = normal_offset != 0.0
     part = np.empty((n_chunks, n_faces, 4))  # min x, max x, min y, max y (normalised device)
@@ -654,6 +655,7 @@ def _receiver_rects(
             f = 0
             if face_mode == 1:  # as _locate
                 f = _cube_face(px, py, pz, light_pos)
+                faces[i] = f
                 if f < 0:
                     continue
             if f != cur:
@@ -752,13 +754,16 @@ def _project_run(points, lo, hi, vp, f, qx, qy, qz, cws, base):  # pragma: no co
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks):  # pragma: no cover - compiled
+def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, known):  # pragma: no cover
     # visibility_at with the nearest kernel and no normal offset, per block of points in two
     # passes: the projection (faces, then runs of one face as tight loops of divisions), then
     # the tests and the tap — the operations of _locate / _window / _lit on the same operands,
     # written out (a call of the tuple-returning helpers here costs a third more). The quotient
     # of a point behind the light (w ≤ 0) is never read (numpy error model: no exception at 0).
+    # ``known``: the points' cube faces when the receiver pre-pass found them (int8, −1: none),
+    # else empty.
     n = points.shape[0]
+    reuse = known.shape[0] == n
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
     for ch in numba.prange(n_chunks):
@@ -771,8 +776,12 @@ def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks):  # 
         for b0 in range(ch * n // n_chunks, hi, _BLOCK):
             b1 = min(b0 + _BLOCK, hi)
             if face_mode == 1:
-                for i in range(b0, b1):
-                    faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
+                if reuse:
+                    for i in range(b0, b1):
+                        faces[i - b0] = known[i]
+                else:
+                    for i in range(b0, b1):
+                        faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
                 j0 = b0
                 while j0 < b1:
                     f = faces[j0 - b0]
@@ -859,11 +868,16 @@ def _look_up(
     normal_offset: float,
     code: int,
     out: np.ndarray,
+    faces: np.ndarray | None = None,
 ) -> None:
-    """``out[i]`` = :func:`visibility_at` of every point (blocked: the nearest tap, no normal offset)."""
+    """``out[i]`` = :func:`visibility_at` of every point (blocked: the nearest tap, no normal offset).
+
+    ``faces``: the points' cube faces from :func:`_receiver_rects`, or None.
+    """
     if normal_offset == 0.0 and code == 0:
         n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))
-        _lookup_nearest(points, depth, vps, face_mode, light_position, out, n_chunks)
+        known = np.zeros(0, np.int8) if faces is None else faces
+        _lookup_nearest(points, depth, vps, face_mode, light_position, out, n_chunks, known)
     else:
         _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
 
@@ -926,17 +940,21 @@ def receiver_visibility_compiled(
         # which faces the receivers use, and where: most points of a frame fall in two or three
         # faces, each over part of its rows
         n_chunks = max(1, min(len(p), 4 * _threads()))
-        rects = _receiver_rects(p, nrm, 6, res, vps, view_z, 1, lp, float(normal_offset), code, n_chunks)
+        faces = np.empty(len(p), np.int8)
+        rects = _receiver_rects(
+            p, nrm, 6, res, vps, view_z, 1, lp, float(normal_offset), code, n_chunks, faces
+        )
     else:
         # one map fitted to the casters: the receivers cover most of it, and the pre-pass would
         # cost more than the texels it saves
         rects = _full_rects(len(vps), res)
+        faces = None
     depth = np.empty((len(vps), res, res))  # texels outside the rectangles are never read
     if len(world) == 0:
         depth[:] = 1.0
     else:
         _render_maps(world, vps, rects, constant_bias, slope_bias, depth)
-    _look_up(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out)
+    _look_up(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out, faces)
     return out
 
 

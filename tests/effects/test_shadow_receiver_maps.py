@@ -164,9 +164,11 @@ def test_receiver_rectangles_hold_every_texel_the_reference_reads(kind, kernel, 
     vps = np.stack([proj @ view for view, proj in cameras])
     view_z = np.ascontiguousarray(np.stack([view[2, :3] for view, _ in cameras]))
     position = np.asarray(light.position, dtype=np.float64)
+    faces = np.empty(len(points), np.int8)
     rects = _receiver_rects(
-        points, normals, 6, RES, vps, view_z, 1, position, normal_offset, KERNEL_CODES[kernel], 4
+        points, normals, 6, RES, vps, view_z, 1, position, normal_offset, KERNEL_CODES[kernel], 4, faces
     )
+    np.testing.assert_array_equal(faces, _cube_face(points, position))  # handed to the look-up
     taps = _reference_taps(light, points, normals, kernel, normal_offset)
     assert len(taps) > 100
     for f in range(len(cameras)):
