@@ -5,20 +5,27 @@ of :mod:`blinn_phong.raytrace`.
 written with numpy are the reference; this module runs the same formulas in compiled loops
 that never build an array of all fragments:
 
-* :func:`depth_map_compiled` — per triangle (in parallel): the depth slope
-  ``m = max(|∂z/∂x|, |∂z/∂y|)`` of the unclipped triangle in texel units (OpenGL 2.1
-  §3.5.5), near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
-  §2.12), the viewport transform, snapping to 1/256 texel, edge functions and the top-left
-  fill rule of :mod:`blinn_phong.raster`; then per band of rows (in parallel) the
-  scan conversion (each row only over the span its three edge functions allow, plus a texel
-  of margin; every texel still takes the exact edge tests) keeps the smallest biased depth
-  ``z + constant + slope·m`` per texel (``glPolygonOffset(slope, ·)``). The result is a
-  minimum, so it does not depend on the order in which triangles are drawn.
+* :func:`depth_map_compiled` / :func:`cube_maps_compiled` — per (map, chunk of triangles)
+  in parallel: near-plane clipping (``z_c ≥ −w_c``, new vertices interpolated in clip space,
+  §2.12 of OpenGL 2.1), the viewport transform, snapping to 1/256 texel, edge functions and
+  the top-left fill rule of :mod:`blinn_phong.raster`, and for a triangle that draws
+  something its depth slope ``m = max(|∂z/∂x|, |∂z/∂y|)`` in texel units (the unclipped
+  triangle, §3.5.5), each drawn triangle one float64 record; then per (map, band of rows) in
+  parallel, every thread taking every other band of every map, the scan conversion (each row
+  only over the span its three edge functions allow, plus a texel of margin; every texel
+  still takes the exact edge tests) keeps the smallest biased depth ``z + constant + slope·m``
+  per texel (``glPolygonOffset(slope, ·)``). The result is a minimum, so it does not depend
+  on the order in which triangles are drawn, nor on which other texels are rendered.
 * :func:`lookup_compiled` — per receiver point (in parallel): normal offset (Holbert 2011),
   projection into the light's clip space, the cube face of the major axis for point
   lights (OpenGL 4.6 §8.13, table 8.19), and the percentage-closer filter (Reeves, Salesin
   & Cook 1987) of :data:`blinn_phong.shadows.PCF_KERNELS`. The per-point body is
-  :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly.
+  :func:`visibility_at`, an ``njit`` function a compiled shading kernel can call directly
+  (the nearest tap without normal offset runs the same operations in blocks of points).
+* :func:`receiver_visibility_compiled` — the maps and the look-up of one light in one call,
+  for the frame pipeline: a cube face no receiver uses is not rendered, the others only over
+  a rectangle holding every texel the receivers' taps read; the visibilities are those of
+  the complete maps, bit for bit.
 * :func:`fragment_surface` — per visible fragment (in parallel): its world-space point (the
   perspective-correct barycentrics of the rasterizer applied to the world-space corners,
   ``Σ_k b_k·v_k`` — an affine map commutes with the barycentric sum, so this is the eye-space
@@ -40,10 +47,8 @@ stored depth, or a snapped vertex sits on a rounding boundary.
 
 from __future__ import annotations
 
-import functools
 import math
 import os
-from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -56,6 +61,7 @@ __all__ = [
     "fragment_surface",
     "hard_shadow_rays",
     "lookup_compiled",
+    "receiver_visibility_compiled",
     "visibility_at",
 ]
 
@@ -67,118 +73,142 @@ def _threads() -> int:
     return max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
 
 
+#: Columns of a set-up triangle's record (one float64 row per drawn triangle): window x, y and
+#: depth of its corners (unsnapped), the edge functions' a (3) and the snapped signed area, b,
+#: c, the slope bias, the top-left flags (1.0 / 0.0) and the unsnapped signed area.
+_SX, _SY, _SZ, _EA, _AREA, _EB, _EC, _BIAS, _ETL, _EXAREA, _NREC = 0, 3, 6, 9, 12, 13, 16, 19, 20, 23, 24
+
+
 @numba.njit(cache=True, inline="always")
-def _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, s):  # pragma: no cover - compiled
-    # cv: (3, 4) clip vertices of one (sub-)triangle; fills slot s; False when it draws nothing.
-    for j in range(3):
-        if not cv[j, 3] > 0:
-            return False
+def _snap_setup(
+    x0c, y0c, z0c, w0c, x1c, y1c, z1c, w1c, x2c, y2c, z2c, w2c, res, rec, box, s
+):  # pragma: no cover - compiled
+    # clip corners of one (sub-)triangle (scalars); fills slot s; False when it draws nothing
+    if not (w0c > 0 and w1c > 0 and w2c > 0):
+        return False
+    return _snap_ndc(
+        x0c / w0c, y0c / w0c, z0c / w0c, x1c / w1c, y1c / w1c, z1c / w1c,
+        x2c / w2c, y2c / w2c, z2c / w2c, res, rec, box, s,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, inline="always")
+def _snap_ndc(nx0, ny0, nz0, nx1, ny1, nz1, nx2, ny2, nz2, res, rec, box, s):  # pragma: no cover - compiled
+    # normalised device corners (w > 0) of one (sub-)triangle; fills slot s; False when it draws nothing
     scale = 256.0
-    for j in range(3):
-        w = cv[j, 3]
-        nx = cv[j, 0] / w
-        ny = cv[j, 1] / w
-        nz = cv[j, 2] / w
-        xe = (nx + 1.0) * (0.5 * res)
-        ye = res - (ny + 1.0) * (0.5 * res)
-        sx[s, j] = xe
-        sy[s, j] = ye
-        sz[s, j] = (nz + 1.0) * 0.5
-        qx[s, j] = np.rint(xe * scale) / scale
-        qy[s, j] = res - np.rint((res - ye) * scale) / scale
-    x_0, x_1, x_2 = qx[s, 0], qx[s, 1], qx[s, 2]
-    y_0, y_1, y_2 = qy[s, 0], qy[s, 1], qy[s, 2]
+    half = 0.5 * res
+    r = rec[s]
+    xe0 = (nx0 + 1.0) * half
+    xe1 = (nx1 + 1.0) * half
+    xe2 = (nx2 + 1.0) * half
+    ye0 = res - (ny0 + 1.0) * half
+    ye1 = res - (ny1 + 1.0) * half
+    ye2 = res - (ny2 + 1.0) * half
+    r[_SX], r[_SX + 1], r[_SX + 2] = xe0, xe1, xe2
+    r[_SY], r[_SY + 1], r[_SY + 2] = ye0, ye1, ye2
+    r[_SZ] = (nz0 + 1.0) * 0.5
+    r[_SZ + 1] = (nz1 + 1.0) * 0.5
+    r[_SZ + 2] = (nz2 + 1.0) * 0.5
+    x_0 = np.rint(xe0 * scale) / scale
+    x_1 = np.rint(xe1 * scale) / scale
+    x_2 = np.rint(xe2 * scale) / scale
+    y_0 = res - np.rint((res - ye0) * scale) / scale
+    y_1 = res - np.rint((res - ye1) * scale) / scale
+    y_2 = res - np.rint((res - ye2) * scale) / scale
     area = (x_1 - x_0) * (y_2 - y_0) - (x_2 - x_0) * (y_1 - y_0)
     if area == 0:
         return False
-    x0 = max(np.ceil(min(x_0, x_1, x_2) - 0.5), 0.0)
-    x1 = min(np.floor(max(x_0, x_1, x_2) - 0.5), res - 1.0)
-    y0 = max(np.ceil(min(y_0, y_1, y_2) - 0.5), 0.0)
-    y1 = min(np.floor(max(y_0, y_1, y_2) - 0.5), res - 1.0)
-    if not (x0 <= x1 and y0 <= y1):  # NaN-safe: no box, no integer cast
+    bx0 = max(np.ceil(min(x_0, x_1, x_2) - 0.5), 0.0)
+    bx1 = min(np.floor(max(x_0, x_1, x_2) - 0.5), res - 1.0)
+    by0 = max(np.ceil(min(y_0, y_1, y_2) - 0.5), 0.0)
+    by1 = min(np.floor(max(y_0, y_1, y_2) - 0.5), res - 1.0)
+    if not (bx0 <= bx1 and by0 <= by1):  # NaN-safe: no box, no integer cast
         return False
-    box[s, 0] = int(x0)
-    box[s, 1] = int(x1)
-    box[s, 2] = int(y0)
-    box[s, 3] = int(y1)
+    box[s, 0] = int(bx0)
+    box[s, 1] = int(bx1)
+    box[s, 2] = int(by0)
+    box[s, 3] = int(by1)
     sign = -1.0 if area < 0 else 1.0
-    ea[s, 3] = area
+    r[_AREA] = area
+    # edge i runs from corner j = i + 1 to corner k = i + 2
     for i in range(3):
-        j = (i + 1) % 3
-        k = (i + 2) % 3
-        a = -(qy[s, k] - qy[s, j]) * sign
-        b = (qx[s, k] - qx[s, j]) * sign
-        ea[s, i] = a
-        eb[s, i] = b
-        ec[s, i] = ((qy[s, k] - qy[s, j]) * qx[s, j] - (qx[s, k] - qx[s, j]) * qy[s, j]) * sign
-        etl[s, i] = (a > 0) or (a == 0 and b < 0)
+        if i == 0:
+            xj, yj, xk, yk = x_1, y_1, x_2, y_2
+        elif i == 1:
+            xj, yj, xk, yk = x_2, y_2, x_0, y_0
+        else:
+            xj, yj, xk, yk = x_0, y_0, x_1, y_1
+        a = -(yk - yj) * sign
+        b = (xk - xj) * sign
+        r[_EA + i] = a
+        r[_EB + i] = b
+        r[_EC + i] = ((yk - yj) * xj - (xk - xj) * yj) * sign
+        r[_ETL + i] = 1.0 if (a > 0) or (a == 0 and b < 0) else 0.0
+    r[_EXAREA] = (xe1 - xe0) * (ye2 - ye0) - (xe2 - xe0) * (ye1 - ye0)
     return True
 
 
-@numba.njit(cache=True, nogil=True)  # serial: ~100 ns a triangle; nogil: a cube's faces set up on threads
-def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
-    # slots are filled in order (k counts them), so only the rows of drawn triangles are touched
-    n = world.shape[0]
+@numba.njit(cache=True, inline="always")
+def _overlaps(box, s, rect):  # pragma: no cover - compiled
+    # the triangle's texel box meets the rectangle (r0, r1, c0, c1) of texels to render
+    return box[s, 2] <= rect[1] and box[s, 3] >= rect[0] and box[s, 0] <= rect[3] and box[s, 1] >= rect[2]
+
+
+@numba.njit(cache=True, inline="always")
+def _clip_row(vp, ch, x, y, z):  # pragma: no cover - compiled
+    return ((vp[ch, 0] * x + vp[ch, 1] * y) + vp[ch, 2] * z) + vp[ch, 3]
+
+
+@numba.njit(cache=True)
+def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # pragma: no cover - compiled
+    # triangles t0..t1-1 into slots base, base+1, ... (at most two a triangle: near clipping);
+    # only triangles whose texel box meets ``rect`` are kept. Returns the number of slots filled.
     c = np.empty((3, 4))
     cv = np.empty((3, 4))
     w = np.zeros((5, 3))
-    k = 0
-    sx = np.empty((2 * n, 3))
-    sy = np.empty((2 * n, 3))
-    sz = np.empty((2 * n, 3))
-    qx = np.empty((2 * n, 3))
-    qy = np.empty((2 * n, 3))
-    ea = np.empty((2 * n, 4))  # edge a (3) and the snapped signed area (column 3)
-    eb = np.empty((2 * n, 3))
-    ec = np.empty((2 * n, 3))
-    etl = np.empty((2 * n, 3), np.bool_)
-    box = np.empty((2 * n, 4), np.int64)
-    valid = np.zeros(2 * n, np.bool_)
-    bias = np.empty(2 * n)
-    for t in range(n):
-        for j in range(3):
-            x, y, z = world[t, j, 0], world[t, j, 1], world[t, j, 2]
-            for ch in range(4):
-                c[j, ch] = ((vp[ch, 0] * x + vp[ch, 1] * y) + vp[ch, 2] * z) + vp[ch, 3]
+    k = base
+    for t in range(t0, t1):
+        v = world[t]
+        x0c = _clip_row(vp, 0, v[0, 0], v[0, 1], v[0, 2])
+        x1c = _clip_row(vp, 0, v[1, 0], v[1, 1], v[1, 2])
+        x2c = _clip_row(vp, 0, v[2, 0], v[2, 1], v[2, 2])
+        w0c = _clip_row(vp, 3, v[0, 0], v[0, 1], v[0, 2])
+        w1c = _clip_row(vp, 3, v[1, 0], v[1, 1], v[1, 2])
+        w2c = _clip_row(vp, 3, v[2, 0], v[2, 1], v[2, 2])
         # trivially outside one side of the light's frustum: nothing to draw
-        out = False
-        for ch in range(2):
-            if (c[0, ch] > c[0, 3] and c[1, ch] > c[1, 3] and c[2, ch] > c[2, 3]) or (
-                c[0, ch] < -c[0, 3] and c[1, ch] < -c[1, 3] and c[2, ch] < -c[2, 3]
-            ):
-                out = True
-        if out:
+        if (x0c > w0c and x1c > w1c and x2c > w2c) or (x0c < -w0c and x1c < -w1c and x2c < -w2c):
             continue
-        # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
-        slope = 0.0
-        if c[0, 3] > 0 and c[1, 3] > 0 and c[2, 3] > 0:
-            xw0 = (c[0, 0] / c[0, 3] + 1) * 0.5 * res
-            yw0 = (c[0, 1] / c[0, 3] + 1) * 0.5 * res
-            zw0 = (c[0, 2] / c[0, 3] + 1) * 0.5
-            xw1 = (c[1, 0] / c[1, 3] + 1) * 0.5 * res
-            yw1 = (c[1, 1] / c[1, 3] + 1) * 0.5 * res
-            zw1 = (c[1, 2] / c[1, 3] + 1) * 0.5
-            xw2 = (c[2, 0] / c[2, 3] + 1) * 0.5 * res
-            yw2 = (c[2, 1] / c[2, 3] + 1) * 0.5 * res
-            zw2 = (c[2, 2] / c[2, 3] + 1) * 0.5
-            e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
-            e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
-            det = e1x * e2y - e2x * e1y
-            if det != 0:
-                slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
-        b = slope_bias * slope
-        # near clipping, as raster._clip_near
-        d0 = c[0, 2] + c[0, 3]
-        d1 = c[1, 2] + c[1, 3]
-        d2 = c[2, 2] + c[2, 3]
+        y0c = _clip_row(vp, 1, v[0, 0], v[0, 1], v[0, 2])
+        y1c = _clip_row(vp, 1, v[1, 0], v[1, 1], v[1, 2])
+        y2c = _clip_row(vp, 1, v[2, 0], v[2, 1], v[2, 2])
+        if (y0c > w0c and y1c > w1c and y2c > w2c) or (y0c < -w0c and y1c < -w1c and y2c < -w2c):
+            continue
+        z0c = _clip_row(vp, 2, v[0, 0], v[0, 1], v[0, 2])
+        z1c = _clip_row(vp, 2, v[1, 0], v[1, 1], v[1, 2])
+        z2c = _clip_row(vp, 2, v[2, 0], v[2, 1], v[2, 2])
+        # near clipping, as raster._clip_near; the depth slope is computed below, only for a
+        # triangle that draws something in the rectangle
+        d0 = z0c + w0c
+        d1 = z1c + w1c
+        d2 = z2c + w2c
         inside0, inside1, inside2 = d0 >= 0, d1 >= 0, d2 >= 0
         n_in = int(inside0) + int(inside1) + int(inside2)
+        first = k
+        # the corners' normalised device coordinates, shared by the set-up and the depth slope
+        all_w = w0c > 0 and w1c > 0 and w2c > 0
+        nx0 = ny0 = nz0 = nx1 = ny1 = nz1 = nx2 = ny2 = nz2 = 0.0
+        if all_w:
+            nx0, ny0, nz0 = x0c / w0c, y0c / w0c, z0c / w0c
+            nx1, ny1, nz1 = x1c / w1c, y1c / w1c, z1c / w1c
+            nx2, ny2, nz2 = x2c / w2c, y2c / w2c, z2c / w2c
         if n_in == 3:
-            if _snap_setup(c, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
-                bias[k] = b
-                valid[k] = True
-                k += 1
+            if all_w and _snap_ndc(nx0, ny0, nz0, nx1, ny1, nz1, nx2, ny2, nz2, res, rec, box, k):
+                if _overlaps(box, k, rect):
+                    k += 1
         elif n_in > 0:
+            c[0, 0], c[0, 1], c[0, 2], c[0, 3] = x0c, y0c, z0c, w0c
+            c[1, 0], c[1, 1], c[1, 2], c[1, 3] = x1c, y1c, z1c, w1c
+            c[2, 0], c[2, 1], c[2, 2], c[2, 3] = x2c, y2c, z2c, w2c
             lone_inside = n_in == 1
             ins = (inside0, inside1, inside2)
             odd = 0
@@ -209,34 +239,106 @@ def _setup(world, vp, res, slope_bias):  # pragma: no cover - compiled
                     r = corners[q][j]
                     for ch in range(4):
                         cv[j, ch] = w[r, 0] * c[0, ch] + w[r, 1] * c[1, ch] + w[r, 2] * c[2, ch]
-                if _snap_setup(cv, res, sx, sy, sz, qx, qy, ea, eb, ec, etl, box, k):
-                    bias[k] = b
-                    valid[k] = True
+                drawn = _snap_setup(
+                    cv[0, 0], cv[0, 1], cv[0, 2], cv[0, 3], cv[1, 0], cv[1, 1], cv[1, 2], cv[1, 3],
+                    cv[2, 0], cv[2, 1], cv[2, 2], cv[2, 3], res, rec, box, k,
+                )  # fmt: skip
+                if drawn and _overlaps(box, k, rect):
                     k += 1
-    return valid, bias, sx, sy, sz, ea, eb, ec, etl, box
+        if k == first:
+            continue
+        # depth slope of the unclipped triangle in window units (GL 2.1 §3.5.5)
+        slope = 0.0
+        if all_w:
+            xw0 = (nx0 + 1) * 0.5 * res
+            yw0 = (ny0 + 1) * 0.5 * res
+            zw0 = (nz0 + 1) * 0.5
+            xw1 = (nx1 + 1) * 0.5 * res
+            yw1 = (ny1 + 1) * 0.5 * res
+            zw1 = (nz1 + 1) * 0.5
+            xw2 = (nx2 + 1) * 0.5 * res
+            yw2 = (ny2 + 1) * 0.5 * res
+            zw2 = (nz2 + 1) * 0.5
+            e1x, e1y, e1z = xw1 - xw0, yw1 - yw0, zw1 - zw0
+            e2x, e2y, e2z = xw2 - xw0, yw2 - yw0, zw2 - zw0
+            det = e1x * e2y - e2x * e1y
+            if det != 0:
+                slope = max(abs((e1z * e2y - e2z * e1y) / det), abs((e1x * e2z - e2x * e1z) / det))
+        b = slope_bias * slope
+        for s in range(first, k):
+            rec[s, _BIAS] = b
+    return k - base
+
+
+@numba.njit(parallel=True, cache=True)
+def _setup(world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, slots):  # pragma: no cover
+    # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
+    # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
+    # empty (r0 > r1) are skipped. Fills the records ``rec`` (F, 2n, _NREC), the texel boxes
+    # ``box`` (F, 2n, 4) and the slots drawn per face ``slots`` (F, 2n; the first count[f] of
+    # row f); returns count (F,). The arrays come from numpy, whose large allocations get
+    # transparent huge pages: a fresh 20 MB of 4 KiB pages costs milliseconds of page faults.
+    n_faces = vps.shape[0]
+    n = world.shape[0]
+    filled = np.zeros((n_faces, n_chunks), np.int64)
+    # worker w (of W = workers, the threads) takes the tasks w, w + W, w + 2W, ... of face-major
+    # order: every W-th chunk of every face, so that each thread gets a share of every part of
+    # the mesh list
+    for w in numba.prange(workers):
+        for task in range(w, n_faces * n_chunks, workers):
+            f = task // n_chunks
+            ch = task % n_chunks
+            if rects[f, 0] > rects[f, 1] or rects[f, 2] > rects[f, 3]:
+                continue
+            t0 = ch * n // n_chunks
+            t1 = (ch + 1) * n // n_chunks
+            filled[f, ch] = _setup_range(
+                world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0
+            )
+    count = np.zeros(n_faces, np.int64)
+    for f in range(n_faces):
+        k = 0
+        for ch in range(n_chunks):
+            base = 2 * (ch * n // n_chunks)
+            for s in range(base, base + filled[f, ch]):
+                slots[f, k] = s
+                k += 1
+        count[f] = k
+    return count
 
 
 @numba.njit(cache=True)
-def _scan_rows(
-    depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
-):  # pragma: no cover
-    # rows r0..r1 (inclusive) of one map: fill with 1, then keep the smallest biased depth
-    depth[r0 : r1 + 1, :] = 1.0
+def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma: no cover - compiled
+    # texels (r0..r1, c0..c1) (inclusive) of one map: fill with 1, then keep the smallest biased
+    # depth; every texel's value is the one a scan of the whole map gives it (a minimum over the
+    # same triangles, whatever the order)
+    depth[r0 : r1 + 1, c0 : c1 + 1] = 1.0
     for q in range(slots.shape[0]):
         s = slots[q]
         lo = max(box[s, 2], r0)
         hi = min(box[s, 3], r1)
         if lo > hi:
             continue
-        area = ea[s, 3]
-        ex_area = (sx[s, 1] - sx[s, 0]) * (sy[s, 2] - sy[s, 0]) - (sx[s, 2] - sx[s, 0]) * (
-            sy[s, 1] - sy[s, 0]
-        )
+        r = rec[s]
+        sx0, sx1, sx2 = r[_SX], r[_SX + 1], r[_SX + 2]
+        sy0, sy1, sy2 = r[_SY], r[_SY + 1], r[_SY + 2]
+        sz0, sz1, sz2 = r[_SZ], r[_SZ + 1], r[_SZ + 2]
+        a0, a1, a2 = r[_EA], r[_EA + 1], r[_EA + 2]
+        b0, b1, b2 = r[_EB], r[_EB + 1], r[_EB + 2]
+        k0, k1, k2 = r[_EC], r[_EC + 1], r[_EC + 2]
+        tl0, tl1, tl2 = r[_ETL] != 0.0, r[_ETL + 1] != 0.0, r[_ETL + 2] != 0.0
+        area = r[_AREA]
+        ex_area = r[_EXAREA]
         exact = ex_area * area > 0 and abs(ex_area) > 1e-12
         abs_area = abs(area)
-        b = bias[s]
-        bx0 = float(box[s, 0])
-        bx1 = float(box[s, 1])
+        b = r[_BIAS]
+        bx0 = float(max(box[s, 0], c0))
+        bx1 = float(min(box[s, 1], c1))
+        # reciprocals of the edges' a (|a| ≥ 1/256 or 0: snapped coordinates): the row spans
+        # below multiply instead of dividing, a few ulp off, well inside their texel of margin
+        i0 = 1.0 / a0 if a0 != 0 else 0.0
+        i1 = 1.0 / a1 if a1 != 0 else 0.0
+        i2 = 1.0 / a2 if a2 != 0 else 0.0
         for py in range(lo, hi + 1):
             cy = py + 0.5
             # the row's span: each edge function is linear in x, so its sign changes once; the
@@ -245,42 +347,43 @@ def _scan_rows(
             x_lo, x_hi = bx0, bx1
             empty = False
             for i in range(3):
-                a = ea[s, i]
-                k = eb[s, i] * cy + ec[s, i]
+                if i == 0:
+                    a, inv, k, tl = a0, i0, b0 * cy + k0, tl0
+                elif i == 1:
+                    a, inv, k, tl = a1, i1, b1 * cy + k1, tl1
+                else:
+                    a, inv, k, tl = a2, i2, b2 * cy + k2, tl2
                 if a > 0:
-                    x_lo = max(x_lo, math.ceil(-k / a - 0.5) - 1.0)
+                    x_lo = max(x_lo, math.ceil(-k * inv - 0.5) - 1.0)
                 elif a < 0:
-                    x_hi = min(x_hi, math.floor(-k / a - 0.5) + 1.0)
-                elif k < 0 or (k == 0 and not etl[s, i]):
+                    x_hi = min(x_hi, math.floor(-k * inv - 0.5) + 1.0)
+                elif k < 0 or (k == 0 and not tl):
                     empty = True
             if empty or not x_lo <= x_hi:
                 continue
+            row0 = b0 * cy + k0
+            row1 = b1 * cy + k1
+            row2 = b2 * cy + k2
             for px in range(int(x_lo), int(x_hi) + 1):
                 cx = px + 0.5
-                e0 = ea[s, 0] * cx + (eb[s, 0] * cy + ec[s, 0])
-                if e0 < 0 or (e0 == 0 and not etl[s, 0]):
+                e0 = a0 * cx + row0
+                if e0 < 0 or (e0 == 0 and not tl0):
                     continue
-                e1 = ea[s, 1] * cx + (eb[s, 1] * cy + ec[s, 1])
-                if e1 < 0 or (e1 == 0 and not etl[s, 1]):
+                e1 = a1 * cx + row1
+                if e1 < 0 or (e1 == 0 and not tl1):
                     continue
-                e2 = ea[s, 2] * cx + (eb[s, 2] * cy + ec[s, 2])
-                if e2 < 0 or (e2 == 0 and not etl[s, 2]):
+                e2 = a2 * cx + row2
+                if e2 < 0 or (e2 == 0 and not tl2):
                     continue
                 if exact:
-                    l0 = (
-                        (sx[s, 2] - sx[s, 1]) * (cy - sy[s, 1]) - (sy[s, 2] - sy[s, 1]) * (cx - sx[s, 1])
-                    ) / ex_area
-                    l1 = (
-                        (sx[s, 0] - sx[s, 2]) * (cy - sy[s, 2]) - (sy[s, 0] - sy[s, 2]) * (cx - sx[s, 2])
-                    ) / ex_area
-                    l2 = (
-                        (sx[s, 1] - sx[s, 0]) * (cy - sy[s, 0]) - (sy[s, 1] - sy[s, 0]) * (cx - sx[s, 0])
-                    ) / ex_area
+                    l0 = ((sx2 - sx1) * (cy - sy1) - (sy2 - sy1) * (cx - sx1)) / ex_area
+                    l1 = ((sx0 - sx2) * (cy - sy2) - (sy0 - sy2) * (cx - sx2)) / ex_area
+                    l2 = ((sx1 - sx0) * (cy - sy0) - (sy1 - sy0) * (cx - sx0)) / ex_area
                 else:
                     l0 = e0 / abs_area
                     l1 = e1 / abs_area
                     l2 = e2 / abs_area
-                z = l0 * sz[s, 0] + l1 * sz[s, 1] + l2 * sz[s, 2]
+                z = l0 * sz0 + l1 * sz1 + l2 * sz2
                 if z > 1.0:
                     continue
                 z = max(z, 0.0)
@@ -290,40 +393,51 @@ def _scan_rows(
 
 
 @numba.njit(parallel=True, cache=True)
-def _scan(depth, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box):  # pragma: no cover
-    res = depth.shape[0]
-    band_h = (res + n_bands - 1) // n_bands
-    for band in numba.prange(n_bands):
-        r0 = band * band_h
-        r1 = min(res, r0 + band_h) - 1
-        _scan_rows(depth, r0, r1, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box)
-
-
-@numba.njit(parallel=True, cache=True)
-def _scan_faces(
-    out, n_bands, slots, bias, constant_bias, sx, sy, sz, ea, eb, ec, etl, box
-):  # pragma: no cover - compiled
-    # every (face, band of rows) is one task, faces interleaved so that each thread gets a share
-    # of every face (one face may hold most of the work: the one looking at the ground); the
-    # per-face arrays come as tuples, one entry per face, so nothing is copied into one block
+def _scan(out, rects, n_bands, workers, slots, count, constant_bias, rec, box):  # pragma: no cover
+    # every (face, band of the face's rows) is one task; worker w takes the tasks w, w + W, ...
+    # of face-major order, i.e. every W-th band of every face: the work of a map is far from
+    # uniform over its rows (a sphere in a few bands), and neighbouring bands hold similar
+    # work. Faces with an empty rectangle are left unwritten.
     n_faces = out.shape[0]
+    for w in numba.prange(workers):
+        for task in range(w, n_faces * n_bands, workers):
+            f = task // n_bands
+            band = task % n_bands
+            r_lo, r_hi, c0, c1 = rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3]
+            if r_lo > r_hi or c0 > c1:
+                continue
+            band_h = (r_hi - r_lo + n_bands) // n_bands
+            r0 = r_lo + band * band_h
+            r1 = min(r_hi, r0 + band_h - 1)
+            if r0 <= r1:
+                _scan_rows(out[f], r0, r1, c0, c1, slots[f, : count[f]], constant_bias, rec[f], box[f])
+
+
+def _render_maps(
+    world: np.ndarray,
+    vps: np.ndarray,
+    rects: np.ndarray,
+    constant_bias: float,
+    slope_bias: float,
+    out: np.ndarray,
+) -> np.ndarray:
+    """Depth maps of the casters seen by F cameras, each only over its rectangle of texels.
+
+    ``world``: (n, 3, 3) contiguous float64; ``vps``: (F, 4, 4); ``rects``: (F, 4) int64 texel
+    rectangles ``(r0, r1, c0, c1)`` (inclusive; r0 > r1 or c0 > c1: the face is not rendered);
+    ``out``: (F, R, R) float64. Texels outside a face's rectangle are left as they were.
+    """
     res = out.shape[1]
-    band_h = (res + n_bands - 1) // n_bands
-    for task in numba.prange(n_faces * n_bands):
-        f = task % n_faces
-        r0 = (task // n_faces) * band_h
-        r1 = min(res, r0 + band_h) - 1
-        if r0 <= r1:
-            _scan_rows(
-                out[f], r0, r1, slots[f], bias[f], constant_bias,
-                sx[f], sy[f], sz[f], ea[f], eb[f], ec[f], etl[f], box[f],
-            )  # fmt: skip
-
-
-@functools.lru_cache(maxsize=1)
-def _setup_pool() -> ThreadPoolExecutor:
-    """Threads for the per-face set-up of a cube (``_setup`` releases the GIL)."""
-    return ThreadPoolExecutor(max_workers=_threads(), thread_name_prefix="shadow-setup")
+    threads = numba.get_num_threads()
+    n_chunks = max(1, min(len(world), 4 * threads))
+    shape = (len(vps), 2 * len(world))
+    rec = np.empty((*shape, _NREC))
+    box = np.empty((*shape, 4), np.int32)
+    slots = np.empty(shape, np.int64)
+    count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, threads, rec, box, slots)
+    n_bands = max(1, min(res, 4 * threads))
+    _scan(out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box)
+    return out
 
 
 def cube_maps_compiled(
@@ -335,9 +449,9 @@ def cube_maps_compiled(
 ) -> np.ndarray:
     """:func:`depth_map_compiled` for several cameras at once (a cube's six faces).
 
-    Each face's triangle set-up runs on a thread of its own (the compiled set-up releases the
-    GIL); then every (face, band of rows) pair is one task of a parallel scan, so that a face
-    holding most of the work is shared by every thread.
+    The triangle set-up runs in parallel over (face, chunk of triangles) tasks; then every
+    (face, band of rows) pair is one task of a parallel scan, so that a face holding most of
+    the work is shared by every thread.
 
     Args:
         world_triangles: (n, 3, 3) float64 world-space casters.
@@ -354,19 +468,15 @@ def cube_maps_compiled(
         out[:] = 1.0
         return out
     vps = np.ascontiguousarray(view_projections, dtype=np.float64)
-    res = float(out.shape[1])
+    return _render_maps(world, vps, _full_rects(len(vps), out.shape[1]), constant_bias, slope_bias, out)
 
-    def setup(f: int) -> tuple[np.ndarray, ...]:
-        valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vps[f], res, float(slope_bias))
-        k = int(np.count_nonzero(valid))  # slots are filled in order: the first k are the drawn ones
-        return tuple(a[:k] for a in (bias, sx, sy, sz, ea, eb, ec, etl, box))
 
-    faces = list(_setup_pool().map(setup, range(len(vps))))
-    slots = tuple(np.arange(len(face[0]), dtype=np.int64) for face in faces)
-    per_face = [tuple(face[j] for face in faces) for j in range(9)]
-    n_bands = max(1, min(out.shape[1], 2 * _threads()))
-    _scan_faces(out, n_bands, slots, per_face[0], float(constant_bias), *per_face[1:])
-    return out
+def _full_rects(n_faces: int, res: int) -> np.ndarray:
+    """(F, 4) rectangles ``(0, R − 1, 0, R − 1)``: every texel of every face."""
+    rects = np.empty((n_faces, 4), np.int64)
+    rects[:, 0::2] = 0
+    rects[:, 1::2] = res - 1
+    return rects
 
 
 def depth_map_compiled(
@@ -397,11 +507,8 @@ def depth_map_compiled(
     if len(world) == 0:
         depth[:] = 1.0
         return depth
-    vp = np.ascontiguousarray(view_projection, dtype=np.float64)
-    valid, bias, sx, sy, sz, ea, eb, ec, etl, box = _setup(world, vp, float(res), float(slope_bias))
-    slots = np.flatnonzero(valid).astype(np.int64)
-    n_bands = max(1, min(res, 4 * _threads()))
-    _scan(depth, n_bands, slots, bias, float(constant_bias), sx, sy, sz, ea, eb, ec, etl, box)
+    vp = np.ascontiguousarray(view_projection, dtype=np.float64).reshape(1, 4, 4)
+    _render_maps(world, vp, _full_rects(1, res), constant_bias, slope_bias, depth.reshape(1, res, res))
     return depth
 
 
@@ -412,32 +519,43 @@ def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
     return 1.0 if z <= depth[f, int(r), int(c)] else 0.0
 
 
-@numba.njit(cache=True, inline="always")  # inlined: a call per point costs more than its body
-def visibility_at(
-    px, py, pz, nx, ny, nz, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel
-):  # pragma: no cover - compiled
-    """Shadow-map visibility of one world point (compiled; callable from other numba kernels).
+@numba.njit(cache=True, inline="always")
+def _cube_face(px, py, pz, light_pos):  # pragma: no cover - compiled
+    # cube face of the major axis of p − light (ties to the lower axis, as np.argmax); −1 at the light
+    rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
+    ax, best, val = 0, abs(rx), rx
+    if abs(ry) > best:
+        ax, best, val = 1, abs(ry), ry
+    if abs(rz) > best:
+        ax, best, val = 2, abs(rz), rz
+    if val == 0:
+        return -1
+    return 2 * ax + (0 if val > 0 else 1)
 
-    ``(px, py, pz)``: world point; ``(nx, ny, nz)``: its normal (read only when
-    ``normal_offset`` ≠ 0); ``depth``: (F, H, W) maps; ``vp``: (F, 4, 4) world → clip;
-    ``view_z``: (F, 3) row 2 of each view matrix (towards-the-light test of the normal
-    offset); ``face_mode``: 1 for a cube (F = 6, face of the major axis of ``p − light_pos``),
-    else 0; ``kernel``: 0 nearest, 1 bilinear, k for a k×k box. Returns a float in [0, 1]:
-    the formulas of :func:`blinn_phong.shadows.shadow_visibility`.
-    """
-    res_y = float(depth.shape[1])
-    res_x = float(depth.shape[2])
+
+@numba.njit(cache=True, inline="always")
+def _window(nxd, nyd, nzd, res_x, res_y):  # pragma: no cover - compiled
+    # (x, y, z, found) from normalised device coordinates (w > 0): texel coordinates (x right,
+    # y down from the top) and window depth; found is False outside the map (lit)
+    z = (nzd + 1) * 0.5
+    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
+        return 0.0, 0.0, 0.0, False
+    x = (nxd + 1) * 0.5 * res_x
+    y = res_y - (nyd + 1) * 0.5 * res_y
+    return x, y, z, True
+
+
+@numba.njit(cache=True, inline="always")
+def _locate(
+    px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+):  # pragma: no cover - compiled
+    # (face, x, y, z, found): the texel coordinates (x right, y down from the top) and window
+    # depth of a receiver in its map; found is False where the map is not read (lit)
     f = 0
-    if face_mode == 1:  # cube: face of the major axis, ties to the lower axis (np.argmax)
-        rx, ry, rz = px - light_pos[0], py - light_pos[1], pz - light_pos[2]
-        ax, best, val = 0, abs(rx), rx
-        if abs(ry) > best:
-            ax, best, val = 1, abs(ry), ry
-        if abs(rz) > best:
-            ax, best, val = 2, abs(rz), rz
-        if val == 0:
-            return 1.0
-        f = 2 * ax + (0 if val > 0 else 1)
+    if face_mode == 1:  # cube: face of the major axis
+        f = _cube_face(px, py, pz, light_pos)
+        if f < 0:
+            return 0, 0.0, 0.0, 0.0, False
     if normal_offset != 0.0:
         length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
         nx, ny, nz = nx / length, ny / length, nz / length
@@ -450,13 +568,14 @@ def visibility_at(
     cz = ((m[2, 0] * px + m[2, 1] * py) + m[2, 2] * pz) + m[2, 3]
     cw = ((m[3, 0] * px + m[3, 1] * py) + m[3, 2] * pz) + m[3, 3]
     if not cw > 0:
-        return 1.0
-    nxd, nyd, nzd = cx / cw, cy / cw, cz / cw
-    z = (nzd + 1) * 0.5
-    if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):  # outside (or NaN): lit
-        return 1.0
-    x = (nxd + 1) * 0.5 * res_x
-    y = res_y - (nyd + 1) * 0.5 * res_y
+        return f, 0.0, 0.0, 0.0, False
+    x, y, z, found = _window(cx / cw, cy / cw, cz / cw, res_x, res_y)
+    return f, x, y, z, found
+
+
+@numba.njit(cache=True, inline="always")
+def _filtered(depth, f, x, y, z, kernel, res_x, res_y):  # pragma: no cover - compiled
+    # the percentage-closer filter of ``kernel`` at texel coordinates (x, y), receiver depth z
     if kernel == 0:
         return _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
     if kernel == 1:
@@ -479,6 +598,121 @@ def visibility_at(
     return total / (kernel * kernel)
 
 
+@numba.njit(cache=True, inline="always")  # inlined: a call per point costs more than its body
+def visibility_at(
+    px, py, pz, nx, ny, nz, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel
+):  # pragma: no cover - compiled
+    """Shadow-map visibility of one world point (compiled; callable from other numba kernels).
+
+    ``(px, py, pz)``: world point; ``(nx, ny, nz)``: its normal (read only when
+    ``normal_offset`` ≠ 0); ``depth``: (F, H, W) maps; ``vp``: (F, 4, 4) world → clip;
+    ``view_z``: (F, 3) row 2 of each view matrix (towards-the-light test of the normal
+    offset); ``face_mode``: 1 for a cube (F = 6, face of the major axis of ``p − light_pos``),
+    else 0; ``kernel``: 0 nearest, 1 bilinear, k for a k×k box. Returns a float in [0, 1]:
+    the formulas of :func:`blinn_phong.shadows.shadow_visibility`.
+    """
+    res_y = float(depth.shape[1])
+    res_x = float(depth.shape[2])
+    f, x, y, z, found = _locate(
+        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+    )
+    if not found:
+        return 1.0
+    return _filtered(depth, f, x, y, z, kernel, res_x, res_y)
+
+
+@numba.njit(parallel=True, cache=True)
+def _receiver_rects(
+    points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks, faces
+):  # pragma: no cover - compiled
+    # per face, a rectangle (r0, r1, c0, c1) holding every texel the look-ups of the points read
+    # (r0 > r1: none). The face and the normal offset are chosen as visibility_at chooses them
+    # (exactly: a point must be counted in its own face); the projection is then bounded from
+    # outside: one reciprocal instead of three divisions (a few ulp off), no depth test, the
+    # frustum test widened by 1e-9, and two texels of margin beyond the taps' reach, so the
+    # rectangle can only be larger than the exact one. Per chunk of points in parallel: the
+    # extreme normalised coordinates per face, merged and turned into texels at the end. Each
+    # point's cube face (−1: none) is written to ``faces`` (int8) for the look-up.
+    n = points.shape[0]
+    with_normals = normal_offset != 0.0
+    part = np.empty((n_chunks, n_faces, 4))  # min x, max x, min y, max y (normalised device)
+    lim = 1.0 + 1e-9
+    for ch in numba.prange(n_chunks):
+        for f in range(n_faces):
+            part[ch, f, 0] = np.inf
+            part[ch, f, 1] = -np.inf
+            part[ch, f, 2] = np.inf
+            part[ch, f, 3] = -np.inf
+        # the current face's extremes and matrix rows in registers; points come in runs of one
+        # face, so they are stored and reloaded only where the face changes
+        cur = 0
+        x_lo, x_hi, y_lo, y_hi = np.inf, -np.inf, np.inf, -np.inf
+        m00, m01, m02, m03 = vp[0, 0, 0], vp[0, 0, 1], vp[0, 0, 2], vp[0, 0, 3]
+        m10, m11, m12, m13 = vp[0, 1, 0], vp[0, 1, 1], vp[0, 1, 2], vp[0, 1, 3]
+        m30, m31, m32, m33 = vp[0, 3, 0], vp[0, 3, 1], vp[0, 3, 2], vp[0, 3, 3]
+        for i in range(ch * n // n_chunks, (ch + 1) * n // n_chunks):
+            px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+            f = 0
+            if face_mode == 1:  # as _locate
+                f = _cube_face(px, py, pz, light_pos)
+                faces[i] = f
+                if f < 0:
+                    continue
+            if f != cur:
+                part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
+                part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
+                cur = f
+                x_lo, x_hi, y_lo, y_hi = part[ch, f, 0], part[ch, f, 1], part[ch, f, 2], part[ch, f, 3]
+                m00, m01, m02, m03 = vp[f, 0, 0], vp[f, 0, 1], vp[f, 0, 2], vp[f, 0, 3]
+                m10, m11, m12, m13 = vp[f, 1, 0], vp[f, 1, 1], vp[f, 1, 2], vp[f, 1, 3]
+                m30, m31, m32, m33 = vp[f, 3, 0], vp[f, 3, 1], vp[f, 3, 2], vp[f, 3, 3]
+            if with_normals:  # as _locate
+                nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
+                length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+                nx, ny, nz = nx / length, ny / length, nz / length
+                if nx * view_z[f, 0] + ny * view_z[f, 1] + nz * view_z[f, 2] < 0:
+                    nx, ny, nz = -nx, -ny, -nz
+                px, py, pz = px + normal_offset * nx, py + normal_offset * ny, pz + normal_offset * nz
+            cw = ((m30 * px + m31 * py) + m32 * pz) + m33
+            if not cw > 0:
+                continue
+            inv = 1.0 / cw
+            nxd = (((m00 * px + m01 * py) + m02 * pz) + m03) * inv
+            nyd = (((m10 * px + m11 * py) + m12 * pz) + m13) * inv
+            if not (nxd >= -lim and nxd <= lim and nyd >= -lim and nyd <= lim):
+                continue
+            x_lo = min(x_lo, nxd)
+            x_hi = max(x_hi, nxd)
+            y_lo = min(y_lo, nyd)
+            y_hi = max(y_hi, nyd)
+        part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
+        part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
+    reach = 2 + (0 if kernel <= 1 else (kernel - 1) // 2)  # texels beyond floor(x) a tap may read
+    rects = np.empty((n_faces, 4), np.int64)
+    for f in range(n_faces):  # merged over the chunks
+        ax_lo, ax_hi, ay_lo, ay_hi = np.inf, -np.inf, np.inf, -np.inf
+        for ch in range(n_chunks):
+            ax_lo = min(ax_lo, part[ch, f, 0])
+            ax_hi = max(ax_hi, part[ch, f, 1])
+            ay_lo = min(ay_lo, part[ch, f, 2])
+            ay_hi = max(ay_hi, part[ch, f, 3])
+        if not ax_lo <= ax_hi:
+            rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3] = res, -1, res, -1
+            continue
+        ax_lo, ax_hi = max(ax_lo, -1.0), min(ax_hi, 1.0)
+        ay_lo, ay_hi = max(ay_lo, -1.0), min(ay_hi, 1.0)
+        # columns from x = (nx + 1)·R/2, rows from y = R − (ny + 1)·R/2 (rows grow as ny falls)
+        c0 = math.floor((ax_lo + 1) * 0.5 * res) - reach
+        c1 = math.floor((ax_hi + 1) * 0.5 * res) + reach
+        r0 = math.floor(res - (ay_hi + 1) * 0.5 * res) - reach
+        r1 = math.floor(res - (ay_lo + 1) * 0.5 * res) + reach
+        rects[f, 0] = max(r0, 0)
+        rects[f, 1] = min(r1, res - 1)
+        rects[f, 2] = max(c0, 0)
+        rects[f, 3] = min(c1, res - 1)
+    return rects
+
+
 @numba.njit(parallel=True, cache=True)
 def _lookup(
     points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
@@ -492,6 +726,87 @@ def _lookup(
             points[i, 0], points[i, 1], points[i, 2], nx, ny, nz,
             depth, vp, view_z, face_mode, light_pos, normal_offset, kernel,
         )  # fmt: skip
+
+
+#: Points per block of :func:`_lookup_nearest`.
+_BLOCK = 512
+
+
+@numba.njit(cache=True, inline="always")
+def _project_run(points, lo, hi, vp, f, qx, qy, qz, cws, base):  # pragma: no cover - compiled
+    # clip coordinates of points lo..hi-1 by face f's matrix and their quotients by w, into the
+    # block's scratch rows (i − base); a tight loop of independent divisions, no branches
+    m00, m01, m02, m03 = vp[f, 0, 0], vp[f, 0, 1], vp[f, 0, 2], vp[f, 0, 3]
+    m10, m11, m12, m13 = vp[f, 1, 0], vp[f, 1, 1], vp[f, 1, 2], vp[f, 1, 3]
+    m20, m21, m22, m23 = vp[f, 2, 0], vp[f, 2, 1], vp[f, 2, 2], vp[f, 2, 3]
+    m30, m31, m32, m33 = vp[f, 3, 0], vp[f, 3, 1], vp[f, 3, 2], vp[f, 3, 3]
+    for i in range(lo, hi):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        cx = ((m00 * px + m01 * py) + m02 * pz) + m03
+        cy = ((m10 * px + m11 * py) + m12 * pz) + m13
+        cz = ((m20 * px + m21 * py) + m22 * pz) + m23
+        cw = ((m30 * px + m31 * py) + m32 * pz) + m33
+        j = i - base
+        qx[j] = cx / cw
+        qy[j] = cy / cw
+        qz[j] = cz / cw
+        cws[j] = cw
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, known):  # pragma: no cover
+    # visibility_at with the nearest kernel and no normal offset, per block of points in two
+    # passes: the projection (faces, then runs of one face as tight loops of divisions), then
+    # the tests and the tap — the operations of _locate / _window / _lit on the same operands,
+    # written out (a call of the tuple-returning helpers here costs a third more). The quotient
+    # of a point behind the light (w ≤ 0) is never read (numpy error model: no exception at 0).
+    # ``known``: the points' cube faces when the receiver pre-pass found them (int8, −1: none),
+    # else empty.
+    n = points.shape[0]
+    reuse = known.shape[0] == n
+    res_y = float(depth.shape[1])
+    res_x = float(depth.shape[2])
+    for ch in numba.prange(n_chunks):
+        qx = np.empty(_BLOCK)
+        qy = np.empty(_BLOCK)
+        qz = np.empty(_BLOCK)
+        cws = np.empty(_BLOCK)
+        faces = np.zeros(_BLOCK, np.int64)
+        hi = (ch + 1) * n // n_chunks
+        for b0 in range(ch * n // n_chunks, hi, _BLOCK):
+            b1 = min(b0 + _BLOCK, hi)
+            if face_mode == 1:
+                if reuse:
+                    for i in range(b0, b1):
+                        faces[i - b0] = known[i]
+                else:
+                    for i in range(b0, b1):
+                        faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
+                j0 = b0
+                while j0 < b1:
+                    f = faces[j0 - b0]
+                    j1 = j0 + 1
+                    while j1 < b1 and faces[j1 - b0] == f:
+                        j1 += 1
+                    if f >= 0:
+                        _project_run(points, j0, j1, vp, f, qx, qy, qz, cws, b0)
+                    j0 = j1
+            else:
+                _project_run(points, b0, b1, vp, 0, qx, qy, qz, cws, b0)
+            for i in range(b0, b1):
+                j = i - b0
+                f = faces[j]
+                if f < 0 or not cws[j] > 0:
+                    out[i] = 1.0
+                    continue
+                nxd, nyd, nzd = qx[j], qy[j], qz[j]
+                z = (nzd + 1) * 0.5
+                if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):
+                    out[i] = 1.0
+                    continue
+                x = (nxd + 1) * 0.5 * res_x
+                y = res_y - (nyd + 1) * 0.5 * res_y
+                out[i] = _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
 
 
 def lookup_compiled(
@@ -527,7 +842,7 @@ def lookup_compiled(
     nrm = np.zeros((1, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
     cube = depth.shape[0] == 6
     lp = np.zeros(3) if light_position is None else np.asarray(light_position, dtype=np.float64)
-    _lookup(
+    _look_up(
         np.ascontiguousarray(points, dtype=np.float64),
         nrm,
         np.ascontiguousarray(depth, dtype=np.float64),
@@ -539,6 +854,107 @@ def lookup_compiled(
         KERNEL_CODES[kernel],
         out,
     )
+    return out
+
+
+def _look_up(
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth: np.ndarray,
+    vps: np.ndarray,
+    view_z: np.ndarray,
+    face_mode: int,
+    light_position: np.ndarray,
+    normal_offset: float,
+    code: int,
+    out: np.ndarray,
+    faces: np.ndarray | None = None,
+) -> None:
+    """``out[i]`` = :func:`visibility_at` of every point (blocked: the nearest tap, no normal offset).
+
+    ``faces``: the points' cube faces from :func:`_receiver_rects`, or None.
+    """
+    if normal_offset == 0.0 and code == 0:
+        n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))
+        known = np.zeros(0, np.int8) if faces is None else faces
+        _lookup_nearest(points, depth, vps, face_mode, light_position, out, n_chunks, known)
+    else:
+        _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
+
+
+def receiver_visibility_compiled(
+    world_triangles: np.ndarray,
+    view_projection: np.ndarray,
+    view: np.ndarray,
+    resolution: int,
+    points: np.ndarray,
+    normals: np.ndarray | None,
+    *,
+    constant_bias: float,
+    slope_bias: float,
+    light_position: np.ndarray | None,
+    normal_offset: float,
+    kernel: str,
+) -> np.ndarray:
+    """Shadow-map visibility of points, a cube's faces rendered only where their look-ups read.
+
+    The value of :func:`lookup_compiled` on the maps of :func:`depth_map_compiled` /
+    :func:`cube_maps_compiled`, bit for bit. For a cube (F = 6) a first parallel pass over the
+    points finds, per face, a rectangle holding every texel their percentage-closer taps read
+    (the look-up's face choice, and its projection bounded from outside); a face no point
+    reads is not rendered at all, the others only over their rectangle, and only with the
+    triangles whose texel box meets it. A texel's depth is a minimum over the triangles that
+    cover it, so it is the same whether or not the texels around it are rendered. A single
+    map is rendered whole.
+
+    Args:
+        world_triangles: (n, 3, 3) float64 world-space casters.
+        view_projection: (F, 4, 4) world → clip matrices (F = 1, or 6 cube faces in the
+            order of :data:`blinn_phong.shadows._CUBE_FACES`).
+        view: (F, 4, 4) world → light-eye matrices (row 2 orients the normal offset).
+        resolution: texels per map side.
+        points: (m, 3) float64 world-space receivers.
+        normals: (m, 3) float64 normals, or None when ``normal_offset`` is 0.
+        constant_bias: window-depth units added to every caster fragment.
+        slope_bias: multiple of the triangle's depth slope per texel added.
+        light_position: the point light's position for a cube (F = 6), else None.
+        normal_offset: world units along the light-facing unit normal.
+        kernel: one of :data:`blinn_phong.shadows.PCF_KERNELS`.
+
+    Returns:
+        (m,) float64 visibility in [0, 1].
+    """
+    out = np.empty(len(points))
+    if len(points) == 0:
+        return out
+    res = int(resolution)
+    world = np.ascontiguousarray(world_triangles, dtype=np.float64).reshape(-1, 3, 3)
+    vps = np.ascontiguousarray(view_projection, dtype=np.float64)
+    view_z = np.ascontiguousarray(np.asarray(view, dtype=np.float64)[:, 2, :3])
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    nrm = np.zeros((1, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    cube = len(vps) == 6
+    lp = np.zeros(3) if light_position is None else np.asarray(light_position, dtype=np.float64)
+    code = KERNEL_CODES[kernel]
+    if cube:
+        # which faces the receivers use, and where: most points of a frame fall in two or three
+        # faces, each over part of its rows
+        n_chunks = max(1, min(len(p), 4 * _threads()))
+        faces = np.empty(len(p), np.int8)
+        rects = _receiver_rects(
+            p, nrm, 6, res, vps, view_z, 1, lp, float(normal_offset), code, n_chunks, faces
+        )
+    else:
+        # one map fitted to the casters: the receivers cover most of it, and the pre-pass would
+        # cost more than the texels it saves
+        rects = _full_rects(len(vps), res)
+        faces = None
+    depth = np.empty((len(vps), res, res))  # texels outside the rectangles are never read
+    if len(world) == 0:
+        depth[:] = 1.0
+    else:
+        _render_maps(world, vps, rects, constant_bias, slope_bias, depth)
+    _look_up(p, nrm, depth, vps, view_z, 1 if cube else 0, lp, float(normal_offset), code, out, faces)
     return out
 
 

@@ -850,6 +850,44 @@ def _casters_between(height: np.ndarray, plane: np.ndarray, light: np.ndarray) -
     return bool(light[3] == 0 or h.max() < abs(side))
 
 
+def _receiver_visibility(
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    p: np.ndarray,
+    normals: np.ndarray | None,
+    resolution: int,
+    constant_bias: float,
+    slope_bias: float,
+    kernel: str,
+    normal_offset: float,
+) -> np.ndarray:
+    """Compiled ``shadow_map`` visibility: :func:`light_shadow_maps` then :func:`shadow_map_visibility`,
+    same checks and bit-identical values, with only the texels the look-ups read rendered
+    (:func:`blinn_phong.shadow_kernels.receiver_visibility_compiled`)."""
+    cameras = light_cameras(light, tris)  # the checks and their order of light_shadow_maps
+    if not isinstance(resolution, int | np.integer) or resolution < 1:
+        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
+    if constant_bias < 0 or slope_bias < 0:
+        raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
+    n = _lookup_normals(p, normals, normal_offset, kernel)
+    from .shadow_kernels import receiver_visibility_compiled
+
+    cube = len(cameras) == 6
+    return receiver_visibility_compiled(
+        tris,
+        np.stack([proj @ view for view, proj in cameras]),
+        np.stack([view for view, _ in cameras]),
+        int(resolution),
+        p,
+        n,
+        constant_bias=float(constant_bias),
+        slope_bias=float(slope_bias),
+        light_position=np.asarray(light.position, dtype=np.float64) if cube else None,  # type: ignore[union-attr]
+        normal_offset=float(normal_offset),
+        kernel=kernel,
+    )
+
+
 def _light_visibility_checked(
     method: str,
     light: DirectionalLight | PointLight | SpotLight,
@@ -880,6 +918,10 @@ def _light_visibility_checked(
 
         return shadow_volume_visibility(light, tris, p, normals, **volume_options)  # type: ignore[arg-type]
     if method == "shadow_map":
+        if _compiled(engine):
+            return _receiver_visibility(
+                light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, normal_offset
+            )
         maps = light_shadow_maps(
             light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias, engine=engine
         )
