@@ -244,6 +244,39 @@ def _traced_hard(
     return out
 
 
+def _planar_hard(
+    scene: Scene,
+    light: object,
+    tris: np.ndarray,
+    world: np.ndarray,
+    normal: np.ndarray,
+    mesh_of: np.ndarray,
+    plane: object,
+    culling: list[object],
+) -> np.ndarray | None:
+    """Planar shadows (:func:`blinn_phong.shadows.light_visibility` ``"planar"``) where every caster
+    lies between the plane and the light: the plane's points by :func:`_traced_hard` (the shadow
+    rays that method casts against the frame's BVH, most answered by the culling), every other
+    point lit. None where the casters are not all between (the method projects them instead)."""
+    from blinn_phong.shadows import _casters_between, _on_plane
+
+    pl = np.asarray(plane, dtype=np.float64)
+    if isinstance(light, DirectionalLight):
+        homogeneous = np.r_[-np.asarray(light.direction, dtype=np.float64), 0.0]
+    else:
+        homogeneous = np.r_[np.asarray(light.position, dtype=np.float64), 1.0]  # type: ignore[attr-defined]
+    height = tris @ pl[:3] + pl[3]
+    off_plane = np.abs(height).max(axis=1) > 1e-9 * max(float(np.abs(tris).max()), 1.0)
+    on_plane, q, q_normals = _on_plane(world, pl)
+    vis = np.ones(len(world))
+    if not (off_plane.any() and on_plane.any()):
+        return vis
+    if not _casters_between(height[off_plane], pl, homogeneous):
+        return None
+    vis[on_plane] = _traced_hard(scene, light, tris, q, q_normals, mesh_of[on_plane], culling)
+    return vis
+
+
 def _visibility_at(
     scene: Scene,
     lit: list[tuple[object, object]],
@@ -275,14 +308,26 @@ def _visibility_at(
     # world, normal and tris are this frame's own finite float64 arrays: checked once, here
     with trusted_arrays(world, normal, tris), one_bvh:
         for i, (light, c) in enumerate(lit):
+            culled = compiled and mesh_of is not None  # the compiled engine: shadow rays culled
+            planar_rays = culled and c.method == "planar" and set(c.params) == {"plane"}
             if c.method == "soft":
                 if not ray_scene:
                     from blinn_phong.raytrace import cached_ray_scene  # Embree: imported only when used
 
                     ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
                 column = _soft_visibility(light, c.params, ray_scene[0], world, normal)
-            elif compiled and c.method == "ray_traced" and not (coloured or c.params) and mesh_of is not None:
+            elif culled and c.method == "ray_traced" and not (coloured or c.params):
                 column = _traced_hard(scene, light, tris, world, normal, mesh_of, culling)
+            elif (
+                planar_rays
+                and (
+                    planar := _planar_hard(
+                        scene, light, tris, world, normal, mesh_of, c.params["plane"], culling
+                    )
+                )
+                is not None
+            ):
+                column = planar
             elif coloured and c.method == "ray_traced":
                 column = light_visibility(
                     c.method, light, tris, world, normal, transmittance=transmittance, **c.params

@@ -107,3 +107,24 @@ def test_point_light_inside_a_sphere_and_float32_coordinates():
     )
     for light in (inside, LIGHTS["spot"]):
         _check(scene_with([ball32], light, camera), light)
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
+    # Planar shadows with every caster between the plane and the light cast the plane's shadow
+    # rays against the frame's BVH; the frame answers most of them by culling. Same answers.
+    from blinn_phong.pipeline import _planar_hard
+
+    light = LIGHTS[light_name]
+    scene = scene_with(casters("pair"), light, outside_camera())
+    points, normals, mesh_of, tris = _surfaces(scene)
+    plane = (0.0, 0.0, 1.0, 0.0)  # the ground quad of scene_with, z = 0
+    got = _planar_hard(scene, light, tris, points, normals, mesh_of, plane, [])
+    assert got is not None
+    want = light_visibility("planar", light, tris, points, normals, plane=plane)
+    np.testing.assert_array_equal(got, want)
+    assert 0.02 < np.mean(want == 0) < 0.5  # a real shadow on the ground
+    # a caster below the plane is not between it and the light: the frame leaves it to the method
+    sunk = scene_with([sphere_mesh((0.0, 0.0, -1.5), 0.7)], light, outside_camera())
+    points, normals, mesh_of, tris = _surfaces(sunk)
+    assert _planar_hard(sunk, light, tris, points, normals, mesh_of, plane, []) is None
