@@ -211,20 +211,21 @@ def _traced_hard(
     world: np.ndarray,
     normal: np.ndarray,
     mesh_of: np.ndarray,
-    culling: list[object],
+    culling: dict[object, object],
 ) -> np.ndarray:
     """Ray-traced hard visibility of one light, tracing only the rays geometry cannot answer.
 
     :mod:`blinn_phong.ray_culling` proves most rays lit or shadowed (the answers Embree gives);
     the rest go to :func:`blinn_phong.shadows.light_visibility` in one batch.
-    ``culling`` caches the frame's caster tables between lights.
+    ``culling`` caches the frame's caster tables (and :func:`_planar_hard`'s plane heights)
+    between lights.
     """
     from blinn_phong import raytrace  # Embree: imported only when used
     from blinn_phong.ray_culling import LIT, TRACE, caster_tables, rays_to_trace
 
     bvh = raytrace.cached_ray_scene(tris)
-    if not culling:
-        culling.append(caster_tables(scene, bvh.centre))
+    if "tables" not in culling:
+        culling["tables"] = caster_tables(scene, bvh.centre)
     if isinstance(light, DirectionalLight):
         vec = -np.asarray(light.direction, dtype=np.float64)
         vec = vec / np.linalg.norm(vec)
@@ -233,8 +234,9 @@ def _traced_hard(
         vec, positional = np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
     ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
     answer = rays_to_trace(
-        world, normal, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps, culling[0]
-    )  # type: ignore[arg-type]
+        world, normal, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps,
+        culling["tables"],
+    )  # type: ignore[arg-type]  # fmt: skip
     out = (answer == LIT).astype(np.float64)
     index = np.flatnonzero(answer == TRACE)
     if len(index):
@@ -252,7 +254,7 @@ def _planar_hard(
     normal: np.ndarray,
     mesh_of: np.ndarray,
     plane: object,
-    culling: list[object],
+    culling: dict[object, object],
 ) -> np.ndarray | None:
     """Planar shadows (:func:`blinn_phong.shadows.light_visibility` ``"planar"``) where every caster
     lies between the plane and the light: the plane's points by :func:`_traced_hard` (the shadow
@@ -265,8 +267,11 @@ def _planar_hard(
         homogeneous = np.r_[-np.asarray(light.direction, dtype=np.float64), 0.0]
     else:
         homogeneous = np.r_[np.asarray(light.position, dtype=np.float64), 1.0]  # type: ignore[attr-defined]
-    height = tris @ pl[:3] + pl[3]
-    off_plane = np.abs(height).max(axis=1) > 1e-9 * max(float(np.abs(tris).max()), 1.0)
+    key = ("plane", pl.tobytes())
+    if key not in culling:  # (else: the frame's other lights on the same plane)
+        height = tris @ pl[:3] + pl[3]
+        culling[key] = (height, np.abs(height).max(axis=1) > 1e-9 * max(float(np.abs(tris).max()), 1.0))
+    height, off_plane = culling[key]  # type: ignore[misc]
     on_plane, q, q_normals = _on_plane(world, pl)
     vis = np.ones(len(world))
     if not (off_plane.any() and on_plane.any()):
@@ -298,10 +303,10 @@ def _visibility_at(
     coloured = transmittance is not None and any(c.method == "ray_traced" for _, c in lit)
     out = np.empty((len(world), len(lit), 3) if coloured else (len(world), len(lit)))
     ray_scene: list[object] = []
-    culling: list[object] = []
+    culling: dict[object, object] = {}
     shadow_engine = "numba" if compiled else "numpy"
     one_bvh: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
-    if any(c.method in ("ray_traced", "soft") for _, c in lit):
+    if any(c.method in ("ray_traced", "soft", "planar") for _, c in lit):
         from blinn_phong.raytrace import frame_triangles  # Embree: imported only when used
 
         one_bvh = frame_triangles(tris)  # the BVH's cache key computed once per frame, not per light

@@ -43,7 +43,7 @@ def _check(scene: Scene, light) -> tuple[float, int]:
     points, normals, mesh_of, tris = _surfaces(scene)
     assert len(points) > 1000
     full = light_visibility("ray_traced", light, tris, points, normals, engine="numba")
-    culled = _traced_hard(scene, light, tris, points, normals, mesh_of, [])
+    culled = _traced_hard(scene, light, tris, points, normals, mesh_of, {})
     np.testing.assert_array_equal(culled, full)
     bvh = raytrace.cached_ray_scene(tris)
     if isinstance(light, DirectionalLight):
@@ -119,7 +119,7 @@ def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
     scene = scene_with(casters("pair"), light, outside_camera())
     points, normals, mesh_of, tris = _surfaces(scene)
     plane = (0.0, 0.0, 1.0, 0.0)  # the ground quad of scene_with, z = 0
-    got = _planar_hard(scene, light, tris, points, normals, mesh_of, plane, [])
+    got = _planar_hard(scene, light, tris, points, normals, mesh_of, plane, {})
     assert got is not None
     want = light_visibility("planar", light, tris, points, normals, plane=plane)
     np.testing.assert_array_equal(got, want)
@@ -127,4 +127,4 @@ def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
     # a caster below the plane is not between it and the light: the frame leaves it to the method
     sunk = scene_with([sphere_mesh((0.0, 0.0, -1.5), 0.7)], light, outside_camera())
     points, normals, mesh_of, tris = _surfaces(sunk)
-    assert _planar_hard(sunk, light, tris, points, normals, mesh_of, plane, []) is None
+    assert _planar_hard(sunk, light, tris, points, normals, mesh_of, plane, {}) is None
