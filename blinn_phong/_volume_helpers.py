@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["component", "mix", "project_one"]
+__all__ = ["component", "depth_range", "mix", "plane_gap", "project_one"]
 
 
 @numba.njit(inline="always", cache=True)
@@ -62,3 +62,46 @@ def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
             t, v, 3
         ] * vp[r, 3]
     return src[t, v, r]
+
+
+@numba.njit(inline="always", cache=True)
+def depth_range(z0, x0, y0, gx, gy, ax, bx, ay, by):  # pragma: no cover - compiled
+    """The range of the depth plane ``z0 + (gx·(x − x0) + gy·(y − y0))`` over the rectangle
+    [ax, bx] × [ay, by] (its corners), widened past the rounding of evaluating it at a point."""
+    lo = np.inf
+    hi = -np.inf
+    mag = 0.0
+    for corner in range(4):
+        xc = ax if corner % 2 == 0 else bx
+        yc = ay if corner < 2 else by
+        u = gx * (xc - x0)
+        v = gy * (yc - y0)
+        d = z0 + (u + v)
+        lo = min(lo, d)
+        hi = max(hi, d)
+        mag = max(mag, abs(z0) + abs(u) + abs(v))
+    margin = 1e-12 * mag + 1e-300
+    return lo - margin, hi + margin
+
+
+@numba.njit(inline="always", cache=True)
+def plane_gap(z0, x0, y0, gx, gy, a, b, c, xc, yc, ax, bx, ay, by):  # pragma: no cover - compiled
+    """The range of ``(z0 + (gx·(x − x0) + gy·(y − y0))) − (a + (b·(x − xc) + c·(y − yc)))`` (a
+    face's depth plane minus a tile's receiver plane) over [ax, bx] × [ay, by] (its corners: the
+    difference is affine), widened past the rounding of evaluating either plane at a point."""
+    lo = np.inf
+    hi = -np.inf
+    mag = 0.0
+    for corner in range(4):
+        xc_ = ax if corner % 2 == 0 else bx
+        yc_ = ay if corner < 2 else by
+        u = gx * (xc_ - x0)
+        v = gy * (yc_ - y0)
+        s = b * (xc_ - xc)
+        t = c * (yc_ - yc)
+        g = (z0 + (u + v)) - (a + (s + t))
+        lo = min(lo, g)
+        hi = max(hi, g)
+        mag = max(mag, abs(z0) + abs(u) + abs(v) + abs(a) + abs(s) + abs(t))
+    margin = 1e-12 * mag + 1e-300
+    return lo - margin, hi + margin

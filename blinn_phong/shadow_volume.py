@@ -859,6 +859,8 @@ def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool
 def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
     import numba
 
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
+
     @numba.njit(parallel=parallel, cache=True, fastmath=False)
     def count(
         n_bands,
@@ -894,12 +896,21 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         cell_start,
         zlo,
         zhi,
+        fit,
+        order,
         zfail,
+        visibility,
     ):  # pragma: no cover - compiled
-        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c);
-        # zlo/zhi: each tile's receiver depth range
+        # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
+        # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
+        # residuals from it (see ``tile_depths``). Returns (counts, visibility) in the receivers'
+        # input order (``order`` maps sorted → input): with ``visibility`` an empty count array
+        # and 1.0 where the count is 0, else 0.0; without it the counts and an empty array.
         n_cells = nx * ny
-        counts = np.zeros(px.shape[0], np.int64)
+        m = px.shape[0]
+        counts = np.zeros(m, np.int64)
+        out_counts = np.zeros(0 if visibility else m, np.int64)
+        out_vis = np.zeros(m if visibility else 0)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
         # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
         # gets a share of the busy rows whatever the threads' static split of the bands
@@ -907,38 +918,53 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
             for t in range(front.shape[0]):
                 if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
                     continue
+                # the face's fields as scalars (the same values: the same arithmetic below)
+                ex0, ex1, ex2 = ex[t, 0], ex[t, 1], ex[t, 2]
+                ey0, ey1, ey2 = ey[t, 0], ey[t, 1], ey[t, 2]
+                dx0, dx1, dx2 = edx[t, 0], edx[t, 1], edx[t, 2]
+                dy0, dy1, dy2 = edy[t, 0], edy[t, 1], edy[t, 2]
+                es0, es1, es2 = esign[t, 0], esign[t, 1], esign[t, 2]
+                et0, et1, et2 = etie[t, 0], etie[t, 1], etie[t, 2]
+                zt, xt, yt, gxt, gyt = z0[t], x0[t], y0[t], gx[t], gy[t]
+                lx, hx, ly, hy = bx0[t], bx1[t], by0[t], by1[t]
+                ft = front[t]
+                # a face inside one tile: no strip to clip it to, no tile inside it
+                single = cx0[t] == cx1[t] and cy0[t] == cy1[t]
                 if n_bands == 1:
                     lo = cy0[t]
                 else:  # the first row >= cy0 of this band
                     d = band - cy0[t] % n_bands
                     lo = cy0[t] + (d + n_bands if d < 0 else d)
                 for row in range(lo, cy1[t] + 1, n_bands):
-                    # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
-                    sy0 = ymin + row * ch - 1e-9 * ch
-                    sy1 = ymin + (row + 1) * ch + 1e-9 * ch
-                    span_lo = np.inf
-                    span_hi = -np.inf
-                    for i in range(3):
-                        if edy[t, i] == 0.0:
-                            if sy0 <= ey[t, i] <= sy1:
-                                span_lo = min(span_lo, ex[t, i])
-                                span_hi = max(span_hi, ex[t, i] + edx[t, i])
+                    c_lo = cx0[t]
+                    c_hi = cx1[t]
+                    if not single:
+                        # the face's x-extent inside this row of tiles: its edges clipped to the strip
+                        sy0 = ymin + row * ch - 1e-9 * ch
+                        sy1 = ymin + (row + 1) * ch + 1e-9 * ch
+                        span_lo = np.inf
+                        span_hi = -np.inf
+                        for i in range(3):
+                            if edy[t, i] == 0.0:
+                                if sy0 <= ey[t, i] <= sy1:
+                                    span_lo = min(span_lo, ex[t, i])
+                                    span_hi = max(span_hi, ex[t, i] + edx[t, i])
+                                continue
+                            ta = (sy0 - ey[t, i]) / edy[t, i]
+                            tb = (sy1 - ey[t, i]) / edy[t, i]
+                            t_lo = max(min(ta, tb), 0.0)
+                            t_hi = min(max(ta, tb), 1.0)
+                            if t_lo > t_hi:
+                                continue
+                            xa = ex[t, i] + t_lo * edx[t, i]
+                            xb = ex[t, i] + t_hi * edx[t, i]
+                            span_lo = min(span_lo, xa, xb)
+                            span_hi = max(span_hi, xa, xb)
+                        if span_lo > span_hi:
                             continue
-                        ta = (sy0 - ey[t, i]) / edy[t, i]
-                        tb = (sy1 - ey[t, i]) / edy[t, i]
-                        t_lo = max(min(ta, tb), 0.0)
-                        t_hi = min(max(ta, tb), 1.0)
-                        if t_lo > t_hi:
-                            continue
-                        xa = ex[t, i] + t_lo * edx[t, i]
-                        xb = ex[t, i] + t_hi * edx[t, i]
-                        span_lo = min(span_lo, xa, xb)
-                        span_hi = max(span_hi, xa, xb)
-                    if span_lo > span_hi:
-                        continue
-                    pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
-                    c_lo = max(cx0[t], int(np.floor((span_lo - pad - xmin) / cw)))
-                    c_hi = min(cx1[t], int(np.floor((span_hi + pad - xmin) / cw)))
+                        pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
+                        c_lo = max(c_lo, int(np.floor((span_lo - pad - xmin) / cw)))
+                        c_hi = min(c_hi, int(np.floor((span_hi + pad - xmin) / cw)))
                     for col in range(c_lo, c_hi + 1):
                         cell = row * nx + col
                         s0 = cell_start[cell]
@@ -950,84 +976,89 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                         bx = xmin + (col + 1) * cw + 1e-9 * cw
                         ay = ymin + row * ch - 1e-9 * ch
                         by = ymin + (row + 1) * ch + 1e-9 * ch
-                        # tile against the triangle: outside one edge, or inside all three
-                        outside = False
-                        inside_all = True
-                        for i in range(3):
-                            lo_e = np.inf
-                            hi_e = -np.inf
-                            mag = 0.0
-                            for corner in range(4):
-                                xc = ax if corner % 2 == 0 else bx
-                                yc = ay if corner < 2 else by
-                                u = edx[t, i] * (yc - ey[t, i])
-                                v = edy[t, i] * (xc - ex[t, i])
-                                e = esign[t, i] * (u - v)
-                                lo_e = min(lo_e, e)
-                                hi_e = max(hi_e, e)
-                                mag = max(mag, abs(u) + abs(v))
-                            margin = 1e-12 * mag + 1e-300
-                            if hi_e < -margin:
-                                outside = True
-                                break
-                            if lo_e <= margin:
-                                inside_all = False
-                        if outside:
-                            continue
-                        # the face's depth plane over the tile
-                        lo_z = np.inf
-                        hi_z = -np.inf
-                        mag = 0.0
-                        for corner in range(4):
-                            xc = ax if corner % 2 == 0 else bx
-                            yc = ay if corner < 2 else by
-                            u = gx[t] * (xc - x0[t])
-                            v = gy[t] * (yc - y0[t])
-                            d = z0[t] + (u + v)
-                            lo_z = min(lo_z, d)
-                            hi_z = max(hi_z, d)
-                            mag = max(mag, abs(z0[t]) + abs(u) + abs(v))
-                        margin = 1e-12 * mag + 1e-300
-                        all_nearer = hi_z < zlo[cell] - margin
-                        none_nearer = lo_z > zhi[cell] + margin
+                        inside_all = False
+                        if not single:  # tile against the face: outside one edge, or inside all three
+                            outside = False
+                            inside_all = True
+                            for i in range(3):
+                                lo_e = np.inf
+                                hi_e = -np.inf
+                                mag = 0.0
+                                for corner in range(4):
+                                    xc = ax if corner % 2 == 0 else bx
+                                    yc = ay if corner < 2 else by
+                                    u = edx[t, i] * (yc - ey[t, i])
+                                    v = edy[t, i] * (xc - ex[t, i])
+                                    e = esign[t, i] * (u - v)
+                                    lo_e = min(lo_e, e)
+                                    hi_e = max(hi_e, e)
+                                    mag = max(mag, abs(u) + abs(v))
+                                margin = 1e-12 * mag + 1e-300
+                                if hi_e < -margin:
+                                    outside = True
+                                    break
+                                if lo_e <= margin:
+                                    inside_all = False
+                            if outside:
+                                continue
+                        # the face's depth over the part of the tile inside its bounding box (no
+                        # receiver outside that box is counted) against the receivers' depths:
+                        # their range, then (when the ranges overlap) their plane and residuals
+                        rx0 = max(ax, lx)
+                        rx1 = min(bx, hx)
+                        ry0 = max(ay, ly)
+                        ry1 = min(by, hy)
+                        lo_z, hi_z = vh.depth_range(zt, xt, yt, gxt, gyt, rx0, rx1, ry0, ry1)
+                        all_nearer = hi_z < zlo[cell]
+                        none_nearer = lo_z > zhi[cell]
+                        if not (all_nearer or none_nearer):
+                            lo_g, hi_g = vh.plane_gap(
+                                zt, xt, yt, gxt, gyt, fit[cell, 0], fit[cell, 1], fit[cell, 2],
+                                xmin + (col + 0.5) * cw, ymin + (row + 0.5) * ch, rx0, rx1, ry0, ry1,
+                            )  # fmt: skip
+                            all_nearer = hi_g < fit[cell, 3]
+                            none_nearer = lo_g > fit[cell, 4]
                         if zfail:
                             if all_nearer:
                                 continue
                             if inside_all and none_nearer:
-                                whole[cell] -= front[t]
+                                whole[cell] -= ft
                                 continue
                         else:
                             if none_nearer:
                                 continue
                             if inside_all and all_nearer:
-                                whole[cell] += front[t]
+                                whole[cell] += ft
                                 continue
-                        for k in range(s0, s1):
-                            p = k
+                        for p in range(s0, s1):
                             x = px[p]
                             y = py[p]
-                            if x < bx0[t] or x > bx1[t] or y < by0[t] or y > by1[t]:
+                            if x < lx or x > hx or y < ly or y > hy:
                                 continue
-                            ok = True
-                            for i in range(3):
-                                e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
-                                se = esign[t, i] * e
-                                if not (se > 0 or (e == 0 and etie[t, i])):
-                                    ok = False
-                                    break
-                            if not ok:
+                            e = dx0 * (y - ey0) - dy0 * (x - ex0)
+                            if not (es0 * e > 0 or (e == 0 and et0)):
                                 continue
-                            depth = z0[t] + (gx[t] * (x - x0[t]) + gy[t] * (y - y0[t]))
+                            e = dx1 * (y - ey1) - dy1 * (x - ex1)
+                            if not (es1 * e > 0 or (e == 0 and et1)):
+                                continue
+                            e = dx2 * (y - ey2) - dy2 * (x - ex2)
+                            if not (es2 * e > 0 or (e == 0 and et2)):
+                                continue
+                            depth = zt + (gxt * (x - xt) + gyt * (y - yt))
                             if zfail:
                                 if not (depth < pz[p]):
-                                    counts[p] -= front[t]
+                                    counts[p] -= ft
                             elif depth < pz[p]:
-                                counts[p] += front[t]
+                                counts[p] += ft
             for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
-                        counts[k] += whole[cell]
-        return counts
+                        c = counts[k] + whole[cell]
+                        if visibility:
+                            out_vis[order[k]] = 1.0 if c == 0 else 0.0
+                        else:
+                            out_counts[order[k]] = c
+        return out_counts, out_vis
 
     return count
 
@@ -1115,7 +1146,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
-        """Stable counting sort of the receivers by tile; per tile the depth range."""
+        """Stable counting sort of the receivers by tile."""
         m = px.shape[0]
         n_cells = nx * ny
         cell = np.empty(m, np.int64)
@@ -1139,8 +1170,6 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         sx = np.empty(m)
         sy = np.empty(m)
         sz = np.empty(m)
-        zlo = np.full(n_cells, np.inf)
-        zhi = np.full(n_cells, -np.inf)
         for i in range(m):
             c = cell[i]
             k = fill[c]
@@ -1148,11 +1177,89 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             order[k] = i
             sx[k] = px[i]
             sy[k] = py[i]
-            z = pz[i]
-            sz[k] = z
-            zlo[c] = min(zlo[c], z)
-            zhi[c] = max(zhi[c], z)
-        return order, cell_start, sx, sy, sz, zlo, zhi
+            sz[k] = pz[i]
+        return order, cell_start, sx, sy, sz
+
+    @numba.njit(parallel=parallel, cache=True)
+    def tile_depths(px, py, pz, cell_start, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per tile its receivers' depth range (zlo, zhi), and a least-squares depth plane
+        ``a + (b·(x − xc) + c·(y − yc))`` about the tile's centre (xc, yc) with the lowest and
+        highest residual ``z − plane`` of its receivers, widened past rounding: (n_cells, 5) rows
+        (a, b, c, r_lo, r_hi). Any plane would do (the residuals are measured); a good one lets
+        the kernel settle a tile whose receivers lie on one surface (a ground under its own
+        light cap) without testing each receiver."""
+        n_cells = nx * ny
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        fit = np.zeros((n_cells, 5))
+        for row in numba.prange(ny):
+            yc = ymin + (row + 0.5) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
+                xc = xmin + (cell - row * nx + 0.5) * cw
+                zref = pz[k0]
+                n = k1 - k0
+                su = 0.0
+                sv = 0.0
+                sw = 0.0
+                suu = 0.0
+                suv = 0.0
+                svv = 0.0
+                suw = 0.0
+                svw = 0.0
+                lo = np.inf
+                hi = -np.inf
+                for k in range(k0, k1):
+                    u = px[k] - xc
+                    v = py[k] - yc
+                    w = pz[k] - zref
+                    lo = min(lo, pz[k])
+                    hi = max(hi, pz[k])
+                    su += u
+                    sv += v
+                    sw += w
+                    suu += u * u
+                    suv += u * v
+                    svv += v * v
+                    suw += u * w
+                    svw += v * w
+                zlo[cell] = lo
+                zhi[cell] = hi
+                mu = su / n
+                mv = sv / n
+                mw = sw / n
+                cuu = suu / n - mu * mu
+                cuv = suv / n - mu * mv
+                cvv = svv / n - mv * mv
+                cuw = suw / n - mu * mw
+                cvw = svw / n - mv * mw
+                det = cuu * cvv - cuv * cuv
+                b = 0.0
+                c = 0.0
+                if n >= 3 and det > 1e-6 * cuu * cvv:
+                    b = (cuw * cvv - cvw * cuv) / det
+                    c = (cvw * cuu - cuw * cuv) / det
+                a = zref + (mw - (b * mu + c * mv))
+                r_lo = np.inf
+                r_hi = -np.inf
+                mag = 0.0
+                for k in range(k0, k1):
+                    u = b * (px[k] - xc)
+                    v = c * (py[k] - yc)
+                    r = pz[k] - (a + (u + v))
+                    r_lo = min(r_lo, r)
+                    r_hi = max(r_hi, r)
+                    mag = max(mag, abs(pz[k]) + abs(a) + abs(u) + abs(v))
+                margin = 1e-12 * mag + 1e-300
+                fit[cell, 0] = a
+                fit[cell, 1] = b
+                fit[cell, 2] = c
+                fit[cell, 3] = r_lo - margin
+                fit[cell, 4] = r_hi + margin
+        return zlo, zhi, fit
 
     @numba.njit(parallel=parallel, cache=True)
     def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
@@ -1275,21 +1382,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
         )  # fmt: skip
 
-    @numba.njit(parallel=parallel, cache=True)
-    def lit(order, sorted_counts):  # pragma: no cover - compiled
-        out = np.empty(order.shape[0])
-        for k in numba.prange(order.shape[0]):
-            out[order[k]] = 1.0 if sorted_counts[k] == 0 else 0.0
-        return out
-
-    @numba.njit(parallel=parallel, cache=True)
-    def scatter(order, sorted_counts):  # pragma: no cover - compiled
-        out = np.empty(order.shape[0], np.int64)
-        for k in numba.prange(order.shape[0]):
-            out[order[k]] = sorted_counts[k]
-        return out
-
-    return project, bin_points, setup, lit, scatter
+    return project, bin_points, setup, tile_depths
 
 
 def _threads() -> int:
@@ -1413,7 +1506,7 @@ def _count(
         counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
         return (counts == 0).astype(np.float64) if visibility else counts
     parallel = len(px) >= _PARALLEL_RECEIVERS
-    _, bin_points, setup, lit, scatter = _fast_kernels(parallel)
+    _, bin_points, setup, tile_depths = _fast_kernels(parallel)
     fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
     todo = fields[-1]
     if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
@@ -1421,16 +1514,17 @@ def _count(
         cut = setup(cut, vp, False, False, guard, xmin, ymin, cw, ch, nx, ny)
         fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
     st = _Setup(*fields[:-1])
-    order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
+    order, cell_start, sx, sy, sz = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
+    zlo, zhi, fit = tile_depths(sx, sy, sz, cell_start, xmin, ymin, cw, ch, nx, ny)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     n_bands = min(ny, _threads()) if parallel else 1
-    sorted_counts = _kernel(parallel)(
+    counts, lit = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
         st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
-        sx, sy, sz, cell_start, zlo, zhi, zfail,
+        sx, sy, sz, cell_start, zlo, zhi, fit, order, zfail, visibility,
     )  # fmt: skip
-    return lit(order, sorted_counts) if visibility else scatter(order, sorted_counts)
+    return lit if visibility else counts
 
 
 def zpass_is_safe(

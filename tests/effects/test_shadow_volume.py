@@ -111,6 +111,46 @@ def test_engines_count_identically(method, parallel, monkeypatch):
     assert np.count_nonzero(a) > 50
 
 
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize("method", ["zfail", "zpass"])
+@pytest.mark.parametrize("light_name", ["directional", "point"])
+def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, monkeypatch):
+    """Receivers lying 1e-4 above the planes of their own light caps (a ground, a floating open
+    quad, a closed box's top), as the renderer moves them: the compiled kernel settles whole
+    tiles from each tile's depth range and depth plane; the numpy engine tests every receiver.
+    The counts agree exactly (integers from the same float expressions), and the quad's cap,
+    in front of the ground below it, really counts there."""
+    import blinn_phong.shadow_volume as sv
+
+    if parallel:
+        monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
+        monkeypatch.setattr(sv, "_threads", lambda: 3)
+    light = LIGHTS[light_name]
+    ground_p, ground_t, _ = grid_plane(1, 1, (8.0, 8.0))
+    quad_p, quad_t, _ = grid_plane(1, 1, (1.2, 1.0))
+    quad = quad_p[quad_t] + np.array([-0.6, 0.2, 1.1])
+    box = world_triangles(scene_with(casters("box"), light, outside_camera()))
+    tris = np.concatenate([ground_p[ground_t], quad, box + np.array([1.2, -0.4, 0.0])])
+    s = 0.01
+    gx, gy = np.meshgrid(np.arange(-2.0, 2.0, s), np.arange(-1.6, 2.0, s))
+    ground = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, 1e-4)], axis=1)
+    qx, qy = np.meshgrid(np.arange(-1.15, -0.05, s), np.arange(-0.25, 0.65, s))
+    on_quad = np.stack([qx.ravel(), qy.ravel(), np.full(qx.size, 1.1 + 1e-4)], axis=1)
+    bx, by = np.meshgrid(np.arange(0.75, 1.65, s), np.arange(-0.85, 0.05, s))
+    on_box = np.stack([bx.ravel(), by.ravel(), np.full(bx.size, 1.0 + 1e-4)], axis=1)
+    pts = np.concatenate([ground, on_quad, on_box])
+    view = look_at((0.3, -5.0, 4.0), (0.0, 0.0, 0.4), (0.0, 0.0, 1.0))
+    camera = Camera.perspective(50.0, 4 / 3, 0.5, 30.0, view=view)
+    volume = shadow_volume_triangles(tris, light, caps=True if method == "zfail" else "light")
+    a = stencil_counts(volume, camera.view, camera.projection, pts, stencil=method, engine="numpy")
+    b = stencil_counts(volume, camera.view, camera.projection, pts, stencil=method, engine="numba")
+    np.testing.assert_array_equal(a, b)
+    # the scene means something: ground receivers in the quad's and the box's shadows
+    assert 500 < np.count_nonzero(a[: len(ground)]) < len(ground) // 2
+    assert np.count_nonzero(a[len(ground) :]) == 0  # the tops are lit
+
+
 def _ellipse_area(light, centre, radius):
     lv, c = np.asarray(light, float), np.asarray(centre, float)
     axis = c - lv
