@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["component", "depth_range", "mix", "plane_gap", "project_one"]
+__all__ = ["component", "depth_range", "finite_input", "mix", "plane_gap", "project_point"]
 
 
 @numba.njit(inline="always", cache=True)
@@ -22,7 +22,9 @@ def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uin
 
 
 @numba.njit(inline="always", cache=True)
-def project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw):  # pragma: no cover
+def project_point(p, n, light_vec, directional, offset, moved, vp, i):  # pragma: no cover - compiled
+    """Receiver ``i`` moved ``offset`` along its normal towards the light's side (when ``moved``),
+    as normalised-device (x, y, z) and clip w (the numpy engine's expressions, in their order)."""
     q0 = p[i, 0]
     q1 = p[i, 1]
     q2 = p[i, 2]
@@ -49,10 +51,15 @@ def project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, 
     c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
     c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
     c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
-    px[i] = c0 / c3
-    py[i] = c1 / c3
-    pz[i] = c2 / c3
-    pw[i] = c3
+    return c0 / c3, c1 / c3, c2 / c3, c3
+
+
+@numba.njit(inline="always", cache=True)
+def finite_input(p, n, moved, i):  # pragma: no cover - compiled
+    """False when receiver ``i`` (or, when ``moved``, its normal) has a NaN or infinite coordinate."""
+    if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+        return False
+    return not moved or (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2]))
 
 
 @numba.njit(inline="always", cache=True)

@@ -102,6 +102,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,6 +126,7 @@ STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
+_PARALLEL_FACES = 1_000_000  # fewer volume triangles are set up on one thread
 
 
 # --------------------------------------------------------------------------- input checks
@@ -900,18 +902,25 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         order,
         zfail,
         visibility,
+        slack_x,
+        slack_y,
     ):  # pragma: no cover - compiled
         # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
         # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
         # residuals from it (see ``tile_depths``). Returns (counts, visibility) in the receivers'
         # input order (``order`` maps sorted → input): with ``visibility`` an empty count array
         # and 1.0 where the count is 0, else 0.0; without it the counts and an empty array.
+        # slack_x/slack_y: how far a receiver may lie outside its tile (0 when binned from these
+        # very positions; see ``project_binned``): every tile is widened by as much, plus 1e-9
+        # of its size for rounding of the binning.
         n_cells = nx * ny
         m = px.shape[0]
         counts = np.zeros(m, np.int64)
         out_counts = np.zeros(0 if visibility else m, np.int64)
         out_vis = np.zeros(m if visibility else 0)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
+        wx = 1e-9 * cw + slack_x
+        wy = 1e-9 * ch + slack_y
         # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
         # gets a share of the busy rows whatever the threads' static split of the bands
         for band in numba.prange(n_bands):
@@ -940,8 +949,8 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                     c_hi = cx1[t]
                     if not single:
                         # the face's x-extent inside this row of tiles: its edges clipped to the strip
-                        sy0 = ymin + row * ch - 1e-9 * ch
-                        sy1 = ymin + (row + 1) * ch + 1e-9 * ch
+                        sy0 = ymin + row * ch - wy
+                        sy1 = ymin + (row + 1) * ch + wy
                         span_lo = np.inf
                         span_hi = -np.inf
                         for i in range(3):
@@ -962,7 +971,7 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                             span_hi = max(span_hi, xa, xb)
                         if span_lo > span_hi:
                             continue
-                        pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
+                        pad = wx + 1e-12 * (abs(span_lo) + abs(span_hi))
                         c_lo = max(c_lo, int(np.floor((span_lo - pad - xmin) / cw)))
                         c_hi = min(c_hi, int(np.floor((span_hi + pad - xmin) / cw)))
                     for col in range(c_lo, c_hi + 1):
@@ -971,11 +980,11 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                         s1 = cell_start[cell + 1]
                         if s0 == s1:
                             continue
-                        # the tile's rectangle, widened past rounding of the binning
-                        ax = xmin + col * cw - 1e-9 * cw
-                        bx = xmin + (col + 1) * cw + 1e-9 * cw
-                        ay = ymin + row * ch - 1e-9 * ch
-                        by = ymin + (row + 1) * ch + 1e-9 * ch
+                        # the tile's rectangle, widened to hold every receiver binned into it
+                        ax = xmin + col * cw - wx
+                        bx = xmin + (col + 1) * cw + wx
+                        ay = ymin + row * ch - wy
+                        by = ymin + (row + 1) * ch + wy
                         inside_all = False
                         if not single:  # tile against the face: outside one edge, or inside all three
                             outside = False
@@ -1113,10 +1122,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         px = np.empty(m)
         py = np.empty(m)
         pz = np.empty(m)
-        pw = np.empty(m)
         n_chunks = 64
-        # per chunk: min/max of x and y, min of w, and 1 if an input was not finite
-        stats = np.empty((n_chunks, 6))
+        # per chunk: min/max of x and y, min of w, 1 if an input was not finite, (unused) 0, 0
+        stats = np.zeros((n_chunks, 8))
         size = (m + n_chunks - 1) // n_chunks
         for chunk in numba.prange(n_chunks):
             xlo = np.inf
@@ -1126,23 +1134,77 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             wlo = np.inf
             bad = 0.0
             for i in range(chunk * size, min(m, (chunk + 1) * size)):
-                if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+                if not vh.finite_input(p, n, moved, i):
                     bad = 1.0
-                if moved and not (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2])):
-                    bad = 1.0
-                vh.project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
-                xlo = min(xlo, px[i])
-                xhi = max(xhi, px[i])
-                ylo = min(ylo, py[i])
-                yhi = max(yhi, py[i])
-                wlo = min(wlo, pw[i])
+                x, y, z, w = vh.project_point(p, n, light_vec, directional, offset, moved, vp, i)
+                px[i] = x
+                py[i] = y
+                pz[i] = z
+                xlo = min(xlo, x)
+                xhi = max(xhi, x)
+                ylo = min(ylo, y)
+                yhi = max(yhi, y)
+                wlo = min(wlo, w)
             stats[chunk, 0] = xlo
             stats[chunk, 1] = xhi
             stats[chunk, 2] = ylo
             stats[chunk, 3] = yhi
             stats[chunk, 4] = wlo
             stats[chunk, 5] = bad
-        return px, py, pz, pw, stats
+        return px, py, pz, stats
+
+    @numba.njit(parallel=parallel, cache=True)
+    def project_binned(
+        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny
+    ):  # pragma: no cover - compiled
+        """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
+        at ``k``), with how far any receiver now lies outside its tile (a receiver moved for
+        another light may cross a border: the kernel widens every tile by as much)."""
+        m = p.shape[0]
+        sx = np.empty(m)
+        sy = np.empty(m)
+        sz = np.empty(m)
+        # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
+        # largest distance of a receiver outside its tile along x and along y
+        stats = np.zeros((ny, 8))
+        for row in numba.prange(ny):
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            out_x = 0.0
+            out_y = 0.0
+            ty0 = ymin + row * ch
+            ty1 = ymin + (row + 1) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                tx0 = xmin + (cell - row * nx) * cw
+                tx1 = xmin + (cell - row * nx + 1) * cw
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    i = order[k]
+                    if not vh.finite_input(p, n, moved, i):
+                        bad = 1.0
+                    x, y, z, w = vh.project_point(p, n, light_vec, directional, offset, moved, vp, i)
+                    sx[k] = x
+                    sy[k] = y
+                    sz[k] = z
+                    xlo = min(xlo, x)
+                    xhi = max(xhi, x)
+                    ylo = min(ylo, y)
+                    yhi = max(yhi, y)
+                    wlo = min(wlo, w)
+                    out_x = max(out_x, tx0 - x, x - tx1)
+                    out_y = max(out_y, ty0 - y, y - ty1)
+            stats[row, 0] = xlo
+            stats[row, 1] = xhi
+            stats[row, 2] = ylo
+            stats[row, 3] = yhi
+            stats[row, 4] = wlo
+            stats[row, 5] = bad
+            stats[row, 6] = out_x
+            stats[row, 7] = out_y
+        return sx, sy, sz, stats
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
@@ -1262,11 +1324,14 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         return zlo, zhi, fit
 
     @numba.njit(parallel=parallel, cache=True)
-    def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+    def setup(
+        src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
+    ):  # pragma: no cover - compiled
         """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
         ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
         a triangle that crosses the near plane or the guard band (when ``check``) is flagged in
-        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area."""
+        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area. Its tiles
+        are those its bounding box meets once widened by the receivers' slack (see ``count``)."""
         s = src.shape[0]
         ex = np.empty((s, 3))
         ey = np.empty((s, 3))
@@ -1363,10 +1428,10 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             hi_x = max(xa, xb, xc_)
             lo_y = min(ya, yb, yc_)
             hi_y = max(ya, yb, yc_)
-            fx0 = np.floor((lo_x - xmin) / cw)
-            fx1 = np.floor((hi_x - xmin) / cw)
-            fy0 = np.floor((lo_y - ymin) / ch)
-            fy1 = np.floor((hi_y - ymin) / ch)
+            fx0 = np.floor((lo_x - slack_x - xmin) / cw)
+            fx1 = np.floor((hi_x + slack_x - xmin) / cw)
+            fy0 = np.floor((lo_y - slack_y - ymin) / ch)
+            fy1 = np.floor((hi_y + slack_y - ymin) / ch)
             cx0[t] = np.int64(min(max(fx0, 0.0), float(nx)))
             cx1[t] = np.int64(min(max(fx1, -1.0), float(nx - 1)))
             cy0[t] = np.int64(min(max(fy0, 0.0), float(ny)))
@@ -1382,7 +1447,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
         )  # fmt: skip
 
-    return project, bin_points, setup, tile_depths
+    return project, bin_points, setup, tile_depths, project_binned
 
 
 def _threads() -> int:
@@ -1440,8 +1505,36 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
-    px, py, pz, bounds = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
-    return _count(vol, vp, px, py, pz, bounds, stencil == "zfail", numba_path)
+    rec = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
+    return _count(vol, vp, rec, stencil == "zfail")
+
+
+@dataclass(frozen=True, eq=False)
+class _Receivers:
+    """Projected receivers: normalised-device (x, y, z) and their (xmin, xmax, ymin, ymax).
+
+    The numpy engine keeps them in input order (``order`` None). The compiled engine keeps them
+    sorted by the tiles of ``grid`` (receiver ``order[k]`` at ``k``, tile c holding
+    ``cell_start[c]:cell_start[c + 1]``), with ``slack`` = (x, y): how far a receiver may lie
+    outside its tile (0 when binned from these very positions).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    bounds: tuple[float, float, float, float]
+    grid: tuple[float, float, float, float, int, int] | None = None
+    order: np.ndarray | None = None
+    cell_start: np.ndarray | None = None
+    slack: tuple[float, float] = (0.0, 0.0)
+
+
+#: The last compiled binning of receivers: (weak references to the points and normals, the
+#: view-projection bytes, grid, order, cell_start). The lights of a frame count the same
+#: receivers, moved by ``offset`` towards each light: the next light projects straight into
+#: this order instead of sorting again. Any permutation would count the same (every tile's
+#: bounds, depths and slack are measured again); a good one only makes the tiles tight.
+_BINNING: list[tuple] = []
 
 
 def _projected(
@@ -1453,22 +1546,31 @@ def _projected(
     moved: bool,
     vp: np.ndarray,
     numba_path: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float, float, float]]:
+    reuse: bool = False,
+) -> _Receivers:
     """Receivers (moved ``offset`` towards the light's side when ``moved``) in normalised-device
-    coordinates, and their (xmin, xmax, ymin, ymax); raises if a receiver is behind the camera
-    or a point or normal is not finite."""
+    coordinates; the compiled engine also bins them into tiles (reusing the last binning of the
+    same point and normal arrays under the same camera when ``reuse``). Raises if a receiver is
+    behind the camera or a point or normal is not finite."""
+    m = len(p)
     if numba_path:
         # small jobs run serially: a parallel region costs more than it saves on a busy machine
-        kernels = _fast_kernels(len(p) >= _PARALLEL_RECEIVERS)
-        px, py, pz, _, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+        parallel = m >= _PARALLEL_RECEIVERS
+        kernels = _fast_kernels(parallel)
+        key = vp.tobytes()
+        cached = _BINNING[0] if reuse and _BINNING else None
+        if cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key:
+            grid, order, cell_start = cached[3:]
+            sx, sy, sz, stats = kernels[4](
+                p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid
+            )
+        else:
+            px, py, pz, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+            cached = None
         bad = bool(stats[:, 5].any())
-        w_ok = bool(stats[:, 4].min() > 0)
-        bounds = (
-            float(stats[:, 0].min()),
-            float(stats[:, 1].max()),
-            float(stats[:, 2].min()),
-            float(stats[:, 3].max()),
-        )
+        w_ok = bool(stats[:, 4].min() > 0) if m else True
+        lo, hi = stats.min(axis=0), stats.max(axis=0)
+        bounds = (float(lo[0]), float(hi[1]), float(lo[2]), float(hi[3])) if m else (0.0,) * 4
     else:
         bad = not (np.all(np.isfinite(p)) and (not moved or np.all(np.isfinite(n))))
         q = _offset_numpy(p, n, light_vec, directional, offset) if moved else p
@@ -1481,48 +1583,57 @@ def _projected(
         raise ValueError("points/normals: expected finite coordinates, got NaN or Inf")
     if not w_ok:
         raise ValueError(f"points: some of the {len(p)} receivers lie behind the camera (clip w <= 0)")
-    return px, py, pz, bounds
+    if not numba_path:
+        return _Receivers(px, py, pz, bounds)
+    if cached is not None:
+        slack = (float(max(stats[:, 6].max(), 0.0)), float(max(stats[:, 7].max(), 0.0)))
+        return _Receivers(sx, sy, sz, bounds, grid, order, cell_start, slack)
+    grid = _grid_params(m, bounds)
+    order, cell_start, sx, sy, sz = kernels[1](px, py, pz, *grid)
+    if reuse:
+        try:
+            _BINNING[:] = [(weakref.ref(p), weakref.ref(n), key, grid, order, cell_start)]
+        except TypeError:  # an array that takes no weak reference: not kept
+            _BINNING.clear()
+    return _Receivers(sx, sy, sz, bounds, grid, order, cell_start)
 
 
 def _count(
-    vol: np.ndarray,
-    vp: np.ndarray,
-    px: np.ndarray,
-    py: np.ndarray,
-    pz: np.ndarray,
-    bounds: tuple[float, float, float, float],
-    zfail: bool,
-    numba_path: bool,
-    visibility: bool = False,
+    vol: np.ndarray, vp: np.ndarray, rec: _Receivers, zfail: bool, visibility: bool = False
 ) -> np.ndarray:
-    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers
-    whose (xmin, xmax, ymin, ymax) are ``bounds``."""
-    grid = _grid_params(len(px), bounds)
-    xmin, ymin, cw, ch, nx, ny = grid
+    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers,
+    in their input order."""
+    bounds = rec.bounds
     guard = 2.0 * max(*(abs(b) for b in bounds), 1.0) + 1.0
-    if not numba_path:
+    if rec.order is None:  # the numpy engine
+        grid = _grid_params(len(rec.x), bounds)
         st = _setup(_transform(vol, vp), grid, guard)
-        cell_start, order = _bin_numpy(px, py, grid)
-        counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+        cell_start, order = _bin_numpy(rec.x, rec.y, grid)
+        counts = _count_numpy(st, rec.x, rec.y, rec.z, cell_start, order, grid[4], zfail)
         return (counts == 0).astype(np.float64) if visibility else counts
-    parallel = len(px) >= _PARALLEL_RECEIVERS
-    _, bin_points, setup, tile_depths = _fast_kernels(parallel)
-    fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
+    grid = rec.grid
+    xmin, ymin, cw, ch, nx, ny = grid
+    slack_x, slack_y = rec.slack
+    parallel = len(rec.x) >= _PARALLEL_RECEIVERS
+    _, _, setup, tile_depths, _ = _fast_kernels(parallel)
+    # the volume's set-up is small work: one thread (no parallel region to wait for)
+    serial_setup = _fast_kernels(False)[2] if len(vol) < _PARALLEL_FACES else setup
+    fields = serial_setup(vol, vp, True, True, guard, *grid, slack_x, slack_y)
     todo = fields[-1]
     if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
         cut = _clip(_transform(vol[todo], vp), guard)
-        cut = setup(cut, vp, False, False, guard, xmin, ymin, cw, ch, nx, ny)
+        cut = serial_setup(cut, vp, False, False, guard, *grid, slack_x, slack_y)
         fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
     st = _Setup(*fields[:-1])
-    order, cell_start, sx, sy, sz = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
-    zlo, zhi, fit = tile_depths(sx, sy, sz, cell_start, xmin, ymin, cw, ch, nx, ny)
+    zlo, zhi, fit = tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     n_bands = min(ny, _threads()) if parallel else 1
     counts, lit = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
         st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
-        sx, sy, sz, cell_start, zlo, zhi, fit, order, zfail, visibility,
+        rec.x, rec.y, rec.z, rec.cell_start, zlo, zhi, fit, rec.order, zfail, visibility,
+        slack_x, slack_y,
     )  # fmt: skip
     return lit if visibility else counts
 
@@ -1673,10 +1784,10 @@ def shadow_volume_visibility(
         extent = 4.0 * (span + reach) + 1.0
     vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     # offset and projection in one compiled pass (the numpy engine: the same expressions)
-    px, py, pz, bounds = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path)
+    rec = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path, reuse=True)
     topo, key = _topology_with_key(tris)
     if stencil == "auto":
-        stencil = _choose(light, tris, key, view, proj, bounds)[0]
+        stencil = _choose(light, tris, key, view, proj, rec.bounds)[0]
     # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
     # when the volumes end at a finite distance (orthographic cameras), the dark caps too
     caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
@@ -1684,7 +1795,7 @@ def shadow_volume_visibility(
     volume = _cached(
         ("volume", key, light_key), lambda: shadow_volume_triangles(topo, light, caps=caps, extent=extent)
     )
-    return _count(volume, vp, px, py, pz, bounds, stencil == "zfail", numba_path, visibility=True)
+    return _count(volume, vp, rec, stencil == "zfail", visibility=True)
 
 
 #: Per-frame reuse: volumes and near-plane proofs by (topology digest, light, ...), a few entries.

@@ -151,6 +151,35 @@ def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, mon
     assert np.count_nonzero(a[len(ground) :]) == 0  # the tops are lit
 
 
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+def test_a_reused_binning_counts_as_a_fresh_one():
+    """The next light of a frame projects its (differently moved) receivers into the previous
+    light's tile order; even a stale order (the arrays changed in place) counts exactly as a
+    fresh binning does, since every tile's bounds and depths are measured again."""
+    import blinn_phong.shadow_volume as sv
+
+    first, second = LIGHTS["directional"], LIGHTS["point"]
+    scene = scene_with(casters("pair") + casters("box"), second, outside_camera())
+    tris = world_triangles(scene)
+    pts, nrm, _, _ = samples(scene, WIDTH, HEIGHT)
+    pts, nrm = pts.copy(), nrm.copy()
+
+    def visibility(light, reuse):
+        if not reuse:
+            sv._BINNING.clear()
+        return shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera, engine="numba")
+
+    for light in (first, second):  # binned for `first`, reused for `second`
+        reused = visibility(light, True)
+    assert sv._BINNING and sv._BINNING[0][0]() is pts
+    np.testing.assert_array_equal(reused, visibility(second, False))
+    assert 100 < np.count_nonzero(reused == 0) < len(pts) - 100
+    visibility(first, False)
+    shuffled = np.random.default_rng(7).permutation(len(pts))
+    pts[:], nrm[:] = pts[shuffled], nrm[shuffled]  # same arrays: the cached order is now stale
+    np.testing.assert_array_equal(visibility(second, True), visibility(second, False))
+
+
 def _ellipse_area(light, centre, radius):
     lv, c = np.asarray(light, float), np.asarray(centre, float)
     axis = c - lv
