@@ -985,6 +985,27 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                         bx = xmin + (col + 1) * cw + wx
                         ay = ymin + row * ch - wy
                         by = ymin + (row + 1) * ch + wy
+                        # the face's depth over the part of the tile inside its bounding box (no
+                        # receiver outside that box is counted) against the receivers' depths:
+                        # their range, then (when the ranges overlap) their plane and residuals
+                        rx0 = max(ax, lx)
+                        rx1 = min(bx, hx)
+                        ry0 = max(ay, ly)
+                        ry1 = min(by, hy)
+                        lo_z, hi_z = vh.depth_range(zt, xt, yt, gxt, gyt, rx0, rx1, ry0, ry1)
+                        all_nearer = hi_z < zlo[cell]
+                        none_nearer = lo_z > zhi[cell]
+                        if not (all_nearer or none_nearer):
+                            lo_g, hi_g = vh.plane_gap(
+                                zt, xt, yt, gxt, gyt, fit[cell, 0], fit[cell, 1], fit[cell, 2],
+                                xmin + (col + 0.5) * cw, ymin + (row + 0.5) * ch, rx0, rx1, ry0, ry1,
+                            )  # fmt: skip
+                            all_nearer = hi_g < fit[cell, 3]
+                            none_nearer = lo_g > fit[cell, 4]
+                        # a face behind every receiver (z-pass) or in front of all (z-fail) counts
+                        # at none of them, whatever it covers
+                        if all_nearer if zfail else none_nearer:
+                            continue
                         inside_all = False
                         if not single:  # tile against the face: outside one edge, or inside all three
                             outside = False
@@ -1010,35 +1031,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                                     inside_all = False
                             if outside:
                                 continue
-                        # the face's depth over the part of the tile inside its bounding box (no
-                        # receiver outside that box is counted) against the receivers' depths:
-                        # their range, then (when the ranges overlap) their plane and residuals
-                        rx0 = max(ax, lx)
-                        rx1 = min(bx, hx)
-                        ry0 = max(ay, ly)
-                        ry1 = min(by, hy)
-                        lo_z, hi_z = vh.depth_range(zt, xt, yt, gxt, gyt, rx0, rx1, ry0, ry1)
-                        all_nearer = hi_z < zlo[cell]
-                        none_nearer = lo_z > zhi[cell]
-                        if not (all_nearer or none_nearer):
-                            lo_g, hi_g = vh.plane_gap(
-                                zt, xt, yt, gxt, gyt, fit[cell, 0], fit[cell, 1], fit[cell, 2],
-                                xmin + (col + 0.5) * cw, ymin + (row + 0.5) * ch, rx0, rx1, ry0, ry1,
-                            )  # fmt: skip
-                            all_nearer = hi_g < fit[cell, 3]
-                            none_nearer = lo_g > fit[cell, 4]
-                        if zfail:
-                            if all_nearer:
-                                continue
-                            if inside_all and none_nearer:
-                                whole[cell] -= ft
-                                continue
-                        else:
-                            if none_nearer:
-                                continue
-                            if inside_all and all_nearer:
-                                whole[cell] += ft
-                                continue
+                        if inside_all and (none_nearer if zfail else all_nearer):
+                            whole[cell] += -ft if zfail else ft
+                            continue
                         for p in range(s0, s1):
                             x = px[p]
                             y = py[p]
