@@ -1034,9 +1034,15 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                         if inside_all and (none_nearer if zfail else all_nearer):
                             whole[cell] += -ft if zfail else ft
                             continue
-                        for p in range(s0, s1):
-                            x = px[p]
-                            y = py[p]
+                        # the tile's receivers one by one (views of the tile: indices from 0
+                        # compile to plain loads)
+                        xs = px[s0:s1]
+                        ys = py[s0:s1]
+                        zs = pz[s0:s1]
+                        cs = counts[s0:s1]
+                        for j in range(xs.shape[0]):
+                            x = xs[j]
+                            y = ys[j]
                             if x < lx or x > hx or y < ly or y > hy:
                                 continue
                             e = dx0 * (y - ey0) - dy0 * (x - ex0)
@@ -1050,10 +1056,10 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                                 continue
                             depth = zt + (gxt * (x - xt) + gyt * (y - yt))
                             if zfail:
-                                if not (depth < pz[p]):
-                                    counts[p] -= ft
-                            elif depth < pz[p]:
-                                counts[p] += ft
+                                if not (depth < zs[j]):
+                                    cs[j] -= ft
+                            elif depth < zs[j]:
+                                cs[j] += ft
             for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
