@@ -11,7 +11,16 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["component", "depth_range", "finite_input", "mix", "plane_gap", "project_point"]
+__all__ = [
+    "component",
+    "depth_range",
+    "edge_box",
+    "edge_span",
+    "finite_input",
+    "mix",
+    "plane_gap",
+    "project_point",
+]
 
 
 @numba.njit(inline="always", cache=True)
@@ -112,3 +121,43 @@ def plane_gap(z0, x0, y0, gx, gy, a, b, c, xc, yc, ax, bx, ay, by):  # pragma: n
         mag = max(mag, abs(z0) + abs(u) + abs(v) + abs(a) + abs(s) + abs(t))
     margin = 1e-12 * mag + 1e-300
     return lo - margin, hi + margin
+
+
+@numba.njit(inline="always", cache=True)
+def edge_span(ex, ey, dx, dy, sy0, sy1, lo, hi):  # pragma: no cover - compiled
+    """(lo, hi) widened by the x-extent of the edge from (ex, ey) along (dx, dy) clipped to the
+    strip sy0 ≤ y ≤ sy1 (unchanged when the edge misses the strip)."""
+    if dy == 0.0:
+        if sy0 <= ey <= sy1:
+            lo = min(lo, ex)
+            hi = max(hi, ex + dx)
+        return lo, hi
+    ta = (sy0 - ey) / dy
+    tb = (sy1 - ey) / dy
+    t_lo = max(min(ta, tb), 0.0)
+    t_hi = min(max(ta, tb), 1.0)
+    if t_lo > t_hi:
+        return lo, hi
+    xa = ex + t_lo * dx
+    xb = ex + t_hi * dx
+    return min(lo, xa, xb), max(hi, xa, xb)
+
+
+@numba.njit(inline="always", cache=True)
+def edge_box(ex, ey, dx, dy, es, ax, bx, ay, by):  # pragma: no cover - compiled
+    """The rectangle [ax, bx] × [ay, by] against the inside of one edge (``es·E > 0``, E the edge
+    function from (ex, ey) along (dx, dy)), past rounding: (wholly outside, wholly inside)."""
+    lo = np.inf
+    hi = -np.inf
+    mag = 0.0
+    for corner in range(4):
+        xc = ax if corner % 2 == 0 else bx
+        yc = ay if corner < 2 else by
+        u = dx * (yc - ey)
+        v = dy * (xc - ex)
+        e = es * (u - v)
+        lo = min(lo, e)
+        hi = max(hi, e)
+        mag = max(mag, abs(u) + abs(v))
+    margin = 1e-12 * mag + 1e-300
+    return hi < -margin, lo > margin

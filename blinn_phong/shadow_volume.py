@@ -951,24 +951,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                         # the face's x-extent inside this row of tiles: its edges clipped to the strip
                         sy0 = ymin + row * ch - wy
                         sy1 = ymin + (row + 1) * ch + wy
-                        span_lo = np.inf
-                        span_hi = -np.inf
-                        for i in range(3):
-                            if edy[t, i] == 0.0:
-                                if sy0 <= ey[t, i] <= sy1:
-                                    span_lo = min(span_lo, ex[t, i])
-                                    span_hi = max(span_hi, ex[t, i] + edx[t, i])
-                                continue
-                            ta = (sy0 - ey[t, i]) / edy[t, i]
-                            tb = (sy1 - ey[t, i]) / edy[t, i]
-                            t_lo = max(min(ta, tb), 0.0)
-                            t_hi = min(max(ta, tb), 1.0)
-                            if t_lo > t_hi:
-                                continue
-                            xa = ex[t, i] + t_lo * edx[t, i]
-                            xb = ex[t, i] + t_hi * edx[t, i]
-                            span_lo = min(span_lo, xa, xb)
-                            span_hi = max(span_hi, xa, xb)
+                        span_lo, span_hi = vh.edge_span(ex0, ey0, dx0, dy0, sy0, sy1, np.inf, -np.inf)
+                        span_lo, span_hi = vh.edge_span(ex1, ey1, dx1, dy1, sy0, sy1, span_lo, span_hi)
+                        span_lo, span_hi = vh.edge_span(ex2, ey2, dx2, dy2, sy0, sy1, span_lo, span_hi)
                         if span_lo > span_hi:
                             continue
                         pad = wx + 1e-12 * (abs(span_lo) + abs(span_hi))
@@ -1008,29 +993,12 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                             continue
                         inside_all = False
                         if not single:  # tile against the face: outside one edge, or inside all three
-                            outside = False
-                            inside_all = True
-                            for i in range(3):
-                                lo_e = np.inf
-                                hi_e = -np.inf
-                                mag = 0.0
-                                for corner in range(4):
-                                    xc = ax if corner % 2 == 0 else bx
-                                    yc = ay if corner < 2 else by
-                                    u = edx[t, i] * (yc - ey[t, i])
-                                    v = edy[t, i] * (xc - ex[t, i])
-                                    e = esign[t, i] * (u - v)
-                                    lo_e = min(lo_e, e)
-                                    hi_e = max(hi_e, e)
-                                    mag = max(mag, abs(u) + abs(v))
-                                margin = 1e-12 * mag + 1e-300
-                                if hi_e < -margin:
-                                    outside = True
-                                    break
-                                if lo_e <= margin:
-                                    inside_all = False
-                            if outside:
+                            out0, in0 = vh.edge_box(ex0, ey0, dx0, dy0, es0, ax, bx, ay, by)
+                            out1, in1 = vh.edge_box(ex1, ey1, dx1, dy1, es1, ax, bx, ay, by)
+                            out2, in2 = vh.edge_box(ex2, ey2, dx2, dy2, es2, ax, bx, ay, by)
+                            if out0 or out1 or out2:
                                 continue
+                            inside_all = in0 and in1 and in2
                         if inside_all and (none_nearer if zfail else all_nearer):
                             whole[cell] += -ft if zfail else ft
                             continue
