@@ -1150,14 +1150,22 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             for cell in range(row * nx, (row + 1) * nx):
                 tx0 = xmin + (cell - row * nx) * cw
                 tx1 = xmin + (cell - row * nx + 1) * cw
-                for k in range(cell_start[cell], cell_start[cell + 1]):
-                    i = order[k]
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                # views of the tile (indices from 0: plain loads and stores); an index from
+                # ``order`` is a valid row, taken unsigned (no negative-index handling)
+                ks = order[k0:k1]
+                xs = sx[k0:k1]
+                ys = sy[k0:k1]
+                zs = sz[k0:k1]
+                for k in range(k1 - k0):
+                    i = np.uint64(ks[k])
                     if not vh.finite_input(p, n, moved, i):
                         bad = 1.0
                     x, y, z, w = vh.project_point(p, n, light_vec, directional, offset, moved, vp, i)
-                    sx[k] = x
-                    sy[k] = y
-                    sz[k] = z
+                    xs[k] = x
+                    ys[k] = y
+                    zs[k] = z
                     xlo = min(xlo, x)
                     xhi = max(xhi, x)
                     ylo = min(ylo, y)
@@ -1231,7 +1239,11 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 if k0 == k1:
                     continue
                 xc = xmin + (cell - row * nx + 0.5) * cw
-                zref = pz[k0]
+                # views of the tile (indices from 0: plain loads)
+                xs = px[k0:k1]
+                ys = py[k0:k1]
+                zs = pz[k0:k1]
+                zref = zs[0]
                 n = k1 - k0
                 su = 0.0
                 sv = 0.0
@@ -1243,12 +1255,12 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 svw = 0.0
                 lo = np.inf
                 hi = -np.inf
-                for k in range(k0, k1):
-                    u = px[k] - xc
-                    v = py[k] - yc
-                    w = pz[k] - zref
-                    lo = min(lo, pz[k])
-                    hi = max(hi, pz[k])
+                for k in range(n):
+                    u = xs[k] - xc
+                    v = ys[k] - yc
+                    w = zs[k] - zref
+                    lo = min(lo, zs[k])
+                    hi = max(hi, zs[k])
                     su += u
                     sv += v
                     sw += w
@@ -1277,13 +1289,13 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 r_lo = np.inf
                 r_hi = -np.inf
                 mag = 0.0
-                for k in range(k0, k1):
-                    u = b * (px[k] - xc)
-                    v = c * (py[k] - yc)
-                    r = pz[k] - (a + (u + v))
+                for k in range(n):
+                    u = b * (xs[k] - xc)
+                    v = c * (ys[k] - yc)
+                    r = zs[k] - (a + (u + v))
                     r_lo = min(r_lo, r)
                     r_hi = max(r_hi, r)
-                    mag = max(mag, abs(pz[k]) + abs(a) + abs(u) + abs(v))
+                    mag = max(mag, abs(zs[k]) + abs(a) + abs(u) + abs(v))
                 margin = 1e-12 * mag + 1e-300
                 fit[cell, 0] = a
                 fit[cell, 1] = b
@@ -1528,7 +1540,8 @@ def _projected(
         kernels = _fast_kernels(parallel)
         key = vp.tobytes()
         cached = _BINNING[0] if reuse and _BINNING else None
-        if cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key:
+        same = cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key
+        if same and len(cached[4]) == m:
             grid, order, cell_start = cached[3:]
             sx, sy, sz, stats = kernels[4](
                 p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid
