@@ -81,14 +81,26 @@ triangles sharing an edge give exactly opposite values and, with a fixed tie-bre
 and whose depth, interpolated linearly in screen space (OpenGL 4.6 §14.6.1), is nearer than the
 receiver's (z-pass; ``GL_LESS`` passes) or not nearer (z-fail; the depth test fails). Facing is
 the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid. With
-numba every step is compiled (receiver projection, a counting sort into tiles, volume-triangle
-set-up, counting, the scatter back); the counting kernel gives each thread interleaved rows of
-tiles, each row owning its receivers (no write races), and jobs under ``_PARALLEL_RECEIVERS``
-run on one thread. The numpy engine is the readable reference. Counts are integers and both
-engines evaluate the same floating-point expressions in the same order (written out, no fused
-multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached by a
-digest of the casters and the light (a frame's lights share one topology; the next frame
-reuses the volumes).
+numba every step is compiled (receiver projection, a counting sort into tiles, each tile's depth
+range and depth plane, volume-triangle set-up, counting, written back in input order); the
+counting kernel gives each thread interleaved rows of tiles, each row owning its receivers (no
+write races), and jobs under ``_PARALLEL_RECEIVERS`` run on one thread. The numpy engine is the
+readable reference: it tests every receiver a triangle's tiles hold. The compiled kernel skips
+only what provably cannot count, so it reaches the same per-receiver decisions: a tile the
+triangle misses, or whose receivers all lie behind it (z-pass) or in front of it (z-fail) —
+judged from the tile's receiver depth range, or, when the ranges overlap, from a least-squares
+depth plane of the tile's receivers with their measured residuals (the triangle's depth plane
+minus the receivers' is affine, so its corners bound it over the tile; every bound is widened
+past the rounding of the per-receiver expressions). That settles a ground under its own light
+cap (receivers 1e-4 above the cap, on one plane) without a test per receiver. Whole tiles
+inside a triangle and wholly on one side of it are counted at once. Counts are integers and
+both engines evaluate the same floating-point expressions in the same order (written out, no
+fused multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached
+by a digest of the casters and the light (a frame's lights share one topology; the next frame
+reuses the volumes). The next light of a frame (the same point and normal arrays, the same
+camera) projects its receivers — moved towards that light — straight into the previous
+light's tile order instead of sorting them again; each tile is then widened by the farthest
+any receiver now lies outside it, so the order only affects speed, never a count.
 
 Self-shadowing without depth invariance: a real stencil pass relies on a surface and its own
 light cap giving bit-identical depths (the cap then fails ``GL_LESS`` and lies "behind"). Here
@@ -1079,8 +1091,8 @@ def _project_numpy(q: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @functools.lru_cache(maxsize=2)
 def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
-    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up and
-    the final scatter of counts to visibility."""
+    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up, each
+    tile's receiver depths, and the projection into an earlier binning's order."""
     import numba
 
     from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
