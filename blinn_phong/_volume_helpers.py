@@ -17,6 +17,7 @@ __all__ = [
     "edge_box",
     "edge_span",
     "finite_input",
+    "matrix_entries",
     "mix",
     "plane_gap",
     "project_point",
@@ -31,9 +32,22 @@ def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uin
 
 
 @numba.njit(inline="always", cache=True)
-def project_point(p, n, light_vec, directional, offset, moved, vp, i):  # pragma: no cover - compiled
+def matrix_entries(vp):  # pragma: no cover - compiled
+    """The 16 entries of a 4×4 matrix, row by row, as a tuple (held in registers by a loop)."""
+    return (
+        vp[0, 0], vp[0, 1], vp[0, 2], vp[0, 3],
+        vp[1, 0], vp[1, 1], vp[1, 2], vp[1, 3],
+        vp[2, 0], vp[2, 1], vp[2, 2], vp[2, 3],
+        vp[3, 0], vp[3, 1], vp[3, 2], vp[3, 3],
+    )  # fmt: skip
+
+
+@numba.njit(inline="always", cache=True)
+def project_point(p, n, light_vec, directional, offset, moved, m, i):  # pragma: no cover - compiled
     """Receiver ``i`` moved ``offset`` along its normal towards the light's side (when ``moved``),
-    as normalised-device (x, y, z) and clip w (the numpy engine's expressions, in their order)."""
+    as normalised-device (x, y, z) and clip w (the numpy engine's expressions, in their order).
+    ``light_vec``: the light's (x, y, z) as a tuple; ``m``: :func:`matrix_entries` of the
+    view-projection matrix."""
     q0 = p[i, 0]
     q1 = p[i, 1]
     q2 = p[i, 2]
@@ -56,10 +70,10 @@ def project_point(p, n, light_vec, directional, offset, moved, vp, i):  # pragma
         q0 = q0 + n0 * k
         q1 = q1 + n1 * k
         q2 = q2 + n2 * k
-    c0 = ((q0 * vp[0, 0] + q1 * vp[0, 1]) + q2 * vp[0, 2]) + vp[0, 3]
-    c1 = ((q0 * vp[1, 0] + q1 * vp[1, 1]) + q2 * vp[1, 2]) + vp[1, 3]
-    c2 = ((q0 * vp[2, 0] + q1 * vp[2, 1]) + q2 * vp[2, 2]) + vp[2, 3]
-    c3 = ((q0 * vp[3, 0] + q1 * vp[3, 1]) + q2 * vp[3, 2]) + vp[3, 3]
+    c0 = ((q0 * m[0] + q1 * m[1]) + q2 * m[2]) + m[3]
+    c1 = ((q0 * m[4] + q1 * m[5]) + q2 * m[6]) + m[7]
+    c2 = ((q0 * m[8] + q1 * m[9]) + q2 * m[10]) + m[11]
+    c3 = ((q0 * m[12] + q1 * m[13]) + q2 * m[14]) + m[15]
     return c0 / c3, c1 / c3, c2 / c3, c3
 
 

@@ -1104,6 +1104,8 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         py = np.empty(m)
         pz = np.empty(m)
         n_chunks = 64
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
         # per chunk: min/max of x and y, min of w, 1 if an input was not finite, (unused) 0, 0
         stats = np.zeros((n_chunks, 8))
         size = (m + n_chunks - 1) // n_chunks
@@ -1117,7 +1119,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             for i in range(chunk * size, min(m, (chunk + 1) * size)):
                 if not vh.finite_input(p, n, moved, i):
                     bad = 1.0
-                x, y, z, w = vh.project_point(p, n, light_vec, directional, offset, moved, vp, i)
+                x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
                 px[i] = x
                 py[i] = y
                 pz[i] = z
@@ -1145,6 +1147,8 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         sx = np.empty(m)
         sy = np.empty(m)
         sz = np.empty(m)
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
         # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
         # largest distance of a receiver outside its tile along x and along y
         stats = np.zeros((ny, 8))
@@ -1174,7 +1178,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                     i = np.uint64(ks[k])
                     if not vh.finite_input(p, n, moved, i):
                         bad = 1.0
-                    x, y, z, w = vh.project_point(p, n, light_vec, directional, offset, moved, vp, i)
+                    x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
                     xs[k] = x
                     ys[k] = y
                     zs[k] = z
