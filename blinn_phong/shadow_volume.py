@@ -949,6 +949,7 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                 zt, xt, yt, gxt, gyt = z0[t], x0[t], y0[t], gx[t], gy[t]
                 lx, hx, ly, hy = bx0[t], bx1[t], by0[t], by1[t]
                 ft = front[t]
+                step = -ft if zfail else ft
                 # a face inside one tile: no strip to clip it to, no tile inside it
                 single = cx0[t] == cx1[t] and cy0[t] == cy1[t]
                 if n_bands == 1:
@@ -1035,11 +1036,10 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                             if not (es2 * e > 0 or (e == 0 and et2)):
                                 continue
                             depth = zt + (gxt * (x - xt) + gyt * (y - yt))
-                            if zfail:
-                                if not (depth < zs[j]):
-                                    cs[j] -= ft
-                            elif depth < zs[j]:
-                                cs[j] += ft
+                            # z-fail counts −front where the face is not nearer, z-pass +front where
+                            # it is: one update (the loop compiles to masked vector code)
+                            if (depth < zs[j]) != zfail:
+                                cs[j] += step
             for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
