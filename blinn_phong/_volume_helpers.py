@@ -21,6 +21,7 @@ __all__ = [
     "mix",
     "plane_gap",
     "project_point",
+    "tile_fit",
 ]
 
 
@@ -175,3 +176,65 @@ def edge_box(ex, ey, dx, dy, es, ax, bx, ay, by):  # pragma: no cover - compiled
         mag = max(mag, abs(u) + abs(v))
     margin = 1e-12 * mag + 1e-300
     return hi < -margin, lo > margin
+
+
+@numba.njit(inline="always", cache=True)
+def tile_fit(xs, ys, zs, xc, yc):  # pragma: no cover - compiled
+    """One tile's receivers (views ``xs``, ``ys``, ``zs``, at least one): their depth range, and a
+    least-squares depth plane ``a + (b·(x − xc) + c·(y − yc))`` about (xc, yc) with the lowest
+    and highest residual ``z − plane``, widened past rounding: (zlo, zhi, a, b, c, r_lo, r_hi).
+    Any plane would do (the residuals are measured); a good one lets the counting kernel settle
+    a tile whose receivers lie on one surface without testing each receiver."""
+    n = xs.shape[0]
+    zref = zs[0]
+    su = 0.0
+    sv = 0.0
+    sw = 0.0
+    suu = 0.0
+    suv = 0.0
+    svv = 0.0
+    suw = 0.0
+    svw = 0.0
+    lo = np.inf
+    hi = -np.inf
+    for k in range(n):
+        u = xs[k] - xc
+        v = ys[k] - yc
+        w = zs[k] - zref
+        lo = min(lo, zs[k])
+        hi = max(hi, zs[k])
+        su += u
+        sv += v
+        sw += w
+        suu += u * u
+        suv += u * v
+        svv += v * v
+        suw += u * w
+        svw += v * w
+    mu = su / n
+    mv = sv / n
+    mw = sw / n
+    cuu = suu / n - mu * mu
+    cuv = suv / n - mu * mv
+    cvv = svv / n - mv * mv
+    cuw = suw / n - mu * mw
+    cvw = svw / n - mv * mw
+    det = cuu * cvv - cuv * cuv
+    b = 0.0
+    c = 0.0
+    if n >= 3 and det > 1e-6 * cuu * cvv:
+        b = (cuw * cvv - cvw * cuv) / det
+        c = (cvw * cuu - cuw * cuv) / det
+    a = zref + (mw - (b * mu + c * mv))
+    r_lo = np.inf
+    r_hi = -np.inf
+    mag = 0.0
+    for k in range(n):
+        u = b * (xs[k] - xc)
+        v = c * (ys[k] - yc)
+        r = zs[k] - (a + (u + v))
+        r_lo = min(r_lo, r)
+        r_hi = max(r_hi, r)
+        mag = max(mag, abs(zs[k]) + abs(a) + abs(u) + abs(v))
+    margin = 1e-12 * mag + 1e-300
+    return lo, hi, a, b, c, r_lo - margin, r_hi + margin

@@ -1142,7 +1142,8 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
     ):  # pragma: no cover - compiled
         """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
         at ``k``), with how far any receiver now lies outside its tile (a receiver moved for
-        another light may cross a border: the kernel widens every tile by as much)."""
+        another light may cross a border: the kernel widens every tile by as much), and each
+        tile's depths (``tile_depths``)."""
         m = p.shape[0]
         sx = np.empty(m)
         sy = np.empty(m)
@@ -1152,6 +1153,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
         # largest distance of a receiver outside its tile along x and along y
         stats = np.zeros((ny, 8))
+        zlo = np.full(nx * ny, np.inf)
+        zhi = np.full(nx * ny, -np.inf)
+        fit = np.zeros((nx * ny, 5))
         for row in numba.prange(ny):
             xlo = np.inf
             xhi = -np.inf
@@ -1168,6 +1172,8 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 tx1 = xmin + (cell - row * nx + 1) * cw
                 k0 = cell_start[cell]
                 k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
                 # views of the tile (indices from 0: plain loads and stores); an index from
                 # ``order`` is a valid row, taken unsigned (no negative-index handling)
                 ks = order[k0:k1]
@@ -1189,6 +1195,10 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                     wlo = min(wlo, w)
                     out_x = max(out_x, tx0 - x, x - tx1)
                     out_y = max(out_y, ty0 - y, y - ty1)
+                # the tile's depths while its receivers are at hand (as ``tile_depths``)
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(xs, ys, zs, xmin + (cell - row * nx + 0.5) * cw, ymin + (row + 0.5) * ch)
+                )
             stats[row, 0] = xlo
             stats[row, 1] = xhi
             stats[row, 2] = ylo
@@ -1197,7 +1207,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             stats[row, 5] = bad
             stats[row, 6] = out_x
             stats[row, 7] = out_y
-        return sx, sy, sz, stats
+        return sx, sy, sz, stats, zlo, zhi, fit
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
@@ -1255,69 +1265,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 if k0 == k1:
                     continue
                 xc = xmin + (cell - row * nx + 0.5) * cw
-                # views of the tile (indices from 0: plain loads)
-                xs = px[k0:k1]
-                ys = py[k0:k1]
-                zs = pz[k0:k1]
-                zref = zs[0]
-                n = k1 - k0
-                su = 0.0
-                sv = 0.0
-                sw = 0.0
-                suu = 0.0
-                suv = 0.0
-                svv = 0.0
-                suw = 0.0
-                svw = 0.0
-                lo = np.inf
-                hi = -np.inf
-                for k in range(n):
-                    u = xs[k] - xc
-                    v = ys[k] - yc
-                    w = zs[k] - zref
-                    lo = min(lo, zs[k])
-                    hi = max(hi, zs[k])
-                    su += u
-                    sv += v
-                    sw += w
-                    suu += u * u
-                    suv += u * v
-                    svv += v * v
-                    suw += u * w
-                    svw += v * w
-                zlo[cell] = lo
-                zhi[cell] = hi
-                mu = su / n
-                mv = sv / n
-                mw = sw / n
-                cuu = suu / n - mu * mu
-                cuv = suv / n - mu * mv
-                cvv = svv / n - mv * mv
-                cuw = suw / n - mu * mw
-                cvw = svw / n - mv * mw
-                det = cuu * cvv - cuv * cuv
-                b = 0.0
-                c = 0.0
-                if n >= 3 and det > 1e-6 * cuu * cvv:
-                    b = (cuw * cvv - cvw * cuv) / det
-                    c = (cvw * cuu - cuw * cuv) / det
-                a = zref + (mw - (b * mu + c * mv))
-                r_lo = np.inf
-                r_hi = -np.inf
-                mag = 0.0
-                for k in range(n):
-                    u = b * (xs[k] - xc)
-                    v = c * (ys[k] - yc)
-                    r = zs[k] - (a + (u + v))
-                    r_lo = min(r_lo, r)
-                    r_hi = max(r_hi, r)
-                    mag = max(mag, abs(zs[k]) + abs(a) + abs(u) + abs(v))
-                margin = 1e-12 * mag + 1e-300
-                fit[cell, 0] = a
-                fit[cell, 1] = b
-                fit[cell, 2] = c
-                fit[cell, 3] = r_lo - margin
-                fit[cell, 4] = r_hi + margin
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(px[k0:k1], py[k0:k1], pz[k0:k1], xc, yc)
+                )
         return zlo, zhi, fit
 
     @numba.njit(parallel=parallel, cache=True)
@@ -1524,6 +1474,7 @@ class _Receivers:
     order: np.ndarray | None = None
     cell_start: np.ndarray | None = None
     slack: tuple[float, float] = (0.0, 0.0)
+    depths: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # ``tile_depths``, if known
 
 
 #: The last compiled binning of receivers: (weak references to the points and normals, the
@@ -1559,7 +1510,7 @@ def _projected(
         same = cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key
         if same and len(cached[4]) == m:
             grid, order, cell_start = cached[3:]
-            sx, sy, sz, stats = kernels[4](
+            sx, sy, sz, stats, *depths = kernels[4](
                 p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid
             )
         else:
@@ -1585,7 +1536,7 @@ def _projected(
         return _Receivers(px, py, pz, bounds)
     if cached is not None:
         slack = (float(max(stats[:, 6].max(), 0.0)), float(max(stats[:, 7].max(), 0.0)))
-        return _Receivers(sx, sy, sz, bounds, grid, order, cell_start, slack)
+        return _Receivers(sx, sy, sz, bounds, grid, order, cell_start, slack, tuple(depths))
     grid = _grid_params(m, bounds)
     order, cell_start, sx, sy, sz = kernels[1](px, py, pz, *grid)
     if reuse:
@@ -1623,7 +1574,8 @@ def _count(
         cut = serial_setup(cut, vp, False, False, guard, *grid, slack_x, slack_y)
         fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
     st = _Setup(*fields[:-1])
-    zlo, zhi, fit = tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
+    depths = rec.depths
+    zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     n_bands = min(ny, _threads()) if parallel else 1
     counts, lit = _kernel(parallel)(
