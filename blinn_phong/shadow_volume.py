@@ -950,8 +950,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                 lx, hx, ly, hy = bx0[t], bx1[t], by0[t], by1[t]
                 ft = front[t]
                 step = -ft if zfail else ft
-                # a face inside one tile: no strip to clip it to, no tile inside it
-                single = cx0[t] == cx1[t] and cy0[t] == cy1[t]
+                # a small face (within 2 × 2 tiles): its rows need no clipping to their strips, and
+                # it is not worth testing against each tile's corners (it seldom covers a tile)
+                single = cx1[t] - cx0[t] <= 1 and cy1[t] - cy0[t] <= 1
                 if n_bands == 1:
                     lo = cy0[t]
                 else:  # the first row >= cy0 of this band
