@@ -152,11 +152,17 @@ def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, mon
 
 
 @pytest.mark.skipif(not numba_available(), reason="numba not installed")
-def test_a_reused_binning_counts_as_a_fresh_one():
+@pytest.mark.parametrize("parallel", [False, True])
+def test_a_reused_binning_counts_as_a_fresh_one(parallel, monkeypatch):
     """The next light of a frame projects its (differently moved) receivers into the previous
     light's tile order; even a stale order (the arrays changed in place) counts exactly as a
-    fresh binning does, since every tile's bounds and depths are measured again."""
+    fresh binning does, since every tile's bounds and depths are measured again (on one thread
+    and with the tile rows split between threads)."""
     import blinn_phong.shadow_volume as sv
+
+    if parallel:
+        monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
+        monkeypatch.setattr(sv, "_threads", lambda: 3)
 
     first, second = LIGHTS["directional"], LIGHTS["point"]
     scene = scene_with(casters("pair") + casters("box"), second, outside_camera())
