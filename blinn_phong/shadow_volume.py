@@ -81,14 +81,26 @@ triangles sharing an edge give exactly opposite values and, with a fixed tie-bre
 and whose depth, interpolated linearly in screen space (OpenGL 4.6 §14.6.1), is nearer than the
 receiver's (z-pass; ``GL_LESS`` passes) or not nearer (z-fail; the depth test fails). Facing is
 the sign of the window-space area (``GL_CCW`` front). Receivers are binned on a screen grid. With
-numba every step is compiled (receiver projection, a counting sort into tiles, volume-triangle
-set-up, counting, the scatter back); the counting kernel gives each thread interleaved rows of
-tiles, each row owning its receivers (no write races), and jobs under ``_PARALLEL_RECEIVERS``
-run on one thread. The numpy engine is the readable reference. Counts are integers and both
-engines evaluate the same floating-point expressions in the same order (written out, no fused
-multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached by a
-digest of the casters and the light (a frame's lights share one topology; the next frame
-reuses the volumes).
+numba every step is compiled (receiver projection, a counting sort into tiles, each tile's depth
+range and depth plane, volume-triangle set-up, counting, written back in input order); the
+counting kernel gives each thread interleaved rows of tiles, each row owning its receivers (no
+write races), and jobs under ``_PARALLEL_RECEIVERS`` run on one thread. The numpy engine is the
+readable reference: it tests every receiver a triangle's tiles hold. The compiled kernel skips
+only what provably cannot count, so it reaches the same per-receiver decisions: a tile the
+triangle misses, or whose receivers all lie behind it (z-pass) or in front of it (z-fail) —
+judged from the tile's receiver depth range, or, when the ranges overlap, from a least-squares
+depth plane of the tile's receivers with their measured residuals (the triangle's depth plane
+minus the receivers' is affine, so its corners bound it over the tile; every bound is widened
+past the rounding of the per-receiver expressions). That settles a ground under its own light
+cap (receivers 1e-4 above the cap, on one plane) without a test per receiver. Whole tiles
+inside a triangle and wholly on one side of it are counted at once. Counts are integers and
+both engines evaluate the same floating-point expressions in the same order (written out, no
+fused multiply-add), so they agree exactly. Topologies, volumes and near-plane proofs are cached
+by a digest of the casters and the light (a frame's lights share one topology; the next frame
+reuses the volumes). The next light of a frame (the same point and normal arrays, the same
+camera) projects its receivers — moved towards that light — straight into the previous
+light's tile order instead of sorting them again; each tile is then widened by the farthest
+any receiver now lies outside it, so the order only affects speed, never a count.
 
 Self-shadowing without depth invariance: a real stencil pass relies on a surface and its own
 light cap giving bit-identical depths (the cap then fails ``GL_LESS`` and lies "behind"). Here
@@ -102,6 +114,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -125,6 +138,7 @@ STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
+_PARALLEL_FACES = 1_000_000  # fewer volume triangles are set up on one thread
 
 
 # --------------------------------------------------------------------------- input checks
@@ -859,6 +873,8 @@ def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool
 def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
     import numba
 
+    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
+
     @numba.njit(parallel=parallel, cache=True, fastmath=False)
     def count(
         n_bands,
@@ -894,140 +910,146 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         cell_start,
         zlo,
         zhi,
+        fit,
+        order,
         zfail,
+        visibility,
+        slack_x,
+        slack_y,
     ):  # pragma: no cover - compiled
-        # receivers arrive sorted by tile (px[cell_start[c]:cell_start[c + 1]] lie in tile c);
-        # zlo/zhi: each tile's receiver depth range
+        # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
+        # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
+        # residuals from it (see ``tile_depths``). Returns (counts, visibility) in the receivers'
+        # input order (``order`` maps sorted → input): with ``visibility`` an empty count array
+        # and 1.0 where the count is 0, else 0.0; without it the counts and an empty array.
+        # slack_x/slack_y: how far a receiver may lie outside its tile (0 when binned from these
+        # very positions; see ``project_binned``): every tile is widened by as much, plus 1e-9
+        # of its size for rounding of the binning.
         n_cells = nx * ny
-        counts = np.zeros(px.shape[0], np.int64)
+        m = px.shape[0]
+        counts = np.zeros(m, np.int64)
+        out_counts = np.zeros(0 if visibility else m, np.int64)
+        out_vis = np.zeros(m if visibility else 0)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
+        wx = 1e-9 * cw + slack_x
+        wy = 1e-9 * ch + slack_y
         # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
         # gets a share of the busy rows whatever the threads' static split of the bands
         for band in numba.prange(n_bands):
             for t in range(front.shape[0]):
                 if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
                     continue
+                # the face's fields as scalars (the same values: the same arithmetic below)
+                ex0, ex1, ex2 = ex[t, 0], ex[t, 1], ex[t, 2]
+                ey0, ey1, ey2 = ey[t, 0], ey[t, 1], ey[t, 2]
+                dx0, dx1, dx2 = edx[t, 0], edx[t, 1], edx[t, 2]
+                dy0, dy1, dy2 = edy[t, 0], edy[t, 1], edy[t, 2]
+                es0, es1, es2 = esign[t, 0], esign[t, 1], esign[t, 2]
+                et0, et1, et2 = etie[t, 0], etie[t, 1], etie[t, 2]
+                zt, xt, yt, gxt, gyt = z0[t], x0[t], y0[t], gx[t], gy[t]
+                lx, hx, ly, hy = bx0[t], bx1[t], by0[t], by1[t]
+                ft = front[t]
+                step = -ft if zfail else ft
+                # a small face (within 2 × 2 tiles): its rows need no clipping to their strips, and
+                # it is not worth testing against each tile's corners (it seldom covers a tile)
+                single = cx1[t] - cx0[t] <= 1 and cy1[t] - cy0[t] <= 1
                 if n_bands == 1:
                     lo = cy0[t]
                 else:  # the first row >= cy0 of this band
                     d = band - cy0[t] % n_bands
                     lo = cy0[t] + (d + n_bands if d < 0 else d)
                 for row in range(lo, cy1[t] + 1, n_bands):
-                    # the triangle's x-extent inside this row of tiles: its edges clipped to the strip
-                    sy0 = ymin + row * ch - 1e-9 * ch
-                    sy1 = ymin + (row + 1) * ch + 1e-9 * ch
-                    span_lo = np.inf
-                    span_hi = -np.inf
-                    for i in range(3):
-                        if edy[t, i] == 0.0:
-                            if sy0 <= ey[t, i] <= sy1:
-                                span_lo = min(span_lo, ex[t, i])
-                                span_hi = max(span_hi, ex[t, i] + edx[t, i])
+                    c_lo = cx0[t]
+                    c_hi = cx1[t]
+                    if not single:
+                        # the face's x-extent inside this row of tiles: its edges clipped to the strip
+                        sy0 = ymin + row * ch - wy
+                        sy1 = ymin + (row + 1) * ch + wy
+                        span_lo, span_hi = vh.edge_span(ex0, ey0, dx0, dy0, sy0, sy1, np.inf, -np.inf)
+                        span_lo, span_hi = vh.edge_span(ex1, ey1, dx1, dy1, sy0, sy1, span_lo, span_hi)
+                        span_lo, span_hi = vh.edge_span(ex2, ey2, dx2, dy2, sy0, sy1, span_lo, span_hi)
+                        if span_lo > span_hi:
                             continue
-                        ta = (sy0 - ey[t, i]) / edy[t, i]
-                        tb = (sy1 - ey[t, i]) / edy[t, i]
-                        t_lo = max(min(ta, tb), 0.0)
-                        t_hi = min(max(ta, tb), 1.0)
-                        if t_lo > t_hi:
-                            continue
-                        xa = ex[t, i] + t_lo * edx[t, i]
-                        xb = ex[t, i] + t_hi * edx[t, i]
-                        span_lo = min(span_lo, xa, xb)
-                        span_hi = max(span_hi, xa, xb)
-                    if span_lo > span_hi:
-                        continue
-                    pad = 1e-9 * cw + 1e-12 * (abs(span_lo) + abs(span_hi))
-                    c_lo = max(cx0[t], int(np.floor((span_lo - pad - xmin) / cw)))
-                    c_hi = min(cx1[t], int(np.floor((span_hi + pad - xmin) / cw)))
+                        pad = wx + 1e-12 * (abs(span_lo) + abs(span_hi))
+                        c_lo = max(c_lo, int(np.floor((span_lo - pad - xmin) / cw)))
+                        c_hi = min(c_hi, int(np.floor((span_hi + pad - xmin) / cw)))
                     for col in range(c_lo, c_hi + 1):
                         cell = row * nx + col
                         s0 = cell_start[cell]
                         s1 = cell_start[cell + 1]
                         if s0 == s1:
                             continue
-                        # the tile's rectangle, widened past rounding of the binning
-                        ax = xmin + col * cw - 1e-9 * cw
-                        bx = xmin + (col + 1) * cw + 1e-9 * cw
-                        ay = ymin + row * ch - 1e-9 * ch
-                        by = ymin + (row + 1) * ch + 1e-9 * ch
-                        # tile against the triangle: outside one edge, or inside all three
-                        outside = False
-                        inside_all = True
-                        for i in range(3):
-                            lo_e = np.inf
-                            hi_e = -np.inf
-                            mag = 0.0
-                            for corner in range(4):
-                                xc = ax if corner % 2 == 0 else bx
-                                yc = ay if corner < 2 else by
-                                u = edx[t, i] * (yc - ey[t, i])
-                                v = edy[t, i] * (xc - ex[t, i])
-                                e = esign[t, i] * (u - v)
-                                lo_e = min(lo_e, e)
-                                hi_e = max(hi_e, e)
-                                mag = max(mag, abs(u) + abs(v))
-                            margin = 1e-12 * mag + 1e-300
-                            if hi_e < -margin:
-                                outside = True
-                                break
-                            if lo_e <= margin:
-                                inside_all = False
-                        if outside:
+                        # the tile's rectangle, widened to hold every receiver binned into it
+                        ax = xmin + col * cw - wx
+                        bx = xmin + (col + 1) * cw + wx
+                        ay = ymin + row * ch - wy
+                        by = ymin + (row + 1) * ch + wy
+                        # the face's depth over the part of the tile inside its bounding box (no
+                        # receiver outside that box is counted) against the receivers' depths:
+                        # their range, then (when the ranges overlap) their plane and residuals
+                        rx0 = max(ax, lx)
+                        rx1 = min(bx, hx)
+                        ry0 = max(ay, ly)
+                        ry1 = min(by, hy)
+                        lo_z, hi_z = vh.depth_range(zt, xt, yt, gxt, gyt, rx0, rx1, ry0, ry1)
+                        all_nearer = hi_z < zlo[cell]
+                        none_nearer = lo_z > zhi[cell]
+                        if not (all_nearer or none_nearer):
+                            lo_g, hi_g = vh.plane_gap(
+                                zt, xt, yt, gxt, gyt, fit[cell, 0], fit[cell, 1], fit[cell, 2],
+                                xmin + (col + 0.5) * cw, ymin + (row + 0.5) * ch, rx0, rx1, ry0, ry1,
+                            )  # fmt: skip
+                            all_nearer = hi_g < fit[cell, 3]
+                            none_nearer = lo_g > fit[cell, 4]
+                        # a face behind every receiver (z-pass) or in front of all (z-fail) counts
+                        # at none of them, whatever it covers
+                        if all_nearer if zfail else none_nearer:
                             continue
-                        # the face's depth plane over the tile
-                        lo_z = np.inf
-                        hi_z = -np.inf
-                        mag = 0.0
-                        for corner in range(4):
-                            xc = ax if corner % 2 == 0 else bx
-                            yc = ay if corner < 2 else by
-                            u = gx[t] * (xc - x0[t])
-                            v = gy[t] * (yc - y0[t])
-                            d = z0[t] + (u + v)
-                            lo_z = min(lo_z, d)
-                            hi_z = max(hi_z, d)
-                            mag = max(mag, abs(z0[t]) + abs(u) + abs(v))
-                        margin = 1e-12 * mag + 1e-300
-                        all_nearer = hi_z < zlo[cell] - margin
-                        none_nearer = lo_z > zhi[cell] + margin
-                        if zfail:
-                            if all_nearer:
+                        inside_all = False
+                        if not single:  # tile against the face: outside one edge, or inside all three
+                            out0, in0 = vh.edge_box(ex0, ey0, dx0, dy0, es0, ax, bx, ay, by)
+                            out1, in1 = vh.edge_box(ex1, ey1, dx1, dy1, es1, ax, bx, ay, by)
+                            out2, in2 = vh.edge_box(ex2, ey2, dx2, dy2, es2, ax, bx, ay, by)
+                            if out0 or out1 or out2:
                                 continue
-                            if inside_all and none_nearer:
-                                whole[cell] -= front[t]
+                            inside_all = in0 and in1 and in2
+                        if inside_all and (none_nearer if zfail else all_nearer):
+                            whole[cell] += -ft if zfail else ft
+                            continue
+                        # the tile's receivers one by one (views of the tile: indices from 0
+                        # compile to plain loads)
+                        xs = px[s0:s1]
+                        ys = py[s0:s1]
+                        zs = pz[s0:s1]
+                        cs = counts[s0:s1]
+                        for j in range(xs.shape[0]):
+                            x = xs[j]
+                            y = ys[j]
+                            if x < lx or x > hx or y < ly or y > hy:
                                 continue
-                        else:
-                            if none_nearer:
+                            e = dx0 * (y - ey0) - dy0 * (x - ex0)
+                            if not (es0 * e > 0 or (e == 0 and et0)):
                                 continue
-                            if inside_all and all_nearer:
-                                whole[cell] += front[t]
+                            e = dx1 * (y - ey1) - dy1 * (x - ex1)
+                            if not (es1 * e > 0 or (e == 0 and et1)):
                                 continue
-                        for k in range(s0, s1):
-                            p = k
-                            x = px[p]
-                            y = py[p]
-                            if x < bx0[t] or x > bx1[t] or y < by0[t] or y > by1[t]:
+                            e = dx2 * (y - ey2) - dy2 * (x - ex2)
+                            if not (es2 * e > 0 or (e == 0 and et2)):
                                 continue
-                            ok = True
-                            for i in range(3):
-                                e = edx[t, i] * (y - ey[t, i]) - edy[t, i] * (x - ex[t, i])
-                                se = esign[t, i] * e
-                                if not (se > 0 or (e == 0 and etie[t, i])):
-                                    ok = False
-                                    break
-                            if not ok:
-                                continue
-                            depth = z0[t] + (gx[t] * (x - x0[t]) + gy[t] * (y - y0[t]))
-                            if zfail:
-                                if not (depth < pz[p]):
-                                    counts[p] -= front[t]
-                            elif depth < pz[p]:
-                                counts[p] += front[t]
+                            depth = zt + (gxt * (x - xt) + gyt * (y - yt))
+                            # z-fail counts −front where the face is not nearer, z-pass +front where
+                            # it is: one update (the loop compiles to masked vector code)
+                            if (depth < zs[j]) != zfail:
+                                cs[j] += step
             for row in range(band, ny, n_bands):
                 for cell in range(row * nx, (row + 1) * nx):
                     for k in range(cell_start[cell], cell_start[cell + 1]):
-                        counts[k] += whole[cell]
-        return counts
+                        c = counts[k] + whole[cell]
+                        if visibility:
+                            out_vis[order[k]] = 1.0 if c == 0 else 0.0
+                        else:
+                            out_counts[order[k]] = c
+        return out_counts, out_vis
 
     return count
 
@@ -1070,8 +1092,8 @@ def _project_numpy(q: np.ndarray, vp: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @functools.lru_cache(maxsize=2)
 def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
-    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up and
-    the final scatter of counts to visibility."""
+    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up, each
+    tile's receiver depths, and the projection into an earlier binning's order."""
     import numba
 
     from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
@@ -1082,10 +1104,11 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         px = np.empty(m)
         py = np.empty(m)
         pz = np.empty(m)
-        pw = np.empty(m)
         n_chunks = 64
-        # per chunk: min/max of x and y, min of w, and 1 if an input was not finite
-        stats = np.empty((n_chunks, 6))
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
+        # per chunk: min/max of x and y, min of w, 1 if an input was not finite, (unused) 0, 0
+        stats = np.zeros((n_chunks, 8))
         size = (m + n_chunks - 1) // n_chunks
         for chunk in numba.prange(n_chunks):
             xlo = np.inf
@@ -1095,27 +1118,101 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             wlo = np.inf
             bad = 0.0
             for i in range(chunk * size, min(m, (chunk + 1) * size)):
-                if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+                if not vh.finite_input(p, n, moved, i):
                     bad = 1.0
-                if moved and not (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2])):
-                    bad = 1.0
-                vh.project_one(p, n, light_vec, directional, offset, moved, vp, i, px, py, pz, pw)
-                xlo = min(xlo, px[i])
-                xhi = max(xhi, px[i])
-                ylo = min(ylo, py[i])
-                yhi = max(yhi, py[i])
-                wlo = min(wlo, pw[i])
+                x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                px[i] = x
+                py[i] = y
+                pz[i] = z
+                xlo = min(xlo, x)
+                xhi = max(xhi, x)
+                ylo = min(ylo, y)
+                yhi = max(yhi, y)
+                wlo = min(wlo, w)
             stats[chunk, 0] = xlo
             stats[chunk, 1] = xhi
             stats[chunk, 2] = ylo
             stats[chunk, 3] = yhi
             stats[chunk, 4] = wlo
             stats[chunk, 5] = bad
-        return px, py, pz, pw, stats
+        return px, py, pz, stats
+
+    @numba.njit(parallel=parallel, cache=True)
+    def project_binned(
+        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny
+    ):  # pragma: no cover - compiled
+        """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
+        at ``k``), with how far any receiver now lies outside its tile (a receiver moved for
+        another light may cross a border: the kernel widens every tile by as much), and each
+        tile's depths (``tile_depths``)."""
+        m = p.shape[0]
+        sx = np.empty(m)
+        sy = np.empty(m)
+        sz = np.empty(m)
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
+        # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
+        # largest distance of a receiver outside its tile along x and along y
+        stats = np.zeros((ny, 8))
+        zlo = np.full(nx * ny, np.inf)
+        zhi = np.full(nx * ny, -np.inf)
+        fit = np.zeros((nx * ny, 5))
+        for row in numba.prange(ny):
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            out_x = 0.0
+            out_y = 0.0
+            ty0 = ymin + row * ch
+            ty1 = ymin + (row + 1) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                tx0 = xmin + (cell - row * nx) * cw
+                tx1 = xmin + (cell - row * nx + 1) * cw
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
+                # views of the tile (indices from 0: plain loads and stores); an index from
+                # ``order`` is a valid row, taken unsigned (no negative-index handling)
+                ks = order[k0:k1]
+                xs = sx[k0:k1]
+                ys = sy[k0:k1]
+                zs = sz[k0:k1]
+                for k in range(k1 - k0):
+                    i = np.uint64(ks[k])
+                    if not vh.finite_input(p, n, moved, i):
+                        bad = 1.0
+                    x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                    xs[k] = x
+                    ys[k] = y
+                    zs[k] = z
+                    xlo = min(xlo, x)
+                    xhi = max(xhi, x)
+                    ylo = min(ylo, y)
+                    yhi = max(yhi, y)
+                    wlo = min(wlo, w)
+                    out_x = max(out_x, tx0 - x, x - tx1)
+                    out_y = max(out_y, ty0 - y, y - ty1)
+                # the tile's depths while its receivers are at hand (as ``tile_depths``)
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(xs, ys, zs, xmin + (cell - row * nx + 0.5) * cw, ymin + (row + 0.5) * ch)
+                )
+            stats[row, 0] = xlo
+            stats[row, 1] = xhi
+            stats[row, 2] = ylo
+            stats[row, 3] = yhi
+            stats[row, 4] = wlo
+            stats[row, 5] = bad
+            stats[row, 6] = out_x
+            stats[row, 7] = out_y
+        return sx, sy, sz, stats, zlo, zhi, fit
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
-        """Stable counting sort of the receivers by tile; per tile the depth range."""
+        """Stable counting sort of the receivers by tile."""
         m = px.shape[0]
         n_cells = nx * ny
         cell = np.empty(m, np.int64)
@@ -1139,8 +1236,6 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         sx = np.empty(m)
         sy = np.empty(m)
         sz = np.empty(m)
-        zlo = np.full(n_cells, np.inf)
-        zhi = np.full(n_cells, -np.inf)
         for i in range(m):
             c = cell[i]
             k = fill[c]
@@ -1148,18 +1243,43 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             order[k] = i
             sx[k] = px[i]
             sy[k] = py[i]
-            z = pz[i]
-            sz[k] = z
-            zlo[c] = min(zlo[c], z)
-            zhi[c] = max(zhi[c], z)
-        return order, cell_start, sx, sy, sz, zlo, zhi
+            sz[k] = pz[i]
+        return order, cell_start, sx, sy, sz
 
     @numba.njit(parallel=parallel, cache=True)
-    def setup(src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+    def tile_depths(px, py, pz, cell_start, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per tile its receivers' depth range (zlo, zhi), and a least-squares depth plane
+        ``a + (b·(x − xc) + c·(y − yc))`` about the tile's centre (xc, yc) with the lowest and
+        highest residual ``z − plane`` of its receivers, widened past rounding: (n_cells, 5) rows
+        (a, b, c, r_lo, r_hi). Any plane would do (the residuals are measured); a good one lets
+        the kernel settle a tile whose receivers lie on one surface (a ground under its own
+        light cap) without testing each receiver."""
+        n_cells = nx * ny
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        fit = np.zeros((n_cells, 5))
+        for row in numba.prange(ny):
+            yc = ymin + (row + 0.5) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
+                xc = xmin + (cell - row * nx + 0.5) * cw
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(px[k0:k1], py[k0:k1], pz[k0:k1], xc, yc)
+                )
+        return zlo, zhi, fit
+
+    @numba.njit(parallel=parallel, cache=True)
+    def setup(
+        src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
+    ):  # pragma: no cover - compiled
         """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
         ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
         a triangle that crosses the near plane or the guard band (when ``check``) is flagged in
-        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area."""
+        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area. Its tiles
+        are those its bounding box meets once widened by the receivers' slack (see ``count``)."""
         s = src.shape[0]
         ex = np.empty((s, 3))
         ey = np.empty((s, 3))
@@ -1256,10 +1376,10 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             hi_x = max(xa, xb, xc_)
             lo_y = min(ya, yb, yc_)
             hi_y = max(ya, yb, yc_)
-            fx0 = np.floor((lo_x - xmin) / cw)
-            fx1 = np.floor((hi_x - xmin) / cw)
-            fy0 = np.floor((lo_y - ymin) / ch)
-            fy1 = np.floor((hi_y - ymin) / ch)
+            fx0 = np.floor((lo_x - slack_x - xmin) / cw)
+            fx1 = np.floor((hi_x + slack_x - xmin) / cw)
+            fy0 = np.floor((lo_y - slack_y - ymin) / ch)
+            fy1 = np.floor((hi_y + slack_y - ymin) / ch)
             cx0[t] = np.int64(min(max(fx0, 0.0), float(nx)))
             cx1[t] = np.int64(min(max(fx1, -1.0), float(nx - 1)))
             cy0[t] = np.int64(min(max(fy0, 0.0), float(ny)))
@@ -1275,21 +1395,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
         )  # fmt: skip
 
-    @numba.njit(parallel=parallel, cache=True)
-    def lit(order, sorted_counts):  # pragma: no cover - compiled
-        out = np.empty(order.shape[0])
-        for k in numba.prange(order.shape[0]):
-            out[order[k]] = 1.0 if sorted_counts[k] == 0 else 0.0
-        return out
-
-    @numba.njit(parallel=parallel, cache=True)
-    def scatter(order, sorted_counts):  # pragma: no cover - compiled
-        out = np.empty(order.shape[0], np.int64)
-        for k in numba.prange(order.shape[0]):
-            out[order[k]] = sorted_counts[k]
-        return out
-
-    return project, bin_points, setup, lit, scatter
+    return project, bin_points, setup, tile_depths, project_binned
 
 
 def _threads() -> int:
@@ -1347,8 +1453,37 @@ def stencil_counts(
     numba_path = _use_numba(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
-    px, py, pz, bounds = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
-    return _count(vol, vp, px, py, pz, bounds, stencil == "zfail", numba_path)
+    rec = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
+    return _count(vol, vp, rec, stencil == "zfail")
+
+
+@dataclass(frozen=True, eq=False)
+class _Receivers:
+    """Projected receivers: normalised-device (x, y, z) and their (xmin, xmax, ymin, ymax).
+
+    The numpy engine keeps them in input order (``order`` None). The compiled engine keeps them
+    sorted by the tiles of ``grid`` (receiver ``order[k]`` at ``k``, tile c holding
+    ``cell_start[c]:cell_start[c + 1]``), with ``slack`` = (x, y): how far a receiver may lie
+    outside its tile (0 when binned from these very positions).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    bounds: tuple[float, float, float, float]
+    grid: tuple[float, float, float, float, int, int] | None = None
+    order: np.ndarray | None = None
+    cell_start: np.ndarray | None = None
+    slack: tuple[float, float] = (0.0, 0.0)
+    depths: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # ``tile_depths``, if known
+
+
+#: The last compiled binning of receivers: (weak references to the points and normals, the
+#: view-projection bytes, grid, order, cell_start). The lights of a frame count the same
+#: receivers, moved by ``offset`` towards each light: the next light projects straight into
+#: this order instead of sorting again. Any permutation would count the same (every tile's
+#: bounds, depths and slack are measured again); a good one only makes the tiles tight.
+_BINNING: list[tuple] = []
 
 
 def _projected(
@@ -1360,22 +1495,32 @@ def _projected(
     moved: bool,
     vp: np.ndarray,
     numba_path: bool,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[float, float, float, float]]:
+    reuse: bool = False,
+) -> _Receivers:
     """Receivers (moved ``offset`` towards the light's side when ``moved``) in normalised-device
-    coordinates, and their (xmin, xmax, ymin, ymax); raises if a receiver is behind the camera
-    or a point or normal is not finite."""
+    coordinates; the compiled engine also bins them into tiles (reusing the last binning of the
+    same point and normal arrays under the same camera when ``reuse``). Raises if a receiver is
+    behind the camera or a point or normal is not finite."""
+    m = len(p)
     if numba_path:
         # small jobs run serially: a parallel region costs more than it saves on a busy machine
-        kernels = _fast_kernels(len(p) >= _PARALLEL_RECEIVERS)
-        px, py, pz, _, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+        parallel = m >= _PARALLEL_RECEIVERS
+        kernels = _fast_kernels(parallel)
+        key = vp.tobytes()
+        cached = _BINNING[0] if reuse and _BINNING else None
+        same = cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key
+        if same and len(cached[4]) == m:
+            grid, order, cell_start = cached[3:]
+            sx, sy, sz, stats, *depths = kernels[4](
+                p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid
+            )
+        else:
+            px, py, pz, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+            cached = None
         bad = bool(stats[:, 5].any())
-        w_ok = bool(stats[:, 4].min() > 0)
-        bounds = (
-            float(stats[:, 0].min()),
-            float(stats[:, 1].max()),
-            float(stats[:, 2].min()),
-            float(stats[:, 3].max()),
-        )
+        w_ok = bool(stats[:, 4].min() > 0) if m else True
+        lo, hi = stats.min(axis=0), stats.max(axis=0)
+        bounds = (float(lo[0]), float(hi[1]), float(lo[2]), float(hi[3])) if m else (0.0,) * 4
     else:
         bad = not (np.all(np.isfinite(p)) and (not moved or np.all(np.isfinite(n))))
         q = _offset_numpy(p, n, light_vec, directional, offset) if moved else p
@@ -1388,49 +1533,60 @@ def _projected(
         raise ValueError("points/normals: expected finite coordinates, got NaN or Inf")
     if not w_ok:
         raise ValueError(f"points: some of the {len(p)} receivers lie behind the camera (clip w <= 0)")
-    return px, py, pz, bounds
+    if not numba_path:
+        return _Receivers(px, py, pz, bounds)
+    if cached is not None:
+        slack = (float(max(stats[:, 6].max(), 0.0)), float(max(stats[:, 7].max(), 0.0)))
+        return _Receivers(sx, sy, sz, bounds, grid, order, cell_start, slack, tuple(depths))
+    grid = _grid_params(m, bounds)
+    order, cell_start, sx, sy, sz = kernels[1](px, py, pz, *grid)
+    if reuse:
+        try:
+            _BINNING[:] = [(weakref.ref(p), weakref.ref(n), key, grid, order, cell_start)]
+        except TypeError:  # an array that takes no weak reference: not kept
+            _BINNING.clear()
+    return _Receivers(sx, sy, sz, bounds, grid, order, cell_start)
 
 
 def _count(
-    vol: np.ndarray,
-    vp: np.ndarray,
-    px: np.ndarray,
-    py: np.ndarray,
-    pz: np.ndarray,
-    bounds: tuple[float, float, float, float],
-    zfail: bool,
-    numba_path: bool,
-    visibility: bool = False,
+    vol: np.ndarray, vp: np.ndarray, rec: _Receivers, zfail: bool, visibility: bool = False
 ) -> np.ndarray:
-    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers
-    whose (xmin, xmax, ymin, ymax) are ``bounds``."""
-    grid = _grid_params(len(px), bounds)
-    xmin, ymin, cw, ch, nx, ny = grid
+    """Stencil counts (or, with ``visibility``, 1.0 where the count is 0) of projected receivers,
+    in their input order."""
+    bounds = rec.bounds
     guard = 2.0 * max(*(abs(b) for b in bounds), 1.0) + 1.0
-    if not numba_path:
+    if rec.order is None:  # the numpy engine
+        grid = _grid_params(len(rec.x), bounds)
         st = _setup(_transform(vol, vp), grid, guard)
-        cell_start, order = _bin_numpy(px, py, grid)
-        counts = _count_numpy(st, px, py, pz, cell_start, order, nx, zfail)
+        cell_start, order = _bin_numpy(rec.x, rec.y, grid)
+        counts = _count_numpy(st, rec.x, rec.y, rec.z, cell_start, order, grid[4], zfail)
         return (counts == 0).astype(np.float64) if visibility else counts
-    parallel = len(px) >= _PARALLEL_RECEIVERS
-    _, bin_points, setup, lit, scatter = _fast_kernels(parallel)
-    fields = setup(vol, vp, True, True, guard, xmin, ymin, cw, ch, nx, ny)
+    grid = rec.grid
+    xmin, ymin, cw, ch, nx, ny = grid
+    slack_x, slack_y = rec.slack
+    parallel = len(rec.x) >= _PARALLEL_RECEIVERS
+    _, _, setup, tile_depths, _ = _fast_kernels(parallel)
+    # the volume's set-up is small work: one thread (no parallel region to wait for)
+    serial_setup = _fast_kernels(False)[2] if len(vol) < _PARALLEL_FACES else setup
+    fields = serial_setup(vol, vp, True, True, guard, *grid, slack_x, slack_y)
     todo = fields[-1]
     if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
         cut = _clip(_transform(vol[todo], vp), guard)
-        cut = setup(cut, vp, False, False, guard, xmin, ymin, cw, ch, nx, ny)
+        cut = serial_setup(cut, vp, False, False, guard, *grid, slack_x, slack_y)
         fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
     st = _Setup(*fields[:-1])
-    order, cell_start, sx, sy, sz, zlo, zhi = bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny)
+    depths = rec.depths
+    zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     n_bands = min(ny, _threads()) if parallel else 1
-    sorted_counts = _kernel(parallel)(
+    counts, lit = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
         st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
-        sx, sy, sz, cell_start, zlo, zhi, zfail,
+        rec.x, rec.y, rec.z, rec.cell_start, zlo, zhi, fit, rec.order, zfail, visibility,
+        slack_x, slack_y,
     )  # fmt: skip
-    return lit(order, sorted_counts) if visibility else scatter(order, sorted_counts)
+    return lit if visibility else counts
 
 
 def zpass_is_safe(
@@ -1579,10 +1735,10 @@ def shadow_volume_visibility(
         extent = 4.0 * (span + reach) + 1.0
     vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     # offset and projection in one compiled pass (the numpy engine: the same expressions)
-    px, py, pz, bounds = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path)
+    rec = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path, reuse=True)
     topo, key = _topology_with_key(tris)
     if stencil == "auto":
-        stencil = _choose(light, tris, key, view, proj, bounds)[0]
+        stencil = _choose(light, tris, key, view, proj, rec.bounds)[0]
     # z-pass draws the light caps (receivers hidden behind a caster's lit faces need them) and,
     # when the volumes end at a finite distance (orthographic cameras), the dark caps too
     caps: bool | str = True if stencil == "zfail" or extent is not None else "light"
@@ -1590,7 +1746,7 @@ def shadow_volume_visibility(
     volume = _cached(
         ("volume", key, light_key), lambda: shadow_volume_triangles(topo, light, caps=caps, extent=extent)
     )
-    return _count(volume, vp, px, py, pz, bounds, stencil == "zfail", numba_path, visibility=True)
+    return _count(volume, vp, rec, stencil == "zfail", visibility=True)
 
 
 #: Per-frame reuse: volumes and near-plane proofs by (topology digest, light, ...), a few entries.

@@ -111,6 +111,81 @@ def test_engines_count_identically(method, parallel, monkeypatch):
     assert np.count_nonzero(a) > 50
 
 
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+@pytest.mark.parametrize("parallel", [False, True])
+@pytest.mark.parametrize("method", ["zfail", "zpass"])
+@pytest.mark.parametrize("light_name", ["directional", "point"])
+def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, monkeypatch):
+    """Receivers lying 1e-4 above the planes of their own light caps (a ground, a floating open
+    quad, a closed box's top), as the renderer moves them: the compiled kernel settles whole
+    tiles from each tile's depth range and depth plane; the numpy engine tests every receiver.
+    The counts agree exactly (integers from the same float expressions), and the quad's cap,
+    in front of the ground below it, really counts there."""
+    import blinn_phong.shadow_volume as sv
+
+    if parallel:
+        monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
+        monkeypatch.setattr(sv, "_threads", lambda: 3)
+    light = LIGHTS[light_name]
+    ground_p, ground_t, _ = grid_plane(1, 1, (8.0, 8.0))
+    quad_p, quad_t, _ = grid_plane(1, 1, (1.2, 1.0))
+    quad = quad_p[quad_t] + np.array([-0.6, 0.2, 1.1])
+    box = world_triangles(scene_with(casters("box"), light, outside_camera()))
+    tris = np.concatenate([ground_p[ground_t], quad, box + np.array([1.2, -0.4, 0.0])])
+    s = 0.01
+    gx, gy = np.meshgrid(np.arange(-2.0, 2.0, s), np.arange(-1.6, 2.0, s))
+    ground = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, 1e-4)], axis=1)
+    qx, qy = np.meshgrid(np.arange(-1.15, -0.05, s), np.arange(-0.25, 0.65, s))
+    on_quad = np.stack([qx.ravel(), qy.ravel(), np.full(qx.size, 1.1 + 1e-4)], axis=1)
+    bx, by = np.meshgrid(np.arange(0.75, 1.65, s), np.arange(-0.85, 0.05, s))
+    on_box = np.stack([bx.ravel(), by.ravel(), np.full(bx.size, 1.0 + 1e-4)], axis=1)
+    pts = np.concatenate([ground, on_quad, on_box])
+    view = look_at((0.3, -5.0, 4.0), (0.0, 0.0, 0.4), (0.0, 0.0, 1.0))
+    camera = Camera.perspective(50.0, 4 / 3, 0.5, 30.0, view=view)
+    volume = shadow_volume_triangles(tris, light, caps=True if method == "zfail" else "light")
+    a = stencil_counts(volume, camera.view, camera.projection, pts, stencil=method, engine="numpy")
+    b = stencil_counts(volume, camera.view, camera.projection, pts, stencil=method, engine="numba")
+    np.testing.assert_array_equal(a, b)
+    # the scene means something: ground receivers in the quad's and the box's shadows
+    assert 500 < np.count_nonzero(a[: len(ground)]) < len(ground) // 2
+    assert np.count_nonzero(a[len(ground) :]) == 0  # the tops are lit
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+@pytest.mark.parametrize("parallel", [False, True])
+def test_a_reused_binning_counts_as_a_fresh_one(parallel, monkeypatch):
+    """The next light of a frame projects its (differently moved) receivers into the previous
+    light's tile order; even a stale order (the arrays changed in place) counts exactly as a
+    fresh binning does, since every tile's bounds and depths are measured again (on one thread
+    and with the tile rows split between threads)."""
+    import blinn_phong.shadow_volume as sv
+
+    if parallel:
+        monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
+        monkeypatch.setattr(sv, "_threads", lambda: 3)
+
+    first, second = LIGHTS["directional"], LIGHTS["point"]
+    scene = scene_with(casters("pair") + casters("box"), second, outside_camera())
+    tris = world_triangles(scene)
+    pts, nrm, _, _ = samples(scene, WIDTH, HEIGHT)
+    pts, nrm = pts.copy(), nrm.copy()
+
+    def visibility(light, reuse):
+        if not reuse:
+            sv._BINNING.clear()
+        return shadow_volume_visibility(light, tris, pts, nrm, camera=scene.camera, engine="numba")
+
+    for light in (first, second):  # binned for `first`, reused for `second`
+        reused = visibility(light, True)
+    assert sv._BINNING and sv._BINNING[0][0]() is pts
+    np.testing.assert_array_equal(reused, visibility(second, False))
+    assert 100 < np.count_nonzero(reused == 0) < len(pts) - 100
+    visibility(first, False)
+    shuffled = np.random.default_rng(7).permutation(len(pts))
+    pts[:], nrm[:] = pts[shuffled], nrm[shuffled]  # same arrays: the cached order is now stale
+    np.testing.assert_array_equal(visibility(second, True), visibility(second, False))
+
+
 def _ellipse_area(light, centre, radius):
     lv, c = np.asarray(light, float), np.asarray(centre, float)
     axis = c - lv
