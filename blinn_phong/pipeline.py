@@ -60,28 +60,88 @@ from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
 __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 
 
-def _world_vertices(scene: Scene) -> list[np.ndarray]:
-    """(V_m, 3) world-space vertex positions of each mesh, ``(p, 1)·Mᵀ`` with the mesh's model matrix."""
-    out = []
+#: The world geometry of the last few scenes: per scene, the key of :func:`_geometry_key`, each
+#: mesh's arrays (kept to check their identity) and ``{"verts", "tris", "bvh_key"}``. Mesh arrays
+#: are not to be changed in place (the mesh facts assume it too); the cached arrays are read-only.
+_WORLD_CACHE: list[tuple[tuple, list[np.ndarray], dict[str, object]]] = []
+_WORLD_CACHE_SIZE = 4
+
+
+def _geometry_key(scene: Scene) -> tuple:
+    return tuple(
+        (id(m.positions), id(m.triangles), m.transform.tobytes(), bool(m.casts_shadows)) for m in scene.meshes
+    )
+
+
+def _world_entry(scene: Scene) -> dict[str, object]:
+    """The cached world geometry of ``scene`` (computed on first use; a static scene rendered again,
+    e.g. from another camera, reuses it)."""
+    key = _geometry_key(scene)
+    arrays = [a for m in scene.meshes for a in (m.positions, m.triangles)]
+    for i, (k, kept, entry) in enumerate(_WORLD_CACHE):
+        if k == key and all(a is b for a, b in zip(kept, arrays, strict=True)):
+            _WORLD_CACHE.insert(0, _WORLD_CACHE.pop(i))
+            return entry
+    verts = []
     for m in scene.meshes:
         hom = np.empty((len(m.positions), 4))
         hom[:, :3] = m.positions
         hom[:, 3] = 1.0
-        out.append((hom @ m.transform.T)[:, :3])
-    return out
+        v = (hom @ m.transform.T)[:, :3]
+        v.flags.writeable = False
+        verts.append(v)
+    parts = [v[m.triangles] for m, v in zip(scene.meshes, verts, strict=True) if m.casts_shadows]
+    tris = np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+    tris.flags.writeable = False
+    entry: dict[str, object] = {"verts": verts, "tris": tris, "bvh_key": None}
+    _WORLD_CACHE.insert(0, (key, arrays, entry))
+    del _WORLD_CACHE[_WORLD_CACHE_SIZE:]
+    return entry
+
+
+def _world_vertices(scene: Scene) -> list[np.ndarray]:
+    """(V_m, 3) world-space vertex positions of each mesh, ``(p, 1)·Mᵀ`` with the mesh's model matrix
+    (read-only arrays, cached for the scene's geometry)."""
+    return list(_world_entry(scene)["verts"])  # type: ignore[call-overload]
 
 
 def _world_triangles(scene: Scene, world_vertices: list[np.ndarray] | None = None) -> np.ndarray:
     """(T, 3, 3) world-space triangles of the meshes that cast shadows (``Mesh.casts_shadows``), in
-    scene order, as :func:`blinn_phong.raytrace.world_triangles`.
+    scene order, as :func:`blinn_phong.raytrace.world_triangles` (read-only, cached with the
+    scene's world vertices; ``world_vertices`` other than those are used as given).
 
     Computed here so that shadow maps and planar shadows work where Embree (``embreex``, which
     :mod:`blinn_phong.raytrace` imports) is not installed, e.g. in Blender's own Python.
-    ``world_vertices``: :func:`_world_vertices` of the scene when already computed.
     """
-    verts = _world_vertices(scene) if world_vertices is None else world_vertices
-    parts = [v[m.triangles] for m, v in zip(scene.meshes, verts, strict=True) if m.casts_shadows]
+    entry = _world_entry(scene)
+    verts = entry["verts"]
+    if world_vertices is None or all(a is b for a, b in zip(world_vertices, verts, strict=True)):  # type: ignore[call-overload]
+        return entry["tris"]  # type: ignore[return-value]
+    parts = [v[m.triangles] for m, v in zip(scene.meshes, world_vertices, strict=True) if m.casts_shadows]
     return np.concatenate(parts) if parts else np.zeros((0, 3, 3))
+
+
+def _all_world_vertices(scene: Scene) -> np.ndarray:
+    """(V, 3) every mesh's world vertices in scene order (read-only, cached with them)."""
+    entry = _world_entry(scene)
+    if "all" not in entry:
+        verts = entry["verts"]
+        every = np.concatenate(verts) if verts else np.zeros((0, 3))  # type: ignore[arg-type]
+        every.flags.writeable = False
+        entry["all"] = every
+    return entry["all"]  # type: ignore[return-value]
+
+
+def _bvh_key(scene: Scene, tris: np.ndarray) -> object:
+    """The ray tracer's cache key of the scene's cached caster triangles (hashed once per geometry)."""
+    from blinn_phong import raytrace  # Embree: imported only when used
+
+    entry = _world_entry(scene)
+    if entry["tris"] is not tris:
+        return raytrace._key(tris)
+    if entry["bvh_key"] is None:
+        entry["bvh_key"] = raytrace._key(tris)
+    return entry["bvh_key"]
 
 
 def _fragment_surface(
@@ -309,7 +369,7 @@ def _visibility_at(
     if any(c.method in ("ray_traced", "soft", "planar") for _, c in lit):
         from blinn_phong.raytrace import frame_triangles  # Embree: imported only when used
 
-        one_bvh = frame_triangles(tris)  # the BVH's cache key computed once per frame, not per light
+        one_bvh = frame_triangles(tris, _bvh_key(scene, tris))  # hashed once per geometry, not per light
     # world, normal and tris are this frame's own finite float64 arrays: checked once, here
     with trusted_arrays(world, normal, tris), one_bvh:
         for i, (light, c) in enumerate(lit):
@@ -398,7 +458,7 @@ def _opaque_from_winners(
     if lit is not None:  # shadows: each covered pixel's world point, then each light's visibility there
         t = time.perf_counter()
         verts = _world_vertices(prepared.scene)
-        all_verts = np.concatenate(verts) if verts else np.zeros((0, 3))
+        all_verts = _all_world_vertices(prepared.scene)
         points, normals, rank, mesh_of = winner_surfaces_compiled(
             setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
         )

@@ -240,14 +240,15 @@ _FRAME_KEYS: contextvars.ContextVar[dict[int, tuple[tuple[int, ...], str]] | Non
 
 
 @contextlib.contextmanager
-def frame_triangles(triangles: np.ndarray) -> Iterator[None]:
+def frame_triangles(triangles: np.ndarray, key: object = None) -> Iterator[None]:
     """Inside the block, :func:`cached_ray_scene` of this very array hashes it once, not per call.
 
     For a caller that made ``triangles`` itself and does not modify it inside the block (the
     frame pipeline's caster triangles, queried once per light): the SHA-1 of 260 k triangles
-    costs about 5 ms per call.
+    costs about 5 ms per call. ``key``: the array's :func:`_key`, when the caller kept it (a
+    read-only array it hashed before).
     """
-    token = _FRAME_KEYS.set({**(_FRAME_KEYS.get() or {}), id(triangles): _key(triangles)})
+    token = _FRAME_KEYS.set({**(_FRAME_KEYS.get() or {}), id(triangles): key or _key(triangles)})
     try:
         yield
     finally:

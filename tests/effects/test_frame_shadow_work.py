@@ -111,3 +111,24 @@ def test_planar_by_shadow_rays_equals_the_projection(light):
     # away from the shadow's edges the two classify every point alike; at most a few points whose
     # ray grazes a box edge (float32 Embree) may differ
     assert np.count_nonzero(got != reference) <= 4
+
+
+def test_world_geometry_is_cached_per_scene_geometry_and_read_only():
+    # A static scene rendered again reuses its world vertices and caster triangles (and so the
+    # ray tracer's hash of them); another transform is another geometry.
+    import dataclasses
+
+    from blinn_phong.raytrace import world_triangles
+
+    scene = _scene()
+    tris = _world_triangles(scene)
+    assert tris is _world_triangles(scene) and not tris.flags.writeable
+    np.testing.assert_array_equal(tris, world_triangles(scene)[0])
+    moved = dataclasses.replace(
+        scene.meshes[0], transform=scene.meshes[0].transform @ np.diag([1, 1, 2.0, 1])
+    )
+    other = dataclasses.replace(scene, meshes=(moved, *scene.meshes[1:]))
+    np.testing.assert_array_equal(_world_triangles(other), world_triangles(other)[0])
+    assert not np.array_equal(_world_triangles(other), tris)
+    with pytest.raises(ValueError):
+        _world_vertices(scene)[0][0, 0] = 1.0
