@@ -27,6 +27,7 @@ module and :mod:`blinn_phong.frame` (the plan); no stage imports a later one.
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 from collections.abc import Callable
 
@@ -65,6 +66,7 @@ __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 #: are not to be changed in place (the mesh facts assume it too); the cached arrays are read-only.
 _WORLD_CACHE: list[tuple[tuple, list[np.ndarray], dict[str, object]]] = []
 _WORLD_CACHE_SIZE = 4
+_WORLD_LOCK = threading.Lock()
 
 
 def _geometry_key(scene: Scene) -> tuple:
@@ -78,10 +80,11 @@ def _world_entry(scene: Scene) -> dict[str, object]:
     e.g. from another camera, reuses it)."""
     key = _geometry_key(scene)
     arrays = [a for m in scene.meshes for a in (m.positions, m.triangles)]
-    for i, (k, kept, entry) in enumerate(_WORLD_CACHE):
-        if k == key and all(a is b for a, b in zip(kept, arrays, strict=True)):
-            _WORLD_CACHE.insert(0, _WORLD_CACHE.pop(i))
-            return entry
+    with _WORLD_LOCK:  # renders may run in threads of one process
+        for i, (k, kept, entry) in enumerate(_WORLD_CACHE):
+            if k == key and all(a is b for a, b in zip(kept, arrays, strict=True)):
+                _WORLD_CACHE.insert(0, _WORLD_CACHE.pop(i))
+                return entry
     verts = []
     for m in scene.meshes:
         hom = np.empty((len(m.positions), 4))
@@ -94,8 +97,9 @@ def _world_entry(scene: Scene) -> dict[str, object]:
     tris = np.concatenate(parts) if parts else np.zeros((0, 3, 3))
     tris.flags.writeable = False
     entry: dict[str, object] = {"verts": verts, "tris": tris, "bvh_key": None}
-    _WORLD_CACHE.insert(0, (key, arrays, entry))
-    del _WORLD_CACHE[_WORLD_CACHE_SIZE:]
+    with _WORLD_LOCK:
+        _WORLD_CACHE.insert(0, (key, arrays, entry))
+        del _WORLD_CACHE[_WORLD_CACHE_SIZE:]
     return entry
 
 
