@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 
 import numpy as np
 
@@ -1267,6 +1268,19 @@ def _plain_kernel() -> object:  # a numba dispatcher
     return plain
 
 
+def _run_plain(*args: object) -> int:
+    """Run the fused kernel. Its first compilation (once per machine: the kernel is disk-cached)
+    makes numba's own pedantic SSA check warn about variables of the inlined lighting helpers
+    that it expects in scope (``NumbaIRAssumptionWarning``, "please report"); the compiled
+    code is unaffected (the fused frame equals the numpy engine's, tested), so that warning is
+    not passed on to the user."""
+    from numba.core.errors import NumbaIRAssumptionWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
+        return _plain_kernel()(*args)  # type: ignore[operator]
+
+
 _NO_SETUP = (
     np.zeros(0, np.int64), np.zeros(0, np.bool_), *(np.zeros((0, 3)) for _ in range(2)), np.zeros(0),
     *(np.zeros((0, 3)) for _ in range(5)), np.zeros((0, 3, 3)),
@@ -1340,7 +1354,7 @@ def shade_plain_fragments_compiled(
         if max_layers < 1:
             raise ValueError(f"transparent: max_layers must be >= 1, got {max_layers}")
         lists = (int(n_opaque), offsets, int(max_layers), longest)
-    _plain_kernel()(
+    _run_plain(
         width, height, _row_order(height), False, opaque_of, *fragments, *_NO_SETUP, two_sided,
         geometry, materials, lights, flags, frequencies, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
@@ -1393,7 +1407,7 @@ def shade_plain_winners_compiled(
         vis = vis.astype(np.float64, copy=False)
         vis_mean = vis_mean.astype(np.float64, copy=False)
     return int(
-        _plain_kernel()(
+        _run_plain(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
             two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
             visibility is not None, vis, vis_mean, rank, 0, _NO_INDEX, 0, 0, *out,
