@@ -46,6 +46,8 @@ test: setup
 
 bench: setup
 	$(PY) -m benchmarks --out benchmarks/results --charts docs
+	$(PY) -m benchmarks.planner_fuzz 200
+	$(PY) -m benchmarks.cost_check
 
 # The trade-off families on small scenes (about 30 s), written outside the repository.
 bench-quick: setup
