@@ -45,7 +45,7 @@ from pathlib import Path
 import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, write_json
 from benchmarks.bench_frame import issue_scene
-from benchmarks.tradeoffs import layered_scene, shadow_scene, uncached
+from benchmarks.tradeoffs import layered_scene, shadow_runs, shadow_scene
 from blinn_phong import calibration as cal
 from blinn_phong.planner import shadow_map_geometry, traced_share
 
@@ -104,17 +104,7 @@ def check_frame(
             if isinstance(light, bp.AmbientLight):
                 continue
 
-            def only(method: object, j: int = j) -> list[object]:
-                return [method if i == j else "none" for i in range(len(scene.lights))]
-
-            runs = {
-                "ray_traced": uncached(functools.partial(render, shadows=only("ray_traced"))),
-                "shadow_volume": uncached(functools.partial(render, shadows=only("shadow_volume"))),
-            }
-            if isinstance(light, bp.DirectionalLight):
-                for res in MAP_RESOLUTIONS:
-                    options = bp.ShadowOptions("shadow_map", resolution=res)
-                    runs[f"shadow_map {res}"] = uncached(functools.partial(render, shadows=only(options)))
+            runs = shadow_runs(render, scene, j, MAP_RESOLUTIONS)
             t = _timed(runs, repeat)
             ref = t["ray_traced"]["shadows"]
             share = traced_share(scene, models=models)  # the planner's estimate, as it plans

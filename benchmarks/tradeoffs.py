@@ -404,9 +404,8 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
     from benchmarks.bench_frame import issue_scene
     from blinn_phong import raytrace
     from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
-    from blinn_phong.pipeline import _world_triangles, _world_vertices
-    from blinn_phong.ray_culling import GENERAL, TRACE, caster_tables, rays_to_trace
-    from blinn_phong.scene import DirectionalLight
+    from blinn_phong.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
+    from blinn_phong.ray_culling import GENERAL, TRACE, caster_tables
 
     frames = [("shadow calibration", shadow_scene(), 256, 256)]
     frames.append(("frame benchmark", issue_scene(48 if quick else 96, 24 if quick else 48), 640, 360))
@@ -426,25 +425,11 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
         bvh = raytrace.cached_ray_scene(tris)
         tables = caster_tables(scene, bvh.centre)
         general = float(np.mean(tables[0][mesh_of] == GENERAL))
-        ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
         for j, light in enumerate(scene.lights):
-            directional = isinstance(light, DirectionalLight)
-            if directional:
-                vec = -np.asarray(light.direction, dtype=np.float64)
-                vec = vec / np.linalg.norm(vec)
-
-                def trace_all(points=points, normals=normals, vec=vec, bvh=bvh):
-                    return raytrace.directional_light_visibility(bvh, points, normals, vec)
-            else:
-                vec = np.asarray(light.position, dtype=np.float64)
-
-                def trace_all(points=points, normals=normals, vec=vec, bvh=bvh):
-                    return raytrace.point_light_visibility(bvh, points, normals, vec)
-
-            cull = functools.partial(
-                rays_to_trace, points, normals, mesh_of, vec, not directional, bvh.centre,
-                raytrace.HARD_SHADOW_OFFSET, ulps, tables,
-            )  # fmt: skip
+            vec, positional = _ray_target(light)
+            trace = raytrace.point_light_visibility if positional else raytrace.directional_light_visibility
+            trace_all = functools.partial(trace, bvh, points, normals, vec)
+            cull = functools.partial(_ray_answers, light, points, normals, mesh_of, bvh.centre, tables)
             times = time_interleaved({"surface": surfaces, "cull": cull, "embree": trace_all}, repeat=repeat)
             traced = float(np.mean(cull() == TRACE))
             rows.append(
@@ -810,6 +795,28 @@ def uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]
     return run
 
 
+def shadow_runs(
+    render: Callable[..., bp.RenderResult], scene: bp.Scene, light: int, resolutions: tuple[int, ...]
+) -> dict[str, Callable[[], bp.RenderResult]]:
+    """Frames with light ``light`` alone shadowed (the others ``"none"``), each building its BVH and
+    volumes (:func:`uncached`): ``ray_traced``, ``shadow_volume`` and, for a directional light,
+    ``shadow_map <R>`` for each of ``resolutions``. ``render(shadows=...)`` renders the frame."""
+    n = len(scene.lights)
+
+    def only(method: object) -> list[object]:
+        return [method if i == light else "none" for i in range(n)]
+
+    runs = {
+        "ray_traced": uncached(functools.partial(render, shadows=only("ray_traced"))),
+        "shadow_volume": uncached(functools.partial(render, shadows=only("shadow_volume"))),
+    }
+    if isinstance(scene.lights[light], bp.DirectionalLight):
+        for res in resolutions:
+            options = bp.ShadowOptions("shadow_map", resolution=res)
+            runs[f"shadow_map {res}"] = uncached(functools.partial(render, shadows=only(options)))
+    return runs
+
+
 def shadow_stage_rows(quick: bool = False, repeat: int = 3) -> list[dict]:
     """``shadows``-stage seconds of whole ``render()`` frames, one light shadowed at a time.
 
@@ -840,17 +847,7 @@ def shadow_stage_rows(quick: bool = False, repeat: int = 3) -> list[dict]:
             if isinstance(light, bp.AmbientLight):
                 continue
 
-            def only(method: object, j: int = j, n: int = len(scene.lights)) -> list[object]:
-                return [method if i == j else "none" for i in range(n)]
-
-            runs = {
-                "ray_traced": uncached(functools.partial(render, shadows=only("ray_traced"))),
-                "shadow_volume": uncached(functools.partial(render, shadows=only("shadow_volume"))),
-            }
-            if isinstance(light, bp.DirectionalLight):
-                for res in STAGE_MAP_RESOLUTIONS:
-                    options = bp.ShadowOptions("shadow_map", resolution=res)
-                    runs[f"shadow_map {res}"] = uncached(functools.partial(render, shadows=only(options)))
+            runs = shadow_runs(render, scene, j, STAGE_MAP_RESOLUTIONS)
             times = timed_renders(runs, repeat)
             for label, t in times.items():
                 method, _, res = label.partition(" ")

@@ -268,6 +268,33 @@ def light_visibilities(
     return _visibility_at(scene, lit, verts, world, normal, compiled, mesh_of)
 
 
+def _ray_target(light: object) -> tuple[np.ndarray, bool]:
+    """``(vector, positional)`` of a light's shadow rays, as the ray tracer takes them: the unit
+    direction towards a directional light, else the light's position."""
+    if isinstance(light, DirectionalLight):
+        towards = -np.asarray(light.direction, dtype=np.float64)
+        return towards / np.linalg.norm(towards), False
+    return np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
+
+
+def _ray_answers(
+    light: object,
+    world: np.ndarray,
+    normal: np.ndarray,
+    mesh_of: np.ndarray,
+    centre: np.ndarray,
+    tables: tuple[np.ndarray, ...],
+) -> np.ndarray:
+    """:func:`blinn_phong.ray_culling.rays_to_trace` for the hard shadow rays of ``light`` as the
+    ray tracer builds them (default offset, offset scale, BVH ``centre``)."""
+    from blinn_phong import raytrace  # Embree: imported only when used
+    from blinn_phong.ray_culling import rays_to_trace
+
+    vec, positional = _ray_target(light)
+    offset, scale = raytrace.HARD_SHADOW_OFFSET, raytrace.OFFSET_SCALE
+    return rays_to_trace(world, normal, mesh_of, vec, positional, centre, offset, scale, tables)
+
+
 def _traced_hard(
     scene: Scene,
     light: object,
@@ -285,22 +312,12 @@ def _traced_hard(
     between lights.
     """
     from blinn_phong import raytrace  # Embree: imported only when used
-    from blinn_phong.ray_culling import LIT, TRACE, caster_tables, rays_to_trace
+    from blinn_phong.ray_culling import LIT, TRACE, caster_tables
 
     bvh = raytrace.cached_ray_scene(tris)
     if "tables" not in culling:
         culling["tables"] = caster_tables(scene, bvh.centre)
-    if isinstance(light, DirectionalLight):
-        vec = -np.asarray(light.direction, dtype=np.float64)
-        vec = vec / np.linalg.norm(vec)
-        positional = False
-    else:
-        vec, positional = np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
-    ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
-    answer = rays_to_trace(
-        world, normal, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps,
-        culling["tables"],
-    )  # type: ignore[arg-type]  # fmt: skip
+    answer = _ray_answers(light, world, normal, mesh_of, bvh.centre, culling["tables"])  # type: ignore[arg-type]
     out = (answer == LIT).astype(np.float64)
     index = np.flatnonzero(answer == TRACE)
     if len(index):

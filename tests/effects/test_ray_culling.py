@@ -14,7 +14,7 @@ import pytest
 from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
 from blinn_phong.pipeline import _traced_hard, _world_triangles, _world_vertices
 from blinn_phong.prepared import prepare_scene
-from blinn_phong.scene import Camera, DirectionalLight, Mesh, PointLight, Scene, look_at
+from blinn_phong.scene import Camera, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import light_visibility
 
 from .volume_scenes import LIGHTS, casters, outside_camera, scene_with, sphere_mesh
@@ -38,23 +38,16 @@ def _check(scene: Scene, light) -> tuple[float, int]:
     """Assert culled == traced for ``light``; return the fraction of rays answered without Embree
     and the number answered "shadowed"."""
     from blinn_phong import raytrace
-    from blinn_phong.ray_culling import LIT, SHADOWED, TRACE, caster_tables, rays_to_trace
+    from blinn_phong.pipeline import _ray_answers
+    from blinn_phong.ray_culling import LIT, SHADOWED, TRACE, caster_tables
 
     points, normals, mesh_of, tris = _surfaces(scene)
     assert len(points) > 1000
     full = light_visibility("ray_traced", light, tris, points, normals, engine="numba")
     culled = _traced_hard(scene, light, tris, points, normals, mesh_of, {})
     np.testing.assert_array_equal(culled, full)
-    bvh = raytrace.cached_ray_scene(tris)
-    if isinstance(light, DirectionalLight):
-        vec, positional = -np.asarray(light.direction) / np.linalg.norm(light.direction), False
-    else:
-        vec, positional = np.asarray(light.position, float), True
-    ulps = raytrace.OFFSET_ULPS * float(np.finfo(np.float32).eps)
-    answer = rays_to_trace(
-        points, normals, mesh_of, vec, positional, bvh.centre, raytrace.HARD_SHADOW_OFFSET, ulps,
-        caster_tables(scene, bvh.centre),
-    )  # fmt: skip
+    centre = raytrace.cached_ray_scene(tris).centre
+    answer = _ray_answers(light, points, normals, mesh_of, centre, caster_tables(scene, centre))
     np.testing.assert_array_equal(full[answer == LIT], 1.0)
     np.testing.assert_array_equal(full[answer == SHADOWED], 0.0)
     return float(np.mean(answer != TRACE)), int(np.sum(answer == SHADOWED))
