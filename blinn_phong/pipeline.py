@@ -291,7 +291,7 @@ def _ray_answers(
     from blinn_phong.ray_culling import rays_to_trace
 
     vec, positional = _ray_target(light)
-    offset, scale = raytrace.HARD_SHADOW_OFFSET, raytrace.OFFSET_SCALE
+    offset, scale = raytrace.HARD_SHADOW_OFFSET, raytrace.offset_scale()
     return rays_to_trace(world, normal, mesh_of, vec, positional, centre, offset, scale, tables)
 
 

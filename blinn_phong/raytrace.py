@@ -64,8 +64,12 @@ OFFSET_ULPS = 64.0
 #: Default smallest ray-origin offset of hard shadow rays (world units).
 HARD_SHADOW_OFFSET = 1e-4
 _EPS32 = float(np.finfo(np.float32).eps)  # 2**-23
-#: The origin offset's growth with ``‖p − centre‖∞``: :data:`OFFSET_ULPS` float32 spacings.
-OFFSET_SCALE = OFFSET_ULPS * _EPS32
+
+
+def offset_scale() -> float:
+    """The origin offset's growth with ``‖p − centre‖∞``: :data:`OFFSET_ULPS` float32 spacings
+    (read at each call, so the constant can be changed)."""
+    return OFFSET_ULPS * _EPS32
 
 
 def _points(name: str, value: np.ndarray) -> np.ndarray:
@@ -313,7 +317,7 @@ def world_triangles(scene: object) -> tuple[np.ndarray, np.ndarray]:
 
 def _effective_offset(points: np.ndarray, centre: np.ndarray, offset: float) -> np.ndarray:
     """(n,) ``max(offset, OFFSET_ULPS · 2⁻²³ · ‖p − centre‖∞)``: see the module docstring."""
-    return np.maximum(offset, OFFSET_SCALE * np.abs(points - centre).max(axis=1, initial=0.0))
+    return np.maximum(offset, offset_scale() * np.abs(points - centre).max(axis=1, initial=0.0))
 
 
 def _offset_origins(
@@ -405,7 +409,7 @@ def _hard_shadow(
             positional,
             scene.centre,
             float(offset),
-            OFFSET_SCALE,
+            offset_scale(),
             o32,
             d32,
             t32,
