@@ -54,10 +54,13 @@ _lerp: object = None
 _triangle_setup: object = None
 _sample_depth: object = None
 _winner_point: object = None
+_unit_face_normal: object = None
 
 
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
+    import math
+
     import numba
 
     @numba.njit(inline="always", cache=True)
@@ -128,10 +131,29 @@ def _kernel() -> object:  # a numba dispatcher
         b2 = q0 * weights[t, 0, 2] + q1 * weights[t, 1, 2] + q2 * weights[t, 2, 2]
         return depth, b0, b1, b2
 
+    @numba.njit(inline="always", cache=True)
+    def unit_face_normal(points, v0, v1, v2):  # pragma: no cover - compiled
+        """normals.face_normals of one triangle: (p1 − p0) × (p2 − p0), scaled by its largest
+        component before the length is taken; zero for a zero-area triangle."""
+        ux = points[v1, 0] - points[v0, 0]
+        uy = points[v1, 1] - points[v0, 1]
+        uz = points[v1, 2] - points[v0, 2]
+        vx = points[v2, 0] - points[v0, 0]
+        vy = points[v2, 1] - points[v0, 1]
+        vz = points[v2, 2] - points[v0, 2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        largest = max(abs(nx), abs(ny), abs(nz))
+        if largest > 0:
+            nx, ny, nz = nx / largest, ny / largest, nz / largest
+            length = math.sqrt(nx * nx + ny * ny + nz * nz)
+            nx, ny, nz = nx / length, ny / length, nz / length
+        return nx, ny, nz
+
     # Module globals, not closure variables: numba's disk-cache key hashes closure variables, and
     # a compiled function in one changes it in every process (the kernels were never cached).
-    global _triangle_setup, _sample_depth, _winner_point
+    global _triangle_setup, _sample_depth, _winner_point, _unit_face_normal
     _triangle_setup, _sample_depth, _winner_point = triangle_setup, sample_depth, winner_point
+    _unit_face_normal = unit_face_normal
 
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
@@ -1141,20 +1163,8 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
                         py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
                         pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
-                        ux, uy, uz = (
-                            eye_pos[v1, 0] - eye_pos[v0, 0],
-                            eye_pos[v1, 1] - eye_pos[v0, 1],
-                            eye_pos[v1, 2] - eye_pos[v0, 2],
-                        )
-                        qx, qy, qz = (
-                            eye_pos[v2, 0] - eye_pos[v0, 0],
-                            eye_pos[v2, 1] - eye_pos[v0, 1],
-                            eye_pos[v2, 2] - eye_pos[v0, 2],
-                        )
-                        nx, ny, nz = uy * qz - uz * qy, uz * qx - ux * qz, ux * qy - uy * qx
-                        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                        scale = (1.0 / length if length > 0 else 0.0) * winding[mesh]
-                        nx, ny, nz = nx * scale, ny * scale, nz * scale
+                        nx, ny, nz = _unit_face_normal(eye_pos, v0, v1, v2)
+                        nx, ny, nz = nx * winding[mesh], ny * winding[mesh], nz * winding[mesh]
                         # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
                         wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
                         wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
@@ -1417,7 +1427,6 @@ def shade_plain_winners_compiled(
 
 @functools.lru_cache(maxsize=1)
 def _winner_surface_kernel() -> object:  # a numba dispatcher
-    import math
 
     import numba
 
@@ -1451,22 +1460,9 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
 
     @numba.njit(parallel=True, cache=True)
     def face_normals(triangles, world, out):  # pragma: no cover - compiled
-        # normals.face_normals: (p1 − p0) × (p2 − p0) over the world corners, scaled by its
-        # largest component before the length is taken; zero for a zero-area triangle.
+        # normals.face_normals over the world corners (_unit_face_normal)
         for f in numba.prange(triangles.shape[0]):
-            v0, v1, v2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
-            ux = world[v1, 0] - world[v0, 0]
-            uy = world[v1, 1] - world[v0, 1]
-            uz = world[v1, 2] - world[v0, 2]
-            vx = world[v2, 0] - world[v0, 0]
-            vy = world[v2, 1] - world[v0, 1]
-            vz = world[v2, 2] - world[v0, 2]
-            nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
-            largest = max(abs(nx), abs(ny), abs(nz))
-            if largest > 0:
-                nx, ny, nz = nx / largest, ny / largest, nz / largest
-                length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                nx, ny, nz = nx / length, ny / length, nz / length
+            nx, ny, nz = _unit_face_normal(world, triangles[f, 0], triangles[f, 1], triangles[f, 2])
             out[f, 0], out[f, 1], out[f, 2] = nx, ny, nz
 
     return winner_surface, face_normals
