@@ -173,8 +173,8 @@ def _fit_shadow_map(data: dict, geometry: MapGeometry) -> dict:
 def _fit_frame_shadows(rows: list[dict]) -> dict:
     """The frame's shadow passes per receiver, relative to one Embree ray
     (:func:`benchmarks.tradeoffs.shadow_frame_constants`): the medians of ``surface_ratio`` and
-    ``cull_ratio``, and the largest traced share beyond the receivers on meshes the culling never
-    answers (``rim``)."""
+    ``cull_ratio`` (reported), and the largest traced share beyond the receivers on meshes the
+    culling never answers (``rim``, the constant of :func:`blinn_phong.planner.traced_share`)."""
     return {
         "cost": "in a frame, per receiver: surface (every method) + cull + traced share, × one ray's cost",
         "surface": float(np.median([r["surface_ratio"] for r in rows])),

@@ -336,6 +336,8 @@ def shadow_stage_seconds(
     family's shadow rows (the BVH and the volumes built in every frame): ratios carry over to
     other machines, seconds do not.
     """
+    if not (0.0 <= traced_share <= 1.0):
+        raise ValueError(f"traced_share: expected a value in [0, 1], got {traced_share!r}")
     table = models.get("frame_cost", {}).get("shadows")
     if table is None or method not in table:
         return None
@@ -346,18 +348,6 @@ def shadow_stage_seconds(
     elif method == "shadow_map":
         value += c[3] * resolution**2
     return float(value)
-
-
-def _frame_terms(models: dict, ray_per_receiver: float, receivers: int, traced_share: float | None) -> tuple:
-    """``(ray_term, shared)`` seconds of a frame's ray tracing per-receiver term and of the surface
-    pass every shadow method shares (:func:`shadow_volume_cost`); ``(N·r, 0)`` without a frame."""
-    fs = models.get("frame_shadows")
-    if traced_share is None or fs is None:
-        return ray_per_receiver * receivers, 0.0
-    if not (0.0 <= traced_share <= 1.0):
-        raise ValueError(f"traced_share: expected a value in [0, 1], got {traced_share!r}")
-    factor = min(1.0, fs["cull"] + traced_share)
-    return ray_per_receiver * receivers * factor, ray_per_receiver * receivers * fs["surface"]
 
 
 def shadow_map_cost(
@@ -384,9 +374,7 @@ def shadow_map_cost(
     Without that fit, ``t₀ + t₂·R²``.
 
     ``traced_share`` (a frame of the compiled engine, see :func:`shadow_volume_cost`): with the
-    frame-stage fit the ratio of the two stage predictions (:func:`shadow_stage_seconds`);
-    otherwise ray tracing's per-receiver term becomes ``bn·N·min(1, cull + f)`` and both sides
-    gain the shared surface pass ``bn·N·surface``.
+    frame-stage fit, the ratio of the two stage predictions (:func:`shadow_stage_seconds`).
     """
     m = models["shadow_map"]
     if "m0" not in m:
@@ -399,9 +387,8 @@ def shadow_map_cost(
             return stage_map / stage_ray
     if "mt" in m:
         t = m["triangles"] if triangles is None else triangles
-        rays, shared = _frame_terms(models, m["bn"], n, traced_share)
-        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t + shared) / (
-            m["b0"] + rays + m["bt"] * t + shared
+        return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n + m["mt"] * t) / (
+            m["b0"] + m["bn"] * n + m["bt"] * t
         )
     tau = 1.0 if triangles is None else triangles / m["triangles"]
     return (m["m0"] + m["m2"] * resolution**2 + m["mn"] * n) / (m["b0"] * tau + m["bn"] * n)
@@ -473,11 +460,9 @@ def shadow_volume_cost(
         triangles: ``T``, triangles in the scene (≥ 0).
         receivers: ``N``, receiver samples of the frame (``width·height·samples``, ≥ 0).
         traced_share: in a frame of the compiled engine, the share ``f`` of the receivers whose
-            shadow rays :mod:`blinn_phong.ray_culling` leaves to Embree (None: every ray traced,
-            no frame terms). With the ``frame_shadows`` fit (per receiver, in units of one
-            ray: the shared ``surface`` pass and the ``cull`` pass) ray tracing's ``r_N·N``
-            becomes ``r_N·N·min(1, cull + f)`` and both methods gain ``r_N·N·surface``; with
-            the frame-stage fit (:func:`shadow_stage_seconds`) the two stage predictions.
+            shadow rays :mod:`blinn_phong.ray_culling` leaves to Embree (None: every ray traced).
+            Given, and with the frame-stage fit, the two methods' ``shadows``-stage predictions
+            (:func:`shadow_stage_seconds`) replace the per-call fit below.
 
     Returns:
         ``{"shadow_volume": v₀ + v_T·T + v_N·N, "ray_traced": r₀ + r_T·T + r_N·N,
@@ -496,9 +481,8 @@ def shadow_volume_cost(
         traced = shadow_stage_seconds(models, "ray_traced", receivers, triangles, traced_share)
         if volume is not None and traced is not None and traced > 0:
             return {"shadow_volume": volume, "ray_traced": traced, "ratio": volume / traced}
-    rays, shared = _frame_terms(models, m["rn"], receivers, traced_share)
-    volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers + shared
-    traced = m["r0"] + m["rt"] * triangles + rays + shared
+    volume = m["v0"] + m["vt"] * triangles + m["vn"] * receivers
+    traced = m["r0"] + m["rt"] * triangles + m["rn"] * receivers
     return {"shadow_volume": volume, "ray_traced": traced, "ratio": volume / traced}
 
 
