@@ -109,6 +109,27 @@ def _case_id(case: dict) -> str:
     return "-".join(f"{k}={v}" for k, v in case.items())[:40] or "plain"
 
 
+def _record_fused(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The names of the fused kernels :func:`blinn_phong.pipeline.render_frame` calls, in order."""
+    from blinn_phong import pipeline
+
+    used: list[str] = []
+    for name in ("shade_plain_winners_compiled", "shade_plain_fragments_compiled"):
+        original = getattr(pipeline, name)
+        monkeypatch.setattr(pipeline, name, lambda *a, f=original, n=name: used.append(n) or f(*a))
+    return used
+
+
+def _assert_same_frames(ref: bp.RenderResult, fast: bp.RenderResult) -> None:
+    """Every buffer of the two renders float32, of one shape, within 1e-6 (see the tests' comments)."""
+    assert set(fast.passes) == set(ref.passes)
+    pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
+    pairs.append(("normal", ref.normal, fast.normal))
+    for name, a, b in pairs + [(n, ref.passes[n], fast.passes[n]) for n in ref.passes]:
+        assert a.dtype == b.dtype == np.float32 and a.shape == b.shape, name
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6, err_msg=name)
+
+
 @pytest.mark.parametrize("case", CASES, ids=_case_id)
 def test_fused_frame_equals_the_numpy_reference(case: dict, monkeypatch: pytest.MonkeyPatch) -> None:
     # Same formulas in the same order in both engines; only libm (pow, sqrt) and float64 rounding
@@ -122,35 +143,14 @@ def test_fused_frame_equals_the_numpy_reference(case: dict, monkeypatch: pytest.
         case["shading"] = "phong"
     options = {"shadows": "none", "shading": "phong", "transparency": "zbuffer", **case}
     ref = bp.render(s, 64, 48, engine="numpy", **options)
-    from blinn_phong import pipeline
-
-    used = []
-    for name in ("shade_plain_winners_compiled", "shade_plain_fragments_compiled"):
-        original = getattr(pipeline, name)
-        monkeypatch.setattr(pipeline, name, lambda *a, f=original, n=name: used.append(n) or f(*a))
+    used = _record_fused(monkeypatch)
     fast = bp.render(s, 64, 48, engine="numba", **options)
     # opaque frames, shadowed or not: from the z-buffer; sorted transparency: from the kept fragments
     opaque = options["transparency"] == "zbuffer"
     assert used == ["shade_plain_winners_compiled" if opaque else "shade_plain_fragments_compiled"]
     assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
     assert ref.stats.shaded == fast.stats.shaded
-    assert set(fast.passes) == set(ref.passes)
-    pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
-    pairs.append(("normal", ref.normal, fast.normal))
-    for name, a, b in pairs + [(n, ref.passes[n], fast.passes[n]) for n in ref.passes]:
-        assert a.dtype == b.dtype == np.float32 and a.shape == b.shape, name
-        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6, err_msg=name)
-
-
-def _record_fused(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """The names of the fused kernels :func:`blinn_phong.pipeline.render_frame` calls, in order."""
-    from blinn_phong import pipeline
-
-    used: list[str] = []
-    for name in ("shade_plain_winners_compiled", "shade_plain_fragments_compiled"):
-        original = getattr(pipeline, name)
-        monkeypatch.setattr(pipeline, name, lambda *a, f=original, n=name: used.append(n) or f(*a))
-    return used
+    _assert_same_frames(ref, fast)
 
 
 FOGS = [
@@ -198,12 +198,7 @@ def test_fogged_frame_stays_fused_and_equals_the_numpy_reference(
     assert 0.2 < (ref.rgba[..., 3] > 0).mean() < 1.0  # covered and empty pixels
     if opaque:  # (the A-buffer composites the glass over the floor: α = 1 wherever it is seen)
         assert (ref.rgba[..., 3][ref.rgba[..., 3] > 0] < 1).any()  # premultiplied: α·C_f with α < 1
-    assert set(fast.passes) == set(ref.passes)
-    pairs = [("rgba", ref.rgba, fast.rgba), ("depth", ref.depth, fast.depth)]
-    pairs.append(("normal", ref.normal, fast.normal))
-    for name, a, b in pairs + [(n, ref.passes[n], fast.passes[n]) for n in ref.passes]:
-        assert a.dtype == b.dtype == np.float32 and a.shape == b.shape, name
-        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6, err_msg=name)
+    _assert_same_frames(ref, fast)
 
 
 def test_per_channel_visibility_weights_each_light_per_channel() -> None:
