@@ -30,19 +30,10 @@ from blinn_phong.shadows import (
     shadow_map_visibility,
 )
 
-from .geometry import box_triangles, quad_triangles, uv_sphere_triangles
-from .test_shadow_kernels import surface_samples
+from .test_shadow_kernels import SCENE, surface_samples  # the shadow-kernel tests' scene
 
 pytest.importorskip("numba")
 
-GROUND = quad_triangles(np.array([-4.0, -4.0, 0.0]), np.array([8.0, 0, 0]), np.array([0, 8.0, 0]))
-SCENE = np.concatenate(
-    [
-        GROUND,
-        box_triangles((-1.5, -0.5, 0.0), (-0.5, 0.5, 1.0)),
-        uv_sphere_triangles((1.0, 0.3, 0.8), 0.7, 24, 12),
-    ]
-)
 POINT = PointLight((0.5, 1.5, 2.5))
 RES = 96
 BIAS = {"constant_bias": 1e-4, "slope_bias": 3.0}
