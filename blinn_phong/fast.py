@@ -55,6 +55,9 @@ _triangle_setup: object = None
 _sample_depth: object = None
 _winner_point: object = None
 _unit_face_normal: object = None
+#: The shadow-map look-up of one point (shadow_kernels.stacked_visibility), set by :func:`_plain_kernel`.
+_stacked_visibility: object = None
+_nearest_run: object = None
 
 
 @functools.lru_cache(maxsize=1)
@@ -1047,8 +1050,17 @@ def _plain_kernel() -> object:  # a numba dispatcher
     # kernel inlines code from lighting.py, so the hash of that file is a closure constant:
     # editing the equation invalidates the cached kernel.
     _point_terms = lighting.point_terms()
-    with open(lighting.__file__, "rb") as source:
-        lighting_stamp = int(hashlib.sha256(source.read()).hexdigest()[:15], 16)
+    # the shadow-map look-ups (shadow_kernels.nearest_run and stacked_visibility): their file is stamped too
+    from blinn_phong import shadow_kernels
+
+    global _stacked_visibility, _nearest_run
+    _stacked_visibility = shadow_kernels.stacked_visibility
+    _nearest_run = shadow_kernels.nearest_run
+    digest = hashlib.sha256()
+    for module in (lighting, shadow_kernels):
+        with open(module.__file__, "rb") as source:
+            digest.update(source.read())
+    lighting_stamp = int(digest.hexdigest()[:15], 16)
 
     @numba.njit(inline="always", cache=True)
     def lerp(values, side, v0, v1, v2, b0, b1, b2, j):  # pragma: no cover - compiled
@@ -1062,7 +1074,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
-        n_opaque, offsets, max_layers, max_list,
+        maps, world, n_opaque, offsets, max_layers, max_list,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its visible fragments: ``index[pixel]`` is the z-buffer's winning
@@ -1084,12 +1096,67 @@ def _plain_kernel() -> object:  # a numba dispatcher
         local_viewer, blinn, gl_compat, separate = flags
         mode_of, vertex_terms, winding, view_t = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
+        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel = maps
+        # shadow maps looked up here (opaque winners only, no normal offset): each pixel's world
+        # point as winner_surface computes it, its visibility per light as
+        # shadow_kernels.visibility_at
+        n_lit = m_first.shape[0]
+        has_maps = n_lit > 0
+        no_faces = np.zeros(0, np.int8)
+        scratch = width if has_maps else 0
         lists = offsets.shape[0] > 0
         covered = np.zeros(height, np.int64)
         covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
         for i_row in numba.prange(height):
             row = row_order[i_row]  # rows interleaved over the threads (balanced work)
             order = np.empty(max(max_list, 1), np.int64)  # scratch of the row's thread
+            r_bary = np.empty((scratch, 4))  # maps: the row's winners (depth, b0, b1, b2) ...
+            r_pts = np.empty((scratch, 3))  # ... world points and visibilities
+            r_vis = np.empty((scratch, max(n_lit, 1)))
+            r_vis3 = r_vis.reshape((scratch, max(n_lit, 1), 1))
+            s_qx = np.empty(scratch)
+            s_qy = np.empty(scratch)
+            s_qz = np.empty(scratch)
+            s_cw = np.empty(scratch)
+            s_face = np.zeros(scratch, np.int64)
+            j_cov = 0  # the next covered pixel of the row (maps)
+            if has_maps:
+                # The row's covered pixels first: each winner's depth and barycentrics (read back
+                # below), its world point (as winner_surface) and its visibility per light, in
+                # runs over the row (shadow_kernels.nearest_run: tight loops of divisions), or
+                # per point (stacked_visibility: the PCF kernels).
+                n_cov = 0
+                for col in range(width):
+                    o = index[row * width + col]
+                    if o < 0:
+                        continue
+                    depth, b0, b1, b2 = _winner_point(
+                        o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
+                    )
+                    r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
+                    src = source[o]
+                    v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                    for k in range(3):
+                        r_pts[n_cov, k] = (b0 * world[v0, k] + b1 * world[v1, k]) + b2 * world[v2, k]
+                    n_cov += 1
+                for i_light in range(n_lit):
+                    f0 = m_first[i_light]
+                    if f0 < 0:
+                        for j in range(n_cov):
+                            r_vis[j, i_light] = 1.0
+                        continue
+                    cube = 1 if m_faces[i_light] == 6 else 0
+                    if m_kernel[i_light] == 0:
+                        _nearest_run(
+                            r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
+                            r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face,
+                        )  # fmt: skip
+                        continue
+                    for j in range(n_cov):
+                        r_vis[j, i_light] = _stacked_visibility(
+                            r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
+                            m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
+                        )  # fmt: skip
             n_row = 0
             cy = row + 0.5
             for col in range(width):
@@ -1138,6 +1205,12 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         depth = frag_depth[f]
                         src = tri[f]
                         front = frag_front[f]
+                    elif from_winners and has_maps:  # found above, with the row's visibilities
+                        v = j_cov
+                        depth, b0, b1, b2 = r_bary[v, 0], r_bary[v, 1], r_bary[v, 2], r_bary[v, 3]
+                        j_cov += 1
+                        src = source[o]
+                        front = sub_front[o]
                     elif from_winners:
                         v = vis_index[key] if has_vis else o
                         depth, b0, b1, b2 = _winner_point(
@@ -1177,7 +1250,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                             v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
                             pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                            has_vis, vis,
+                            has_vis, r_vis3 if has_maps else vis,
                         )  # fmt: skip
                         # fog is a function of the fragment's own point
                         px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
@@ -1210,7 +1283,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                             v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
                             pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                            has_vis, vis,
+                            has_vis, r_vis3 if has_maps else vis,
                         )  # fmt: skip
                     r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
                     if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
@@ -1270,7 +1343,13 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 o_nrm[row, col, 1] = 0.0 + np.float32(wy)
                 o_nrm[row, col, 2] = 0.0 + np.float32(wz)
                 o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
-                if has_vis:
+                if has_maps:  # resolve.shadow_pass_values: summed in light order, then divided
+                    mean = r_vis[v, 0]
+                    for i_light in range(1, n_lit):
+                        mean += r_vis[v, i_light]
+                    mean /= n_lit
+                    o_shadow[row, col, 0] = 0.0 + np.float32(mean * a)
+                elif has_vis:
                     o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[v] * a)
             covered[row] = n_row
         return covered.sum()
@@ -1297,6 +1376,14 @@ _NO_SETUP = (
 )  # fmt: skip
 _NO_FRAGMENTS = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.bool_))
 _NO_INDEX = np.zeros(0, np.int64)
+#: No shadow maps for the fused kernel (the fields of blinn_phong.frame_maps.MapStack), no world
+#: vertices.
+_NO_MAPS = (
+    np.zeros((0, 1, 1)), np.zeros((0, 4, 4)), np.zeros((0, 3)), np.zeros(0, np.int64),
+    np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64),
+)  # fmt: skip
+_NO_WORLD = np.zeros((0, 3))
+_NO_WORLD.flags.writeable = False  # one signature: the kernel reads world vertices as read-only views
 
 
 def _row_order(height: int) -> np.ndarray:
@@ -1369,7 +1456,7 @@ def shade_plain_fragments_compiled(
         geometry, materials, lights, flags, frequencies, _fog_scalars(fog), visibility is not None,
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
-        _NO_INDEX, *lists, *out,
+        _NO_INDEX, _NO_MAPS, _NO_WORLD, *lists, *out,
     )  # fmt: skip
 
 
@@ -1393,6 +1480,7 @@ def shade_plain_winners_compiled(
     out: tuple[np.ndarray, ...],
     fog: FogArgs = None,
     visibility: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    maps: tuple[tuple[np.ndarray, ...], np.ndarray] | None = None,
 ) -> int:
     """:func:`shade_plain_fragments_compiled` straight from the z-buffer's winners (one sample per
     pixel, ``fog`` as there): barycentrics and depth as :func:`frame_fragments_compiled` computes
@@ -1402,6 +1490,13 @@ def shade_plain_winners_compiled(
     and ``vis_mean`` (N,) of the covered pixels in row-major order, ``rank`` (H·W,) each pixel's
     row in them (−1 where empty), as :func:`winner_surfaces_compiled` numbers them.
 
+    ``maps``: None, or ``(stack, world_vertices)`` for a frame whose every shadowed light is
+    shadow-mapped (``visibility`` None): a :class:`blinn_phong.frame_maps.MapStack` of the maps
+    of every non-ambient light and the (V, 3) float64 world positions of the prepared scene's
+    vertices. Each pixel's world point (as :func:`winner_surfaces_compiled` computes it) is
+    looked up in the maps as it is shaded (:func:`blinn_phong.shadow_kernels.stacked_visibility`),
+    and the shadow pass is the mean of its visibilities (:func:`blinn_phong.resolve.shadow_pass_values`).
+
     Returns the number of covered pixels (fragments shaded)."""
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
@@ -1410,17 +1505,28 @@ def shade_plain_winners_compiled(
         setup.source, setup.front, setup.x_exact, setup.y_exact, setup.area, setup.a, setup.b, setup.c,
         setup.z, setup.w, np.ascontiguousarray(setup.weights),
     )  # fmt: skip
+    if visibility is not None and maps is not None:
+        raise ValueError("visibility and maps: expected at most one of them")
     if visibility is None:
         vis, vis_mean, rank = np.zeros((0, 0, 1)), np.zeros(0), _NO_INDEX
     else:
         vis, vis_mean, rank = (np.ascontiguousarray(a) for a in visibility)
         vis = vis.astype(np.float64, copy=False)
         vis_mean = vis_mean.astype(np.float64, copy=False)
+    stack, world = _NO_MAPS, _NO_WORLD
+    if maps is not None:
+        stack, world = tuple(maps[0]), np.ascontiguousarray(maps[1], dtype=np.float64).view()
+        world.flags.writeable = False  # typed as _NO_WORLD is: one compiled specialisation
+        if len(stack[3]) != len(lights[0]):
+            raise ValueError(
+                f"maps: expected one entry per non-ambient light ({len(lights[0])}), got {len(stack[3])}"
+            )
     return int(
         _run_plain(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
             two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
-            visibility is not None, vis, vis_mean, rank, 0, _NO_INDEX, 0, 0, *out,
+            visibility is not None or maps is not None, vis, vis_mean, rank, stack, world, 0, _NO_INDEX, 0, 0,
+            *out,
         )
     )  # fmt: skip
 
@@ -1468,6 +1574,20 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
     return winner_surface, face_normals
 
 
+def face_normals_compiled(triangles: np.ndarray, world_vertices: np.ndarray) -> np.ndarray:
+    """(T, 3) float64 unit world face normals of the triangles (zero for a zero-area triangle):
+    :func:`blinn_phong.normals.face_normals` of each triangle's world corners, in parallel.
+
+    Args:
+        triangles: (T, 3) int64 vertex indices into ``world_vertices``.
+        world_vertices: (V, 3) float64 world-space positions.
+    """
+    tris = np.ascontiguousarray(triangles, dtype=np.int64)
+    out = np.empty((len(tris), 3))
+    _winner_surface_kernel()[1](tris, np.ascontiguousarray(world_vertices, dtype=np.float64), out)
+    return out
+
+
 def winner_surfaces_compiled(
     setup: _TriangleSetup,
     winner: np.ndarray,
@@ -1504,11 +1624,10 @@ def winner_surfaces_compiled(
     points = np.empty((covered, 3))
     normals = np.empty((covered, 3))
     mesh = np.empty(covered, np.int64)
-    winner_surface, face_normals = _winner_surface_kernel()
+    winner_surface = _winner_surface_kernel()[0]
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     verts = np.ascontiguousarray(world_vertices, dtype=np.float64)
-    faces = np.empty((len(tris), 3))
-    face_normals(tris, verts, faces)
+    faces = face_normals_compiled(tris, verts)
     winner_surface(
         setup.width, setup.height, _row_order(setup.height), winner, rank, setup.x_exact, setup.y_exact,
         setup.area, setup.a,

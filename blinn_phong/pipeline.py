@@ -448,6 +448,45 @@ def _targets(image: FrameImage) -> tuple[np.ndarray, ...]:
     return (image.rgba, p["ambient"], p["diffuse"], p["specular"], image.normal, image.depth, shadow)
 
 
+#: Shadow-mapped opaque frames look their pixels up inside the fused shading kernel
+#: (:func:`_frame_map_stack`); False takes the general path (world points, then each light's
+#: visibility) — the tests compare the two.
+_IN_KERNEL_MAPS = True
+
+
+def _frame_map_stack(
+    prepared: PreparedScene,
+    lit: list[tuple[object, object]],
+    verts: list[np.ndarray],
+    all_verts: np.ndarray,
+    setup: object,
+    winner: np.ndarray,
+) -> object | None:
+    """The frame's :class:`blinn_phong.frame_maps.MapStack` when every shadowed light of ``lit``
+    is shadow-mapped by the compiled engine with one resolution (the fused kernel then looks
+    the pixels up itself), else None."""
+    from blinn_phong import frame_maps  # compiled engine only: imports numba
+
+    options = []
+    for light, c in lit:
+        params = dict(c.params)  # type: ignore[attr-defined]
+        if c.method == "none":  # type: ignore[attr-defined]
+            options.append((light, "none", params))
+        elif c.method == "shadow_map" and set(params) <= set(frame_maps.MAP_PARAMETERS):  # type: ignore[attr-defined]
+            options.append((light, "shadow_map", params))
+        else:
+            return None
+    resolutions = {
+        p.get("resolution", frame_maps.MAP_PARAMETERS["resolution"]) for _, m, p in options if m != "none"
+    }
+    tris = _world_triangles(prepared.scene, verts)
+    if len(resolutions) != 1 or len(tris) == 0:
+        return None
+    seen = frame_maps.visible_triangles(winner, setup.source, len(prepared.triangles))  # type: ignore[attr-defined]
+    receivers = all_verts[prepared.triangles[seen]]
+    return frame_maps.frame_maps(options, tris, receivers)  # a context: the stack's memory is reused
+
+
 def _opaque_from_winners(
     prepared: PreparedScene,
     width: int,
@@ -475,29 +514,36 @@ def _opaque_from_winners(
     winner = nearest_winners_compiled(setup)
     seconds["visibility"] = time.perf_counter() - t
     say("visibility", 0.4)
-    vis = None
-    if lit is not None:  # shadows: each covered pixel's world point, then each light's visibility there
+    with contextlib.ExitStack() as resources:  # the shadow maps' memory, until shaded
+        vis = maps = None
+        if lit is not None:  # shadows: each covered pixel's world point, then each light's visibility there
+            t = time.perf_counter()
+            verts = _world_vertices(prepared.scene)
+            all_verts = _all_world_vertices(prepared.scene)
+            stacked = (
+                _frame_map_stack(prepared, lit, verts, all_verts, setup, winner) if _IN_KERNEL_MAPS else None
+            )
+            if stacked is not None:  # every light shadow-mapped: looked up by the shading kernel
+                maps = (resources.enter_context(stacked), all_verts)
+            else:
+                points, normals, rank, mesh_of = winner_surfaces_compiled(
+                    setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
+                )
+                visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of)
+                vis = (
+                    visibility if visibility.ndim == 3 else visibility[:, :, None],
+                    shadow_pass_values(visibility),
+                    rank,
+                )
+            seconds["shadows"] = time.perf_counter() - t
+            say("shadows", 0.6)
         t = time.perf_counter()
-        verts = _world_vertices(prepared.scene)
-        all_verts = _all_world_vertices(prepared.scene)
-        points, normals, rank, mesh_of = winner_surfaces_compiled(
-            setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
-        )
-        visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of)
-        vis = (
-            visibility if visibility.ndim == 3 else visibility[:, :, None],
-            shadow_pass_values(visibility),
-            rank,
-        )
-        seconds["shadows"] = time.perf_counter() - t
-        say("shadows", 0.6)
-    t = time.perf_counter()
-    image = _empty_frame(height, width, lit is not None)
-    tables = plain_tables(prepared, gl_compat, shading)
-    shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
-    seconds["shade"] = time.perf_counter() - t
-    seconds["resolve_samples"] = 0.0
-    say("shade", 1.0)
+        image = _empty_frame(height, width, lit is not None)
+        tables = plain_tables(prepared, gl_compat, shading)
+        shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis, maps)
+        seconds["shade"] = time.perf_counter() - t
+        seconds["resolve_samples"] = 0.0
+        say("shade", 1.0)
     return image, shaded
 
 

@@ -53,6 +53,8 @@ import os
 import numba
 import numpy as np
 
+from blinn_phong._scratch import ScratchPool, carve, carved_bytes
+
 __all__ = [
     "area_light_rays",
     "corner_bounds",
@@ -431,13 +433,19 @@ def _render_maps(
     threads = numba.get_num_threads()
     n_chunks = max(1, min(len(world), 4 * threads))
     shape = (len(vps), 2 * len(world))
-    rec = np.empty((*shape, _NREC))
-    box = np.empty((*shape, 4), np.int32)
-    slots = np.empty(shape, np.int64)
-    count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, threads, rec, box, slots)
-    n_bands = max(1, min(res, 4 * threads))
-    _scan(out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box)
+    parts = (((*shape, _NREC), np.float64), ((*shape, 4), np.int32), (shape, np.int64))
+    # the records of a slot per (face, triangle) are mostly never written: kept between frames
+    with _SETUP_SCRATCH.bytes(carved_bytes(*parts)) as buf:
+        rec, box, slots = carve(buf, *parts)
+        count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, threads, rec, box, slots)
+        n_bands = max(1, min(res, 4 * threads))
+        _scan(out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box)
     return out
+
+
+#: Scratch of :func:`_render_maps`' set-up (records, texel boxes, slots), reused by the next
+#: maps: up to 1 GiB (a cube of 2.6M casters) is kept.
+_SETUP_SCRATCH = ScratchPool(1 << 30)
 
 
 def cube_maps_compiled(
@@ -547,15 +555,17 @@ def _window(nxd, nyd, nzd, res_x, res_y):  # pragma: no cover - compiled
 
 @numba.njit(cache=True, inline="always")
 def _locate(
-    px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+    px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, base=0
 ):  # pragma: no cover - compiled
     # (face, x, y, z, found): the texel coordinates (x right, y down from the top) and window
-    # depth of a receiver in its map; found is False where the map is not read (lit)
-    f = 0
+    # depth of a receiver in its map; found is False where the map is not read (lit). The
+    # light's maps are base, base + 1, … of the stack (vp, view_z, and the returned face).
+    f = base
     if face_mode == 1:  # cube: face of the major axis
         f = _cube_face(px, py, pz, light_pos)
         if f < 0:
             return 0, 0.0, 0.0, 0.0, False
+        f += base
     if normal_offset != 0.0:
         length = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
         nx, ny, nz = nx / length, ny / length, nz / length
@@ -615,6 +625,23 @@ def visibility_at(
     res_x = float(depth.shape[2])
     f, x, y, z, found = _locate(
         px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+    )
+    if not found:
+        return 1.0
+    return _filtered(depth, f, x, y, z, kernel, res_x, res_y)
+
+
+@numba.njit(cache=True)  # a call, not inlined: keeps the fused shading kernel's compilation short
+def stacked_visibility(
+    px, py, pz, nx, ny, nz, depth, vp, view_z, base, face_mode, light_pos, normal_offset, kernel
+):  # pragma: no cover - compiled
+    """:func:`visibility_at` of one light whose maps are ``base, base + 1, …`` (1, or 6 cube
+    faces) of a stack of several lights' maps (``depth`` (F, H, W), ``vp`` (F, 4, 4),
+    ``view_z`` (F, 3)): the same operations on the same operands, so the same value."""
+    res_y = float(depth.shape[1])
+    res_x = float(depth.shape[2])
+    f, x, y, z, found = _locate(
+        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, base
     )
     if not found:
         return 1.0
@@ -687,6 +714,15 @@ def _receiver_rects(
             y_hi = max(y_hi, nyd)
         part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
         part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
+    return _rects_from_extremes(part, res, kernel)
+
+
+@numba.njit(cache=True)
+def _rects_from_extremes(part, res, kernel):  # pragma: no cover - compiled
+    # (F, 4) texel rectangles (r0, r1, c0, c1) from per-chunk extremes part[ch, f] = (min x,
+    # max x, min y, max y) of normalised device coordinates, merged over the chunks, clamped to
+    # the map and widened by two texels beyond the taps' reach (r0 > r1: the face is not read)
+    n_chunks, n_faces = part.shape[0], part.shape[1]
     reach = 2 + (0 if kernel <= 1 else (kernel - 1) // 2)  # texels beyond floor(x) a tap may read
     rects = np.empty((n_faces, 4), np.int64)
     for f in range(n_faces):  # merged over the chunks
@@ -711,6 +747,152 @@ def _receiver_rects(
         rects[f, 2] = max(c0, 0)
         rects[f, 3] = min(c1, res - 1)
     return rects
+
+
+@numba.njit(cache=True, inline="always")
+def _extend(part, f, vp, x, y, z, floor_w):  # pragma: no cover - compiled
+    # widen face f's extremes by the projection of world point (x, y, z); False where its clip
+    # w is below floor_w (too near the light's plane for a bounded projection)
+    cw = ((vp[f, 3, 0] * x + vp[f, 3, 1] * y) + vp[f, 3, 2] * z) + vp[f, 3, 3]
+    if not cw > floor_w:
+        return False
+    nxd = (((vp[f, 0, 0] * x + vp[f, 0, 1] * y) + vp[f, 0, 2] * z) + vp[f, 0, 3]) / cw
+    nyd = (((vp[f, 1, 0] * x + vp[f, 1, 1] * y) + vp[f, 1, 2] * z) + vp[f, 1, 3]) / cw
+    part[0, f, 0] = min(part[0, f, 0], nxd)
+    part[0, f, 1] = max(part[0, f, 1], nxd)
+    part[0, f, 2] = min(part[0, f, 2], nyd)
+    part[0, f, 3] = max(part[0, f, 3], nyd)
+    return True
+
+
+@numba.njit(cache=True)
+def _triangle_rects(corners, vp, light_pos, res, kernel):  # pragma: no cover - compiled
+    # Per cube face, a texel rectangle holding every texel a nearest or PCF look-up (no normal
+    # offset) of any point of the (n, 3, 3) world triangles ``corners`` reads. Face f's cone
+    # {d = p − light: s·d_a ≥ |d_b|, s·d_a ≥ |d_c|} (axis a, sign s) is convex, and a point
+    # is looked up in face f only inside it (_cube_face). A triangle whose corners lie inside
+    # one cone with a margin is wholly inside it; its points project (w > 0: a perspective map
+    # keeps convexity) inside the triangle of its projected corners. Any other triangle is
+    # clipped against each cone loosened by the margin (Sutherland–Hodgman) and the vertices
+    # of what is left are projected. The margin (1e-9 of the triangle's extent from the
+    # light) exceeds the rounding of a point interpolated on the triangle, so every point a
+    # look-up assigns to face f is inside what was projected; a vertex with clip w at most
+    # 1e-6 of that extent makes the face whole. The projected extremes go through
+    # _rects_from_extremes (two texels of margin beyond the taps' reach).
+    part = np.empty((1, 6, 4))
+    for f in range(6):
+        part[0, f, 0] = np.inf
+        part[0, f, 1] = -np.inf
+        part[0, f, 2] = np.inf
+        part[0, f, 3] = -np.inf
+    whole = np.zeros(6, np.bool_)
+    lx, ly, lz = light_pos[0], light_pos[1], light_pos[2]
+    poly = np.empty((16, 3))
+    nxt = np.empty((16, 3))
+    d = np.empty((3, 3))
+    for t in range(corners.shape[0]):
+        scale = 0.0
+        for j in range(3):
+            d[j, 0] = corners[t, j, 0] - lx
+            d[j, 1] = corners[t, j, 1] - ly
+            d[j, 2] = corners[t, j, 2] - lz
+            scale = max(scale, abs(d[j, 0]), abs(d[j, 1]), abs(d[j, 2]))
+        if not scale > 0:  # a degenerate triangle at the light: read nowhere (_cube_face: −1)
+            continue
+        eps = 1e-9 * scale
+        floor_w = 1e-6 * scale
+        # the face holding every corner with the margin, if one does
+        inside = -1
+        for f in range(6):
+            a = f // 2
+            sgn = 1.0 if f % 2 == 0 else -1.0
+            b, c = (a + 1) % 3, (a + 2) % 3
+            ok = True
+            for j in range(3):
+                major = sgn * d[j, a]
+                if not (major - abs(d[j, b]) > eps and major - abs(d[j, c]) > eps):
+                    ok = False
+                    break
+            if ok:
+                inside = f
+                break
+        if inside >= 0:
+            for j in range(3):
+                if not _extend(
+                    part, inside, vp, corners[t, j, 0], corners[t, j, 1], corners[t, j, 2], floor_w
+                ):
+                    whole[inside] = True
+            continue
+        for f in range(6):
+            if whole[f]:
+                continue
+            a = f // 2
+            sgn = 1.0 if f % 2 == 0 else -1.0
+            b, c = (a + 1) % 3, (a + 2) % 3
+            n = 3
+            for j in range(3):
+                poly[j, 0], poly[j, 1], poly[j, 2] = d[j, 0], d[j, 1], d[j, 2]
+            for plane in range(4):  # s·d_a − σ·d_o + eps ≥ 0, o ∈ {b, c}, σ = ±1
+                o = b if plane < 2 else c
+                sig = 1.0 if plane % 2 == 0 else -1.0
+                m = 0
+                for j in range(n):
+                    k = (j + 1) % n
+                    dj = sgn * poly[j, a] - sig * poly[j, o] + eps
+                    dk = sgn * poly[k, a] - sig * poly[k, o] + eps
+                    if dj >= 0:
+                        nxt[m, 0], nxt[m, 1], nxt[m, 2] = poly[j, 0], poly[j, 1], poly[j, 2]
+                        m += 1
+                    if (dj >= 0) != (dk >= 0):
+                        u = dj / (dj - dk)
+                        for ch in range(3):
+                            nxt[m, ch] = poly[j, ch] + u * (poly[k, ch] - poly[j, ch])
+                        m += 1
+                n = m
+                for j in range(n):
+                    poly[j, 0], poly[j, 1], poly[j, 2] = nxt[j, 0], nxt[j, 1], nxt[j, 2]
+                if n == 0:
+                    break
+            for j in range(n):
+                if not _extend(part, f, vp, poly[j, 0] + lx, poly[j, 1] + ly, poly[j, 2] + lz, floor_w):
+                    whole[f] = True
+                    break
+    rects = _rects_from_extremes(part, res, kernel)
+    for f in range(6):
+        if whole[f]:
+            rects[f, 0], rects[f, 1], rects[f, 2], rects[f, 3] = 0, res - 1, 0, res - 1
+    return rects
+
+
+def receiver_triangle_rects(
+    corners: np.ndarray, view_projection: np.ndarray, light_position: np.ndarray, resolution: int, kernel: str
+) -> np.ndarray:
+    """Per cube face, the texels that look-ups of any point on the receiver triangles may read.
+
+    A bound from the receivers' triangles rather than their points (the pre-pass of
+    :func:`receiver_visibility_compiled` needs the points): each triangle's part inside a
+    face's cone (the points :func:`visibility_at` looks up in that face), projected, with a
+    margin past rounding and two texels beyond the taps' reach. For look-ups without a normal
+    offset.
+
+    Args:
+        corners: (n, 3, 3) float64 world-space receiver triangles.
+        view_projection: (6, 4, 4) world → clip matrices of the faces
+            (:data:`blinn_phong.shadows._CUBE_FACES` order).
+        light_position: (3,) the point light's world position.
+        resolution: texels per face side.
+        kernel: one of :data:`blinn_phong.shadows.PCF_KERNELS`.
+
+    Returns:
+        (6, 4) int64 inclusive rectangles ``(r0, r1, c0, c1)``; r0 > r1: the face is not read.
+    """
+    return _triangle_rects(
+        np.ascontiguousarray(corners, dtype=np.float64).reshape(-1, 3, 3),
+        np.ascontiguousarray(view_projection, dtype=np.float64),
+        np.asarray(light_position, dtype=np.float64),
+        int(resolution),
+        KERNEL_CODES[kernel],
+    )
 
 
 @numba.njit(parallel=True, cache=True)
@@ -753,19 +935,84 @@ def _project_run(points, lo, hi, vp, f, qx, qy, qz, cws, base):  # pragma: no co
         cws[j] = cw
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, known):  # pragma: no cover
-    # visibility_at with the nearest kernel and no normal offset, per block of points in two
-    # passes: the projection (faces, then runs of one face as tight loops of divisions), then
-    # the tests and the tap — the operations of _locate / _window / _lit on the same operands,
-    # written out (a call of the tuple-returning helpers here costs a third more). The quotient
-    # of a point behind the light (w ≤ 0) is never read (numpy error model: no exception at 0).
-    # ``known``: the points' cube faces when the receiver pre-pass found them (int8, −1: none),
-    # else empty.
-    n = points.shape[0]
-    reuse = known.shape[0] == n
+@numba.njit(cache=True, error_model="numpy")  # a call, not inlined: a per-run body
+def nearest_run(
+    points,
+    b0,
+    b1,
+    depth,
+    vp,
+    base,
+    face_mode,
+    light_pos,
+    known,
+    reuse,
+    out,
+    col,
+    shift,
+    qx,
+    qy,
+    qz,
+    cws,
+    faces,
+):  # pragma: no cover - compiled
+    """``out[i + shift, col]`` = :func:`visibility_at` (nearest tap, no normal offset) of points
+    ``b0 … b1 − 1`` of one light whose maps are ``base, base + 1, …`` of the stack ``depth``
+    (F, H, W) / ``vp`` (F, 4, 4) (compiled; callable from other numba kernels).
+
+    In two passes: the projection (cube faces first, then runs of one face as tight loops of
+    divisions), then the tests and the tap — the operations of _locate / _window / _lit on the
+    same operands, written out (a call of the tuple-returning helpers per point costs a third
+    more). The quotient of a point behind the light (w ≤ 0) is never read (numpy error model:
+    no exception at 0). ``qx, qy, qz, cws`` (float64) and ``faces`` (int64): scratch of at
+    least ``b1 − b0`` rows. ``known[i + shift]``: point i's cube face when ``reuse`` (int8,
+    −1: none).
+    """
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
+    if face_mode == 1:
+        if reuse:
+            for i in range(b0, b1):
+                faces[i - b0] = known[i + shift]
+        else:
+            for i in range(b0, b1):
+                faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
+        j0 = b0
+        while j0 < b1:
+            f = faces[j0 - b0]
+            j1 = j0 + 1
+            while j1 < b1 and faces[j1 - b0] == f:
+                j1 += 1
+            if f >= 0:
+                _project_run(points, j0, j1, vp, base + f, qx, qy, qz, cws, b0)
+            j0 = j1
+    else:
+        for i in range(b0, b1):
+            faces[i - b0] = 0
+        _project_run(points, b0, b1, vp, base, qx, qy, qz, cws, b0)
+    for i in range(b0, b1):
+        j = i - b0
+        f = faces[j]
+        if f < 0 or not cws[j] > 0:
+            out[i + shift, col] = 1.0
+            continue
+        nxd, nyd, nzd = qx[j], qy[j], qz[j]
+        z = (nzd + 1) * 0.5
+        if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):
+            out[i + shift, col] = 1.0
+            continue
+        x = (nxd + 1) * 0.5 * res_x
+        y = res_y - (nyd + 1) * 0.5 * res_y
+        out[i + shift, col] = _lit(depth, base + f, math.floor(x), math.floor(y), z, res_x, res_y)
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, known):  # pragma: no cover
+    # visibility_at with the nearest kernel and no normal offset, per block of points
+    # (nearest_run); ``out``: (n, 1); ``known``: the points' cube faces when the receiver
+    # pre-pass found them (int8, −1: none), else empty.
+    n = points.shape[0]
+    reuse = known.shape[0] == n
     for ch in numba.prange(n_chunks):
         qx = np.empty(_BLOCK)
         qy = np.empty(_BLOCK)
@@ -775,38 +1022,10 @@ def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, know
         hi = (ch + 1) * n // n_chunks
         for b0 in range(ch * n // n_chunks, hi, _BLOCK):
             b1 = min(b0 + _BLOCK, hi)
-            if face_mode == 1:
-                if reuse:
-                    for i in range(b0, b1):
-                        faces[i - b0] = known[i]
-                else:
-                    for i in range(b0, b1):
-                        faces[i - b0] = _cube_face(points[i, 0], points[i, 1], points[i, 2], light_pos)
-                j0 = b0
-                while j0 < b1:
-                    f = faces[j0 - b0]
-                    j1 = j0 + 1
-                    while j1 < b1 and faces[j1 - b0] == f:
-                        j1 += 1
-                    if f >= 0:
-                        _project_run(points, j0, j1, vp, f, qx, qy, qz, cws, b0)
-                    j0 = j1
-            else:
-                _project_run(points, b0, b1, vp, 0, qx, qy, qz, cws, b0)
-            for i in range(b0, b1):
-                j = i - b0
-                f = faces[j]
-                if f < 0 or not cws[j] > 0:
-                    out[i] = 1.0
-                    continue
-                nxd, nyd, nzd = qx[j], qy[j], qz[j]
-                z = (nzd + 1) * 0.5
-                if not (nxd >= -1 and nxd <= 1 and nyd >= -1 and nyd <= 1 and z <= 1):
-                    out[i] = 1.0
-                    continue
-                x = (nxd + 1) * 0.5 * res_x
-                y = res_y - (nyd + 1) * 0.5 * res_y
-                out[i] = _lit(depth, f, math.floor(x), math.floor(y), z, res_x, res_y)
+            nearest_run(
+                points, b0, b1, depth, vp, 0, face_mode, light_pos, known, reuse, out, 0, 0,
+                qx, qy, qz, cws, faces,
+            )  # fmt: skip
 
 
 def lookup_compiled(
@@ -877,7 +1096,7 @@ def _look_up(
     if normal_offset == 0.0 and code == 0:
         n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))
         known = np.zeros(0, np.int8) if faces is None else faces
-        _lookup_nearest(points, depth, vps, face_mode, light_position, out, n_chunks, known)
+        _lookup_nearest(points, depth, vps, face_mode, light_position, out.reshape(-1, 1), n_chunks, known)
     else:
         _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
 

@@ -63,6 +63,7 @@ __all__ = [
     "light_cameras",
     "light_shadow_maps",
     "light_visibility",
+    "map_matrices",
     "mesh_shadow_transmittance",
     "planar_shadow_mask",
     "planar_shadow_matrix",
@@ -864,27 +865,55 @@ def _receiver_visibility(
     """Compiled ``shadow_map`` visibility: :func:`light_shadow_maps` then :func:`shadow_map_visibility`,
     same checks and bit-identical values, with only the texels the look-ups read rendered
     (:func:`blinn_phong.shadow_kernels.receiver_visibility_compiled`)."""
-    cameras = light_cameras(light, tris)  # the checks and their order of light_shadow_maps
-    if not isinstance(resolution, int | np.integer) or resolution < 1:
-        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
-    if constant_bias < 0 or slope_bias < 0:
-        raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
+    vps, views, light_position = map_matrices(light, tris, resolution, constant_bias, slope_bias)
     n = _lookup_normals(p, normals, normal_offset, kernel)
     from .shadow_kernels import receiver_visibility_compiled
 
-    cube = len(cameras) == 6
     return receiver_visibility_compiled(
         tris,
-        np.stack([proj @ view for view, proj in cameras]),
-        np.stack([view for view, _ in cameras]),
+        vps,
+        views,
         int(resolution),
         p,
         n,
         constant_bias=float(constant_bias),
         slope_bias=float(slope_bias),
-        light_position=np.asarray(light.position, dtype=np.float64) if cube else None,  # type: ignore[union-attr]
+        light_position=light_position,
         normal_offset=float(normal_offset),
         kernel=kernel,
+    )
+
+
+def map_matrices(
+    light: DirectionalLight | PointLight | SpotLight,
+    tris: np.ndarray,
+    resolution: int,
+    constant_bias: float,
+    slope_bias: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The checked matrices of a light's shadow map(s) (:func:`light_cameras`).
+
+    Args:
+        light: the light.
+        tris: (n, 3, 3) float64 world-space casters (checked).
+        resolution: texels per map side, an integer ≥ 1.
+        constant_bias: window-depth units of :func:`render_shadow_map`, ≥ 0.
+        slope_bias: multiple of the depth slope of :func:`render_shadow_map`, ≥ 0.
+
+    Returns:
+        ``(view_projection (F, 4, 4), view (F, 4, 4), light_position)``: F = 1, or 6 cube faces
+        with the point light's (3,) world position (else None).
+    """
+    cameras = light_cameras(light, tris)  # the checks and their order of light_shadow_maps
+    if not isinstance(resolution, int | np.integer) or resolution < 1:
+        raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
+    if constant_bias < 0 or slope_bias < 0:
+        raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
+    cube = len(cameras) == 6
+    return (
+        np.stack([proj @ view for view, proj in cameras]),
+        np.stack([view for view, _ in cameras]),
+        np.asarray(light.position, dtype=np.float64) if cube else None,  # type: ignore[union-attr]
     )
 
 
