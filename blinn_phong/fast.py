@@ -1571,7 +1571,20 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
             nx, ny, nz = _unit_face_normal(world, triangles[f, 0], triangles[f, 1], triangles[f, 2])
             out[f, 0], out[f, 1], out[f, 2] = nx, ny, nz
 
-    return winner_surface, face_normals
+    @numba.njit(cache=True)
+    def ranks(winner, rank):  # pragma: no cover - compiled
+        # each covered key's rank among the covered keys in increasing order (−1 where empty),
+        # as compact numbers them; returns their number
+        n = 0
+        for key in range(winner.shape[0]):
+            if winner[key] >= 0:
+                rank[key] = n
+                n += 1
+            else:
+                rank[key] = -1
+        return n
+
+    return winner_surface, face_normals, ranks
 
 
 def face_normals_compiled(triangles: np.ndarray, world_vertices: np.ndarray) -> np.ndarray:
@@ -1614,13 +1627,8 @@ def winner_surfaces_compiled(
     """
     if setup.k != 1:
         raise ValueError(f"setup: expected one sample per pixel, got {setup.k * setup.k}")
-    compact = _kernel()[3]
-    n_keys = setup.width * setup.height
-    fine_key = np.empty(n_keys, np.int64)
-    sub = np.empty(n_keys, np.int64)
-    rank = np.empty(n_keys, np.int64)
-    covered = compact(winner, fine_key, sub, rank)
-    del fine_key, sub
+    rank = np.empty(setup.width * setup.height, np.int64)
+    covered = _winner_surface_kernel()[2](winner, rank)
     points = np.empty((covered, 3))
     normals = np.empty((covered, 3))
     mesh = np.empty(covered, np.int64)

@@ -371,11 +371,14 @@ def _visibility_at(
     normal: np.ndarray,
     compiled: bool,
     mesh_of: np.ndarray | None = None,
+    binning: tuple | None = None,
 ) -> np.ndarray:
     """:func:`light_visibilities` at (N, 3) world points with their (N, 3) face normals.
 
     ``mesh_of``: (N,) the scene mesh of each point; given to the compiled engine, ray-traced
     hard shadows trace only the rays that may be occluded (:func:`_traced_hard`).
+    ``binning``: the points' screen tiles for shadow volumes
+    (:func:`blinn_phong.shadow_volume.pixel_binning` of a frame's pixels), or None.
     """
     tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
@@ -420,6 +423,8 @@ def _visibility_at(
                 )  # type: ignore[arg-type]
             else:
                 extra: dict[str, object] = {"camera": scene.camera} if c.method == "shadow_volume" else {}
+                if c.method == "shadow_volume" and binning is not None and "engine" not in c.params:
+                    extra["binning"] = binning
                 if c.method in ("shadow_map", "ray_traced") and "engine" not in c.params:
                     extra["engine"] = shadow_engine
                 column = light_visibility(c.method, light, tris, world, normal, **c.params, **extra)  # type: ignore[arg-type]
@@ -529,7 +534,14 @@ def _opaque_from_winners(
                 points, normals, rank, mesh_of = winner_surfaces_compiled(
                     setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
                 )
-                visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of)
+                binning = None
+                if any(c.method == "shadow_volume" for _, c in lit):  # type: ignore[attr-defined]
+                    from blinn_phong.shadow_volume import pixel_binning
+
+                    binning = pixel_binning(rank, width, height)  # the pixels' tiles: no sort
+                visibility = _visibility_at(
+                    prepared.scene, lit, verts, points, normals, True, mesh_of, binning
+                )
                 vis = (
                     visibility if visibility.ndim == 3 else visibility[:, :, None],
                     shadow_pass_values(visibility),

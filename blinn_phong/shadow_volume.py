@@ -126,6 +126,7 @@ __all__ = [
     "Topology",
     "analyse_topology",
     "choose_stencil",
+    "pixel_binning",
     "shadow_volume_triangles",
     "shadow_volume_visibility",
     "silhouette_edges",
@@ -245,9 +246,22 @@ def _digest(tris: np.ndarray) -> bytes:
     return b"%d:" % len(flat) + lanes.tobytes()
 
 
+#: The last digests of read-only triangle arrays, by identity: (weak reference, digest). A
+#: frame's lights share one read-only array of casters (the pipeline's cached world geometry).
+_DIGESTS: list[tuple[object, bytes]] = []
+
+
 def _topology_with_key(tris: np.ndarray) -> tuple[Topology, bytes]:
-    """The (cached) topology of checked float64 triangles and the digest it is cached by."""
-    key = _digest(tris)
+    """The (cached) topology of checked float64 triangles and the digest it is cached by (a
+    read-only array's digest is remembered while it lives: it is not written in place)."""
+    key = next((k for ref, k in _DIGESTS if ref() is tris), None)  # type: ignore[operator]
+    if key is None:
+        key = _digest(tris)
+        if not tris.flags.writeable:
+            try:
+                _DIGESTS[:] = [(weakref.ref(tris), key), *_DIGESTS[:3]]
+            except TypeError:  # an array that takes no weak reference: not kept
+                pass
     if key in _TOPOLOGY_CACHE:
         return _TOPOLOGY_CACHE[key], key
     if len(tris) == 0:
@@ -1496,11 +1510,13 @@ def _projected(
     vp: np.ndarray,
     numba_path: bool,
     reuse: bool = False,
+    binning: tuple | None = None,
 ) -> _Receivers:
     """Receivers (moved ``offset`` towards the light's side when ``moved``) in normalised-device
     coordinates; the compiled engine also bins them into tiles (reusing the last binning of the
-    same point and normal arrays under the same camera when ``reuse``). Raises if a receiver is
-    behind the camera or a point or normal is not finite."""
+    same point and normal arrays under the same camera when ``reuse``, or projecting into
+    ``binning`` = (grid, order, cell_start) when given, e.g. :func:`pixel_binning`). Raises if a
+    receiver is behind the camera or a point or normal is not finite."""
     m = len(p)
     if numba_path:
         # small jobs run serially: a parallel region costs more than it saves on a busy machine
@@ -1509,6 +1525,9 @@ def _projected(
         key = vp.tobytes()
         cached = _BINNING[0] if reuse and _BINNING else None
         same = cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key
+        if binning is not None and len(binning[1]) == m:
+            cached = (None, None, key, *binning)
+            same = True
         if same and len(cached[4]) == m:
             grid, order, cell_start = cached[3:]
             sx, sy, sz, stats, *depths = kernels[4](
@@ -1546,6 +1565,72 @@ def _projected(
         except TypeError:  # an array that takes no weak reference: not kept
             _BINNING.clear()
     return _Receivers(sx, sy, sz, bounds, grid, order, cell_start)
+
+
+@functools.lru_cache(maxsize=1)
+def _pixel_binning_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def pixel_bins(rank, width, height, tile, nx, ny):  # pragma: no cover - compiled
+        # counting sort of the covered pixels (rank ≥ 0) by tile: tile column col // tile, tile
+        # row from the bottom (normalised y grows upwards, pixel rows downwards); each row of
+        # tiles (its own cells) counted and filled in parallel, in row-major order within a tile
+        n_cells = nx * ny
+        cell_start = np.zeros(n_cells + 1, np.int64)
+        for band in numba.prange(ny):
+            cy = ny - 1 - band
+            for row in range(band * tile, min(height, (band + 1) * tile)):
+                for col in range(width):
+                    if rank[row * width + col] >= 0:
+                        cell_start[cy * nx + col // tile + 1] += 1
+        for c in range(n_cells):
+            cell_start[c + 1] += cell_start[c]
+        order = np.empty(cell_start[n_cells], np.int64)
+        for band in numba.prange(ny):
+            cy = ny - 1 - band
+            fill = cell_start[cy * nx : cy * nx + nx].copy()
+            for row in range(band * tile, min(height, (band + 1) * tile)):
+                for col in range(width):
+                    r = rank[row * width + col]
+                    if r >= 0:
+                        c = col // tile
+                        order[fill[c]] = r
+                        fill[c] += 1
+        return order, cell_start
+
+    return pixel_bins
+
+
+def pixel_binning(
+    rank: np.ndarray, width: int, height: int, tile: int = 6
+) -> tuple[tuple[float, float, float, float, int, int], np.ndarray, np.ndarray]:
+    """Tiles of a frame's covered pixels for :func:`shadow_volume_visibility` (``binning=``).
+
+    A frame's receivers are its pixels' surface points, which the camera projects onto the
+    pixel centres (``x = 2(col + ½)/W − 1``, ``y = 1 − 2(row + ½)/H``; the offset towards
+    the light moves them a little, measured as the tiles' slack): a grid of ``tile × tile``
+    pixel blocks bins them with no projection and no sort.
+
+    Args:
+        rank: (H·W,) int64 each pixel's receiver row (−1: empty), row-major from the top.
+        width: the frame's width in pixels.
+        height: the frame's height in pixels.
+        tile: pixels per tile side (``tile² ≈`` the 32 receivers per tile of the default grid).
+
+    Returns:
+        ``(grid, order, cell_start)``: grid ``(xmin, ymin, cw, ch, nx, ny)`` in normalised
+        device coordinates, the receivers' rows in tile order, and each tile's first position.
+    """
+    if len(rank) != width * height:
+        raise ValueError(f"rank: expected {width}×{height} = {width * height} entries, got {len(rank)}")
+    nx, ny = -(-width // tile), -(-height // tile)
+    cw, ch = 2.0 * tile / width, 2.0 * tile / height
+    grid = (-1.0, 1.0 - ny * ch, cw, ch, nx, ny)
+    order, cell_start = _pixel_binning_kernel()(
+        np.ascontiguousarray(rank, dtype=np.int64), int(width), int(height), int(tile), nx, ny
+    )
+    return grid, order, cell_start
 
 
 def _count(
@@ -1679,6 +1764,7 @@ def shadow_volume_visibility(
     stencil: str = "auto",
     offset: float = 1e-4,
     engine: str = "auto",
+    binning: tuple | None = None,
 ) -> np.ndarray:
     """Hard-shadow visibility of receivers for one light by shadow volumes (1 = lit, 0 = shadowed).
 
@@ -1697,6 +1783,10 @@ def shadow_volume_visibility(
             outside every volume and the near plane cuts none).
         offset: world units, ≥ 0.
         engine: ``"numba"``, ``"numpy"`` or ``"auto"``.
+        binning: the compiled engine's tiles of the receivers, ``(grid, order, cell_start)``
+            (:func:`pixel_binning` for a frame's pixels), or None: binned from their projections.
+            Any binning counts the same (each tile's bounds and depths are measured from the
+            projected receivers, which may lie outside their tile); a tight one is faster.
 
     Returns:
         (m,) float64 in {0, 1}.
@@ -1735,7 +1825,9 @@ def shadow_volume_visibility(
         extent = 4.0 * (span + reach) + 1.0
     vp = np.asarray(proj, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     # offset and projection in one compiled pass (the numpy engine: the same expressions)
-    rec = _projected(p, n, light_vec, directional, float(offset), True, vp, numba_path, reuse=True)
+    rec = _projected(
+        p, n, light_vec, directional, float(offset), True, vp, numba_path, reuse=True, binning=binning
+    )
     topo, key = _topology_with_key(tris)
     if stencil == "auto":
         stencil = _choose(light, tris, key, view, proj, rec.bounds)[0]
