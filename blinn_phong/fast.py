@@ -1096,7 +1096,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         local_viewer, blinn, gl_compat, separate = flags
         mode_of, vertex_terms, winding, view_t = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
-        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel = maps
+        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
         # shadow maps looked up here (opaque winners only, no normal offset): each pixel's world
         # point as winner_surface computes it, its visibility per light as
         # shadow_kernels.visibility_at
@@ -1149,13 +1149,14 @@ def _plain_kernel() -> object:  # a numba dispatcher
                     if m_kernel[i_light] == 0:
                         _nearest_run(
                             r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
-                            r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face,
+                            r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
                         )  # fmt: skip
                         continue
                     for j in range(n_cov):
                         r_vis[j, i_light] = _stacked_visibility(
                             r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
                             m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
+                            m_rects, m_miss,
                         )  # fmt: skip
             n_row = 0
             cy = row + 0.5
@@ -1380,7 +1381,8 @@ _NO_INDEX = np.zeros(0, np.int64)
 #: vertices.
 _NO_MAPS = (
     np.zeros((0, 1, 1)), np.zeros((0, 4, 4)), np.zeros((0, 3)), np.zeros(0, np.int64),
-    np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64),
+    np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 4), np.int64),
+    np.zeros(1, np.int64),
 )  # fmt: skip
 _NO_WORLD = np.zeros((0, 3))
 _NO_WORLD.flags.writeable = False  # one signature: the kernel reads world vertices as read-only views

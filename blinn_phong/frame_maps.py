@@ -50,8 +50,11 @@ class MapStack(NamedTuple):
     ``view_projection`` (F, 4, 4) world → clip; ``view_z`` (F, 3) row 2 of each world → light-eye
     matrix; per non-ambient light (L): ``first`` (L,) int64 its first map in the stack (−1: no
     shadow), ``faces`` (L,) int64 1 or 6, ``light_position`` (L, 3) (a cube's light),
-    ``kernel`` (L,) int64 codes of :data:`blinn_phong.shadow_kernels.KERNEL_CODES`. Look-ups
-    take no normal offset.
+    ``kernel`` (L,) int64 codes of :data:`blinn_phong.shadow_kernels.KERNEL_CODES`;
+    ``rects`` (F, 4) int64 each map's rendered texels ``(r0, r1, c0, c1)``; ``miss`` (1,) int64,
+    set to 1 by a look-up whose taps leave them (a point farther off its triangle than the
+    bound allows: the frame is then shaded again by the general path). Look-ups take no
+    normal offset.
     """
 
     depth: np.ndarray
@@ -61,13 +64,16 @@ class MapStack(NamedTuple):
     faces: np.ndarray
     light_position: np.ndarray
     kernel: np.ndarray
+    rects: np.ndarray
+    miss: np.ndarray
 
 
 def no_maps() -> MapStack:
     """The empty stack (no look-up in the kernel)."""
     return MapStack(
         np.zeros((0, 1, 1)), np.zeros((0, 4, 4)), np.zeros((0, 3)), np.zeros(0, np.int64),
-        np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64),
+        np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 4), np.int64),
+        np.zeros(1, np.int64),
     )  # fmt: skip
 
 
@@ -171,6 +177,7 @@ def _render_stack(
     n_maps = len(depth)
     vp_all = np.empty((n_maps, 4, 4))
     vz_all = np.empty((n_maps, 3))
+    rects_all = np.empty((n_maps, 4), np.int64)
     at = 0
     for i, o, vps, views, light_position in settings:
         f = len(vps)
@@ -185,7 +192,8 @@ def _render_stack(
         sk._render_maps(
             world, vps, rects, float(o["constant_bias"]), float(o["slope_bias"]), depth[at : at + f]
         )  # type: ignore[arg-type]
+        rects_all[at : at + f] = rects
         vp_all[at : at + f] = vps
         vz_all[at : at + f] = views[:, 2, :3]
         at += f
-    return MapStack(depth, vp_all, vz_all, first, faces, position, kernel)
+    return MapStack(depth, vp_all, vz_all, first, faces, position, kernel, rects_all, np.zeros(1, np.int64))

@@ -531,32 +531,53 @@ def _opaque_from_winners(
             if stacked is not None:  # every light shadow-mapped: looked up by the shading kernel
                 maps = (resources.enter_context(stacked), all_verts)
             else:
-                points, normals, rank, mesh_of = winner_surfaces_compiled(
-                    setup, winner, prepared.triangles, all_verts, prepared.triangle_mesh
-                )
-                binning = None
-                if any(c.method == "shadow_volume" for _, c in lit):  # type: ignore[attr-defined]
-                    from blinn_phong.shadow_volume import pixel_binning
-
-                    binning = pixel_binning(rank, width, height)  # the pixels' tiles: no sort
-                visibility = _visibility_at(
-                    prepared.scene, lit, verts, points, normals, True, mesh_of, binning
-                )
-                vis = (
-                    visibility if visibility.ndim == 3 else visibility[:, :, None],
-                    shadow_pass_values(visibility),
-                    rank,
-                )
+                vis = _winner_visibility(prepared, lit, verts, all_verts, setup, winner)
             seconds["shadows"] = time.perf_counter() - t
             say("shadows", 0.6)
         t = time.perf_counter()
         image = _empty_frame(height, width, lit is not None)
         tables = plain_tables(prepared, gl_compat, shading)
         shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis, maps)
+        if maps is not None and maps[0].miss[0]:  # type: ignore[attr-defined]
+            # a pixel's point lay farther off its triangle than the cube's rectangles allow for
+            # (snapped coverage): shaded again from the general path's visibilities
+            vis = _winner_visibility(prepared, lit, verts, all_verts, setup, winner)  # type: ignore[arg-type]
+            shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
     return image, shaded
+
+
+def _winner_visibility(
+    prepared: PreparedScene,
+    lit: list[tuple[object, object]],
+    verts: list[np.ndarray],
+    all_verts: np.ndarray,
+    setup: object,
+    winner: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The general path's ``(vis (N, L, K), shadow pass (N,), rank)`` of the z-buffer's winners:
+    their world points and face normals (:func:`blinn_phong.fast.winner_surfaces_compiled`),
+    then each light's visibility there (:func:`_visibility_at`)."""
+    points, normals, rank, mesh_of = winner_surfaces_compiled(
+        setup,
+        winner,
+        prepared.triangles,
+        all_verts,
+        prepared.triangle_mesh,  # type: ignore[arg-type]
+    )
+    binning = None
+    if any(c.method == "shadow_volume" for _, c in lit):  # type: ignore[attr-defined]
+        from blinn_phong.shadow_volume import pixel_binning
+
+        binning = pixel_binning(rank, setup.width, setup.height)  # type: ignore[attr-defined]  # the pixels' tiles: no sort
+    visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of, binning)
+    return (
+        visibility if visibility.ndim == 3 else visibility[:, :, None],
+        shadow_pass_values(visibility),
+        rank,
+    )
 
 
 #: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays

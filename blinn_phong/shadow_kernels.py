@@ -633,11 +633,13 @@ def visibility_at(
 
 @numba.njit(cache=True)  # a call, not inlined: keeps the fused shading kernel's compilation short
 def stacked_visibility(
-    px, py, pz, nx, ny, nz, depth, vp, view_z, base, face_mode, light_pos, normal_offset, kernel
+    px, py, pz, nx, ny, nz, depth, vp, view_z, base, face_mode, light_pos, normal_offset, kernel, rects, miss
 ):  # pragma: no cover - compiled
     """:func:`visibility_at` of one light whose maps are ``base, base + 1, …`` (1, or 6 cube
     faces) of a stack of several lights' maps (``depth`` (F, H, W), ``vp`` (F, 4, 4),
-    ``view_z`` (F, 3)): the same operations on the same operands, so the same value."""
+    ``view_z`` (F, 3)): the same operations on the same operands, so the same value.
+    ``rects`` (F, 4): each map's rendered texels ``(r0, r1, c0, c1)``; a look-up whose taps
+    leave them sets ``miss[0] = 1`` (its value is then not to be used)."""
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
     f, x, y, z, found = _locate(
@@ -645,7 +647,27 @@ def stacked_visibility(
     )
     if not found:
         return 1.0
+    if not _taps_inside(rects, f, x, y, kernel, res_x, res_y):
+        miss[0] = 1
     return _filtered(depth, f, x, y, z, kernel, res_x, res_y)
+
+
+@numba.njit(cache=True, inline="always")
+def _taps_inside(rects, f, x, y, kernel, res_x, res_y):  # pragma: no cover - compiled
+    # whether every texel the taps of ``kernel`` at (x, y) read (clamped to the map, as _lit
+    # clamps) lies in rects[f] = (r0, r1, c0, c1)
+    if kernel == 1:
+        c_lo, r_lo = math.floor(x - 0.5), math.floor(y - 0.5)
+        c_hi, r_hi = c_lo + 1, r_lo + 1
+    else:
+        h = 0 if kernel == 0 else (kernel - 1) // 2
+        c_lo, r_lo = math.floor(x) - h, math.floor(y) - h
+        c_hi, r_hi = math.floor(x) + h, math.floor(y) + h
+    c_lo = min(max(c_lo, 0.0), res_x - 1.0)
+    c_hi = min(max(c_hi, 0.0), res_x - 1.0)
+    r_lo = min(max(r_lo, 0.0), res_y - 1.0)
+    r_hi = min(max(r_hi, 0.0), res_y - 1.0)
+    return rects[f, 0] <= r_lo and r_hi <= rects[f, 1] and rects[f, 2] <= c_lo and c_hi <= rects[f, 3]
 
 
 @numba.njit(parallel=True, cache=True)
@@ -955,6 +977,8 @@ def nearest_run(
     qz,
     cws,
     faces,
+    rects,
+    miss,
 ):  # pragma: no cover - compiled
     """``out[i + shift, col]`` = :func:`visibility_at` (nearest tap, no normal offset) of points
     ``b0 … b1 − 1`` of one light whose maps are ``base, base + 1, …`` of the stack ``depth``
@@ -966,10 +990,12 @@ def nearest_run(
     more). The quotient of a point behind the light (w ≤ 0) is never read (numpy error model:
     no exception at 0). ``qx, qy, qz, cws`` (float64) and ``faces`` (int64): scratch of at
     least ``b1 − b0`` rows. ``known[i + shift]``: point i's cube face when ``reuse`` (int8,
-    −1: none).
+    −1: none). ``rects`` (F, 4): each map's rendered texels, or (0, 4) when every texel is; a
+    tap outside them sets ``miss[0] = 1`` (its value is then not to be used).
     """
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
+    check = rects.shape[0] > 0
     if face_mode == 1:
         if reuse:
             for i in range(b0, b1):
@@ -1003,6 +1029,8 @@ def nearest_run(
             continue
         x = (nxd + 1) * 0.5 * res_x
         y = res_y - (nyd + 1) * 0.5 * res_y
+        if check and not _taps_inside(rects, base + f, x, y, 0, res_x, res_y):
+            miss[0] = 1
         out[i + shift, col] = _lit(depth, base + f, math.floor(x), math.floor(y), z, res_x, res_y)
 
 
@@ -1013,6 +1041,8 @@ def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, know
     # pre-pass found them (int8, −1: none), else empty.
     n = points.shape[0]
     reuse = known.shape[0] == n
+    every = np.zeros((0, 4), np.int64)  # every texel a look-up reads is rendered
+    miss = np.zeros(1, np.int64)
     for ch in numba.prange(n_chunks):
         qx = np.empty(_BLOCK)
         qy = np.empty(_BLOCK)
@@ -1024,7 +1054,7 @@ def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, know
             b1 = min(b0 + _BLOCK, hi)
             nearest_run(
                 points, b0, b1, depth, vp, 0, face_mode, light_pos, known, reuse, out, 0, 0,
-                qx, qy, qz, cws, faces,
+                qx, qy, qz, cws, faces, every, miss,
             )  # fmt: skip
 
 

@@ -162,8 +162,13 @@ def test_in_kernel_look_ups_equal_the_general_path(
     stacks: list[object] = []
     original = frame_maps.frame_maps
     monkeypatch.setattr(frame_maps, "frame_maps", lambda *a: stacks.append(a) or original(*a))
+    general_calls: list[object] = []
+    general_path = pipeline._winner_visibility
+    monkeypatch.setattr(
+        pipeline, "_winner_visibility", lambda *a: general_calls.append(a) or general_path(*a)
+    )
     fused = bp.render(scene, 160, 120, **options)
-    assert len(stacks) == 1  # the maps were looked up in the kernel
+    assert len(stacks) == 1 and general_calls == []  # looked up in the kernel, every tap rendered
     monkeypatch.setattr(pipeline, "_IN_KERNEL_MAPS", False)
     general = bp.render(scene, 160, 120, **options)
     assert len(stacks) == 1
@@ -246,3 +251,31 @@ def test_the_scratch_pool_reuses_and_bounds_its_buffers() -> None:
         assert (x == 1.5).all() and (y == -2).all() and (z == 7).all()  # disjoint
     with pytest.raises(ValueError, match="max_bytes and keep"):
         ScratchPool(-1)
+
+
+def test_a_look_up_outside_the_rendered_texels_shades_the_frame_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # rectangles cut to their upper half: the look-ups of the lower half leave them, the kernel
+    # says so, and the frame is shaded again from the general path's visibilities
+    from blinn_phong import shadow_kernels
+
+    def halved(*args: object) -> np.ndarray:
+        rects = receiver_triangle_rects(*args)  # type: ignore[arg-type]
+        rects[:, 1] = np.where(rects[:, 0] <= rects[:, 1], (rects[:, 0] + rects[:, 1]) // 2, rects[:, 1])
+        return rects
+
+    scene = _scene(True)
+    options = {"shadows": bp.ShadowOptions("shadow_map", **MAP)}
+    general_calls: list[object] = []
+    general_path = pipeline._winner_visibility
+    monkeypatch.setattr(
+        pipeline, "_winner_visibility", lambda *a: general_calls.append(a) or general_path(*a)
+    )
+    monkeypatch.setattr(shadow_kernels, "receiver_triangle_rects", halved)
+    fused = bp.render(scene, 160, 120, **options)
+    assert len(general_calls) == 1  # the miss was seen
+    monkeypatch.setattr(pipeline, "_IN_KERNEL_MAPS", False)
+    general = bp.render(scene, 160, 120, **options)
+    np.testing.assert_array_equal(fused.rgba, general.rgba)
+    np.testing.assert_array_equal(fused.passes["shadow"], general.passes["shadow"])
