@@ -9,6 +9,7 @@ effects (transparency, shadows, fog) are stages of that frame. Output follows th
 image conventions: float32 premultiplied linear RGBA, row 0 at the top.
 """
 
+from blinn_phong._scratch import release_scratch
 from blinn_phong.frame import Fog, ShadowOptions
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
 from blinn_phong.planner import Choice, Plan, plan
@@ -71,6 +72,7 @@ __all__ = [
     "plan",
     "prepare_scene",
     "rasterize",
+    "release_scratch",
     "render",
     "resolve_nearest",
     "resolve_samples",

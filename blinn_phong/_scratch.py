@@ -14,11 +14,21 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import weakref
 from collections.abc import Iterator
 
 import numpy as np
 
-__all__ = ["ScratchPool"]
+__all__ = ["ScratchPool", "carve", "carved_bytes", "release_scratch"]
+
+#: Every pool of the process (weakly), for :func:`release_scratch`.
+_POOLS: weakref.WeakSet[ScratchPool] = weakref.WeakSet()
+
+
+def release_scratch() -> int:
+    """Free the scratch memory every pool keeps between frames (e.g. after the last render of a
+    batch, in a long-lived process). Returns the bytes released; the next frame allocates anew."""
+    return sum(pool.clear() for pool in list(_POOLS))
 
 
 class ScratchPool:
@@ -36,6 +46,7 @@ class ScratchPool:
         self.keep = int(keep)
         self._free: list[np.ndarray] = []
         self._lock = threading.Lock()
+        _POOLS.add(self)
 
     @contextlib.contextmanager
     def bytes(self, n: int) -> Iterator[np.ndarray]:
@@ -54,10 +65,12 @@ class ScratchPool:
                     self._free.sort(key=len, reverse=True)
                     del self._free[self.keep :]
 
-    def clear(self) -> None:
-        """Free every kept buffer."""
+    def clear(self) -> int:
+        """Free every kept buffer; returns their bytes."""
         with self._lock:
+            freed = sum(len(b) for b in self._free)
             self._free.clear()
+        return freed
 
 
 def carve(buf: np.ndarray, *parts: tuple[tuple[int, ...], type]) -> list[np.ndarray]:

@@ -279,3 +279,13 @@ def test_a_look_up_outside_the_rendered_texels_shades_the_frame_again(
     general = bp.render(scene, 160, 120, **options)
     np.testing.assert_array_equal(fused.rgba, general.rgba)
     np.testing.assert_array_equal(fused.passes["shadow"], general.passes["shadow"])
+
+
+def test_release_scratch_returns_the_memory_kept_between_frames() -> None:
+    bp.render(_scene(), 64, 48, shadows=bp.ShadowOptions("shadow_map", resolution=64))
+    kept = frame_maps._DEPTH_SCRATCH.max_bytes  # (a bound, not the size)
+    freed = bp.release_scratch()
+    # the depth stack (eight 64² maps: directional, spot, six cube faces) and the set-up
+    # records (a slot per map and triangle) were kept, and are gone
+    assert 64 * 64 * 8 < freed < 2 * kept
+    assert bp.release_scratch() == 0
