@@ -55,7 +55,9 @@ _triangle_setup: object = None
 _sample_depth: object = None
 _winner_point: object = None
 _unit_face_normal: object = None
-#: The shadow-map look-up of one point (shadow_kernels.stacked_visibility), set by :func:`_plain_kernel`.
+_interpolated: object = None
+#: The shadow-map look-ups (shadow_kernels.stacked_visibility per point, nearest_run per run of
+#: points), set by :func:`_plain_kernel`.
 _stacked_visibility: object = None
 _nearest_run: object = None
 
@@ -152,11 +154,17 @@ def _kernel() -> object:  # a numba dispatcher
             nx, ny, nz = nx / length, ny / length, nz / length
         return nx, ny, nz
 
+    @numba.njit(inline="always", cache=True)
+    def interpolated(points, v0, v1, v2, b0, b1, b2, k):  # pragma: no cover - compiled
+        """Coordinate k of the point with barycentrics (b0, b1, b2) on the triangle of vertices
+        v0, v1, v2 of ``points``, summed as raster.interpolate sums it (j = 0, 1, 2)."""
+        return (b0 * points[v0, k] + b1 * points[v1, k]) + b2 * points[v2, k]
+
     # Module globals, not closure variables: numba's disk-cache key hashes closure variables, and
     # a compiled function in one changes it in every process (the kernels were never cached).
-    global _triangle_setup, _sample_depth, _winner_point, _unit_face_normal
+    global _triangle_setup, _sample_depth, _winner_point, _unit_face_normal, _interpolated
     _triangle_setup, _sample_depth, _winner_point = triangle_setup, sample_depth, winner_point
-    _unit_face_normal = unit_face_normal
+    _unit_face_normal, _interpolated = unit_face_normal, interpolated
 
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
@@ -1137,7 +1145,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                     src = source[o]
                     v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
                     for k in range(3):
-                        r_pts[n_cov, k] = (b0 * world[v0, k] + b1 * world[v1, k]) + b2 * world[v2, k]
+                        r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
                     n_cov += 1
                 for i_light in range(n_lit):
                     f0 = m_first[i_light]
@@ -1562,7 +1570,7 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
                 out_mesh[i] = triangle_mesh[src]
                 v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
                 for k in range(3):
-                    out_points[i, k] = (b0 * world[v0, k] + b1 * world[v1, k]) + b2 * world[v2, k]
+                    out_points[i, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)
                 nx, ny, nz = face_normal[src, 0], face_normal[src, 1], face_normal[src, 2]
                 out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
 
