@@ -883,13 +883,32 @@ def _count_numpy(st: _Setup, px, py, pz, cell_start, order, nx: int, zfail: bool
     return counts
 
 
+def _jit(parallel: bool, **options: object) -> object:
+    """``numba.njit(parallel=parallel, cache=True, **options)`` for a kernel built both serial
+    and parallel, each variant cached under its own name.
+
+    numba's on-disk cache files a function under its qualified name and keys each entry by the
+    function's bytecode and closure values, not by its compile options: the serial and parallel
+    builds of one kernel would share an entry, and whichever was compiled first would be loaded
+    for both (a parallel kernel then runs on one thread). The variant's name is therefore made
+    part of the function's qualified name before it is compiled.
+    """
+    import numba
+
+    def build(fn: object) -> object:
+        fn.__qualname__ = f"{fn.__qualname__}.{'parallel' if parallel else 'serial'}"  # type: ignore[attr-defined]
+        return numba.njit(parallel=parallel, cache=True, **options)(fn)
+
+    return build
+
+
 @functools.lru_cache(maxsize=2)
 def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
     import numba
 
     from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
-    @numba.njit(parallel=parallel, cache=True, fastmath=False)
+    @_jit(parallel, fastmath=False)
     def count(
         n_bands,
         ny,
@@ -1112,7 +1131,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
 
     from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
-    @numba.njit(parallel=parallel, cache=True)
+    @_jit(parallel)
     def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
         m = p.shape[0]
         px = np.empty(m)
@@ -1151,7 +1170,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             stats[chunk, 5] = bad
         return px, py, pz, stats
 
-    @numba.njit(parallel=parallel, cache=True)
+    @_jit(parallel)
     def project_binned(
         p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny
     ):  # pragma: no cover - compiled
@@ -1171,7 +1190,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         zlo = np.full(nx * ny, np.inf)
         zhi = np.full(nx * ny, -np.inf)
         fit = np.zeros((nx * ny, 5))
-        for row in numba.prange(ny):
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
+        for i_row in numba.prange(ny):
+            row = spread[i_row]
             xlo = np.inf
             xhi = -np.inf
             ylo = np.inf
@@ -1260,7 +1281,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             sz[k] = pz[i]
         return order, cell_start, sx, sy, sz
 
-    @numba.njit(parallel=parallel, cache=True)
+    @_jit(parallel)
     def tile_depths(px, py, pz, cell_start, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
         """Per tile its receivers' depth range (zlo, zhi), and a least-squares depth plane
         ``a + (b·(x − xc) + c·(y − yc))`` about the tile's centre (xc, yc) with the lowest and
@@ -1272,7 +1293,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         zlo = np.full(n_cells, np.inf)
         zhi = np.full(n_cells, -np.inf)
         fit = np.zeros((n_cells, 5))
-        for row in numba.prange(ny):
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
+        for i_row in numba.prange(ny):
+            row = spread[i_row]
             yc = ymin + (row + 0.5) * ch
             for cell in range(row * nx, (row + 1) * nx):
                 k0 = cell_start[cell]
@@ -1285,7 +1308,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 )
         return zlo, zhi, fit
 
-    @numba.njit(parallel=parallel, cache=True)
+    @_jit(parallel)
     def setup(
         src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
     ):  # pragma: no cover - compiled
@@ -1578,7 +1601,9 @@ def _pixel_binning_kernel() -> object:  # a numba dispatcher
         # tiles (its own cells) counted and filled in parallel, in row-major order within a tile
         n_cells = nx * ny
         cell_start = np.zeros(n_cells + 1, np.int64)
-        for band in numba.prange(ny):
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # tile rows interleaved over the threads
+        for i_band in numba.prange(ny):
+            band = spread[i_band]
             cy = ny - 1 - band
             for row in range(band * tile, min(height, (band + 1) * tile)):
                 for col in range(width):
@@ -1587,7 +1612,8 @@ def _pixel_binning_kernel() -> object:  # a numba dispatcher
         for c in range(n_cells):
             cell_start[c + 1] += cell_start[c]
         order = np.empty(cell_start[n_cells], np.int64)
-        for band in numba.prange(ny):
+        for i_band in numba.prange(ny):
+            band = spread[i_band]
             cy = ny - 1 - band
             fill = cell_start[cy * nx : cy * nx + nx].copy()
             for row in range(band * tile, min(height, (band + 1) * tile)):

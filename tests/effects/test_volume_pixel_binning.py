@@ -114,3 +114,35 @@ def test_the_frame_passes_its_pixel_tiles_to_every_volume(monkeypatch: pytest.Mo
     )
     bp.render(_scene(), W, H, shadows="shadow_volume")
     assert len(seen) == 3 and all(b is not None and len(b) == 3 for b in seen)
+
+
+def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
+    """numba's on-disk cache files a kernel under its qualified name and keys it by bytecode and
+    closure, not by compile options: unless named apart, the serial and the parallel build of a
+    kernel would share one cache entry (the first compiled would serve both, and a parallel
+    kernel could run on one thread). Each variant has its own index file, and both count alike."""
+    kernels = [(sv._kernel(False), sv._kernel(True))]
+    kernels += list(zip(sv._fast_kernels(False), sv._fast_kernels(True), strict=True))
+    for serial, parallel in kernels:
+        if not parallel.targetoptions.get("parallel"):  # one build only (the tile sort)
+            continue
+        assert serial._cache._cache_file._index_path != parallel._cache._cache_file._index_path  # cache files
+        assert ".serial" in serial.py_func.__qualname__ and ".parallel" in parallel.py_func.__qualname__
+    scene = _scene()
+    points, normals, rank = _receivers(scene)
+    tris = pipeline._world_triangles(scene, pipeline._world_vertices(scene))
+    vp = scene.camera.projection @ scene.camera.view
+    light = scene.lights[0]
+    light_vec, directional = sv._light(light)
+    rec = sv._projected(points, normals, light_vec, directional, 1e-4, True, vp, True)
+    volume = sv.shadow_volume_triangles(tris, light, caps=True)
+    counts = {}
+    for parallel in (False, True):
+        sv_receivers = sv._PARALLEL_RECEIVERS
+        try:  # the receivers' count picks the build: force each in turn
+            sv._PARALLEL_RECEIVERS = 0 if parallel else len(points) + 1
+            counts[parallel] = sv._count(volume, vp, rec, zfail=True)
+        finally:
+            sv._PARALLEL_RECEIVERS = sv_receivers
+    assert np.any(counts[False] != 0) and np.any(counts[False] == 0)  # lit and shadowed receivers
+    np.testing.assert_array_equal(counts[True], counts[False])
