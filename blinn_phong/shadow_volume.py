@@ -139,7 +139,7 @@ STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
-_PARALLEL_FACES = 1_000_000  # fewer volume triangles are set up on one thread
+_PARALLEL_FACES = 10_000  # fewer volume triangles are set up on one thread
 
 
 # --------------------------------------------------------------------------- input checks
@@ -1309,15 +1309,33 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         return zlo, zhi, fit
 
     @_jit(parallel)
+    def to_clip(src, vp, guard):  # pragma: no cover - compiled
+        """Which homogeneous world triangles cross the near plane or the guard band once moved
+        to clip space by ``vp`` (as ``setup`` transforms them): those are clipped first."""
+        todo = np.zeros(src.shape[0], np.bool_)
+        for t in numba.prange(src.shape[0]):
+            for v in range(3):
+                xc = vh.component(src, vp, True, t, v, 0)
+                yc = vh.component(src, vp, True, t, v, 1)
+                zc = vh.component(src, vp, True, t, v, 2)
+                wc = vh.component(src, vp, True, t, v, 3)
+                gw = guard * wc
+                if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
+                    todo[t] = True
+        return todo
+
+    @_jit(parallel)
     def setup(
-        src, vp, transform, check, guard, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
+        src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
     ):  # pragma: no cover - compiled
-        """Per triangle (homogeneous world coordinates moved to clip space by ``vp`` when
-        ``transform``, else clip coordinates) the fields of :class:`_Setup` (see :func:`_setup`);
-        a triangle that crosses the near plane or the guard band (when ``check``) is flagged in
-        ``todo`` and left empty, as are those with w ≤ 0 or zero or non-finite area. Its tiles
-        are those its bounding box meets once widened by the receivers' slack (see ``count``)."""
-        s = src.shape[0]
+        """Per triangle the fields of :class:`_Setup` (see :func:`_setup`): first the homogeneous
+        world triangles ``src``, moved to clip space by ``vp`` (those flagged in ``todo`` by
+        ``to_clip`` are left empty), then the clip-space triangles ``cut`` (the flagged ones,
+        clipped), in one set of arrays. Triangles with w ≤ 0 or zero or non-finite area are left
+        empty too. A triangle's tiles are those its bounding box meets once widened by the
+        receivers' slack (see ``count``)."""
+        n_src = src.shape[0]
+        s = n_src + cut.shape[0]
         ex = np.empty((s, 3))
         ey = np.empty((s, 3))
         edx = np.empty((s, 3))
@@ -1338,35 +1356,24 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         bx1 = np.zeros(s)
         by0 = np.zeros(s)
         by1 = np.zeros(s)
-        todo = np.zeros(s, np.bool_)
         for t in numba.prange(s):
-            c00 = vh.component(src, vp, transform, t, 0, 0)
-            c01 = vh.component(src, vp, transform, t, 0, 1)
-            c02 = vh.component(src, vp, transform, t, 0, 2)
-            c03 = vh.component(src, vp, transform, t, 0, 3)
-            c10 = vh.component(src, vp, transform, t, 1, 0)
-            c11 = vh.component(src, vp, transform, t, 1, 1)
-            c12 = vh.component(src, vp, transform, t, 1, 2)
-            c13 = vh.component(src, vp, transform, t, 1, 3)
-            c20 = vh.component(src, vp, transform, t, 2, 0)
-            c21 = vh.component(src, vp, transform, t, 2, 1)
-            c22 = vh.component(src, vp, transform, t, 2, 2)
-            c23 = vh.component(src, vp, transform, t, 2, 3)
-            if check:
-                out = False
-                for v in range(3):
-                    if v == 0:
-                        xc, yc, zc, wc = c00, c01, c02, c03
-                    elif v == 1:
-                        xc, yc, zc, wc = c10, c11, c12, c13
-                    else:
-                        xc, yc, zc, wc = c20, c21, c22, c23
-                    gw = guard * wc
-                    if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
-                        out = True
-                if out:
-                    todo[t] = True
-                    continue
+            if t < n_src and todo[t]:
+                continue
+            transform = t < n_src
+            tri = src if transform else cut
+            k = np.int64(t) if transform else np.int64(t) - n_src  # (a parallel loop's index is unsigned)
+            c00 = vh.component(tri, vp, transform, k, 0, 0)
+            c01 = vh.component(tri, vp, transform, k, 0, 1)
+            c02 = vh.component(tri, vp, transform, k, 0, 2)
+            c03 = vh.component(tri, vp, transform, k, 0, 3)
+            c10 = vh.component(tri, vp, transform, k, 1, 0)
+            c11 = vh.component(tri, vp, transform, k, 1, 1)
+            c12 = vh.component(tri, vp, transform, k, 1, 2)
+            c13 = vh.component(tri, vp, transform, k, 1, 3)
+            c20 = vh.component(tri, vp, transform, k, 2, 0)
+            c21 = vh.component(tri, vp, transform, k, 2, 1)
+            c22 = vh.component(tri, vp, transform, k, 2, 2)
+            c23 = vh.component(tri, vp, transform, k, 2, 3)
             if not (c03 > 0 and c13 > 0 and c23 > 0):
                 continue
             xa = c00 / c03
@@ -1429,10 +1436,10 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             by1[t] = hi_y + pad_y
         return (
             ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front,
-            cx0, cx1, cy0, cy1, bx0, bx1, by0, by1, todo,
+            cx0, cx1, cy0, cy1, bx0, bx1, by0, by1,
         )  # fmt: skip
 
-    return project, bin_points, setup, tile_depths, project_binned
+    return project, bin_points, setup, tile_depths, project_binned, to_clip
 
 
 def _threads() -> int:
@@ -1659,6 +1666,9 @@ def pixel_binning(
     return grid, order, cell_start
 
 
+_NO_CLIP = np.zeros((0, 3, 4))  # no clipped triangles (one array type for the set-up kernel)
+
+
 def _count(
     vol: np.ndarray, vp: np.ndarray, rec: _Receivers, zfail: bool, visibility: bool = False
 ) -> np.ndarray:
@@ -1676,16 +1686,13 @@ def _count(
     xmin, ymin, cw, ch, nx, ny = grid
     slack_x, slack_y = rec.slack
     parallel = len(rec.x) >= _PARALLEL_RECEIVERS
-    _, _, setup, tile_depths, _ = _fast_kernels(parallel)
-    # the volume's set-up is small work: one thread (no parallel region to wait for)
-    serial_setup = _fast_kernels(False)[2] if len(vol) < _PARALLEL_FACES else setup
-    fields = serial_setup(vol, vp, True, True, guard, *grid, slack_x, slack_y)
-    todo = fields[-1]
-    if todo.any():  # the few faces crossing the near plane or the guard band: clipped first
-        cut = _clip(_transform(vol[todo], vp), guard)
-        cut = serial_setup(cut, vp, False, False, guard, *grid, slack_x, slack_y)
-        fields = tuple(np.concatenate([a, b]) for a, b in zip(fields, cut, strict=True))
-    st = _Setup(*fields[:-1])
+    tile_depths = _fast_kernels(parallel)[3]
+    # a small volume is set up on one thread (no parallel region to wait for)
+    _, _, setup, _, _, to_clip = _fast_kernels(len(vol) >= _PARALLEL_FACES)
+    todo = to_clip(vol, vp, guard)
+    # the few faces crossing the near plane or the guard band: clipped, then set up after the rest
+    cut = _clip(_transform(vol[todo], vp), guard) if todo.any() else _NO_CLIP
+    st = _Setup(*setup(vol, cut, todo, vp, *grid, slack_x, slack_y))
     depths = rec.depths
     zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
