@@ -138,7 +138,7 @@ __all__ = [
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
 _ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
-_PARALLEL_RECEIVERS = 100_000  # fewer receivers are counted on one thread
+_PARALLEL_RECEIVERS = 10_000  # fewer receivers are counted on one thread (parallel pays from about 10k)
 _PARALLEL_FACES = 10_000  # fewer volume triangles are set up on one thread
 
 
