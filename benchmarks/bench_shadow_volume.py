@@ -10,8 +10,10 @@ Three measurements, each a ratio between methods timed interleaved in the same r
   is against Embree (exact hard shadows): mean |Δ visibility| and the share of samples that differ.
 * ``frame`` — the frame-pipeline scene (two 65,024-triangle spheres over a ground plane, a
   directional and a point light, 1920×1080; ``--quick``: 480×270): ``render`` with
-  ``shadows="none"`` (the plain compiled frame), ``"shadow_volume"`` and ``"ray_traced"``; frame
-  times, their ratios to the plain frame, and the shadow stage alone against the plain frame.
+  ``shadows="none"`` (the plain compiled frame), ``"shadow_volume"`` and ``"ray_traced"``, each
+  warm (the next frame of an unchanged scene) and cold (adjacency, volumes, near-plane proofs and
+  BVH rebuilt: new geometry every frame); frame times, their ratios to the plain frame, and the
+  shadow stage alone against the plain frame.
 * ``crossover`` — one sphere over a plane under a point light: shadow volumes against Embree as the
   sphere's triangle count and the number of samples grow, both *warm* (each method's per-caster
   cache kept: adjacency, volumes and near-plane proof; the BVH — what the next frame of an
@@ -153,24 +155,31 @@ def _frame_scene(segments: int = 256, rings: int = 128) -> Scene:
 
 
 def frame(width: int, height: int, repeat: int) -> dict:
-    """Frame times with no shadows, shadow volumes and Embree on the two-sphere scene."""
+    """Frame times with no shadows, shadow volumes and Embree on the two-sphere scene, each method
+    warm (the next frame of an unchanged scene: adjacency, volumes and near-plane proofs kept,
+    the BVH kept) and cold (new geometry every frame: all of them rebuilt)."""
+    from blinn_phong import raytrace
+
     scene = _frame_scene()
     stages: dict[str, dict] = {}
 
-    def run_with(shadows: str, cold: bool):
+    def run_with(name: str, shadows: str, cold: bool):
         def call():
             if cold:
                 sv._TOPOLOGY_CACHE.clear()
                 sv._DERIVED_CACHE.clear()
-                sv._BINNING.clear()
-            stages[shadows] = render(scene, width, height, shadows=shadows).stats.seconds
+                raytrace._SCENE_CACHE.clear()
+            sv._BINNING.clear()
+            stages[name] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return call
 
     candidates = {
-        "none": run_with("none", False),
-        "shadow_volume": run_with("shadow_volume", True),
-        "ray_traced": run_with("ray_traced", False),
+        "none": run_with("none", "none", False),
+        "shadow_volume": run_with("shadow_volume", "shadow_volume", False),
+        "shadow_volume_cold": run_with("shadow_volume_cold", "shadow_volume", True),
+        "ray_traced": run_with("ray_traced", "ray_traced", False),
+        "ray_traced_cold": run_with("ray_traced_cold", "ray_traced", True),
     }
     times = time_interleaved(candidates, repeat=repeat)
     plain = times["none"]["median_s"]
@@ -181,11 +190,13 @@ def frame(width: int, height: int, repeat: int) -> dict:
         "frame_ratio_to_plain": {k: v["median_s"] / plain for k, v in times.items()},
         "last_stage_seconds": stages,
         "shadow_stage_ratio_to_plain": {
-            k: stages[k].get("shadows", 0.0) / plain for k in ("shadow_volume", "ray_traced")
+            k: stages[k].get("shadows", 0.0) / plain for k in candidates if k != "none"
         },
     }
-    print(f"frame {width}×{height}: {result['frame_ratio_to_plain']}", flush=True)
-    print(f"  shadow stage / plain frame: {result['shadow_stage_ratio_to_plain']}", flush=True)
+    ratios = {k: round(v, 2) for k, v in result["frame_ratio_to_plain"].items()}
+    print(f"frame {width}×{height}, × the plain frame: {ratios}", flush=True)
+    stage = {k: round(v, 2) for k, v in result["shadow_stage_ratio_to_plain"].items()}
+    print(f"  shadow stage / plain frame: {stage}", flush=True)
     return result
 
 
@@ -313,7 +324,7 @@ def run(out_dir: str | os.PathLike, *, repeat: int = 3, quick: bool = False) -> 
         "repeat": repeat,
         "machine": machine_info(),
         "same_scenes": same_scenes(128 if quick else 256, repeat),
-        "frame": frame(480, 270, max(1, repeat // 2)) if quick else frame(1920, 1080, max(1, repeat // 2)),
+        "frame": frame(480, 270, repeat) if quick else frame(1920, 1080, repeat),
         "crossover": crossover(repeat, quick),
     }
     out = Path(out_dir)

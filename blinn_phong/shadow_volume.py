@@ -203,6 +203,13 @@ class Topology:
     reasons: tuple[str, ...]
     neighbour: np.ndarray
 
+    @functools.cached_property
+    def planes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(T, 3) each triangle's unnormalised normal ``(v₁ − v₀) × (v₂ − v₀)`` and (T, 3) its
+        first vertex ``v₀``: what every light's facing test reads (computed once per topology)."""
+        v = self.vertices[self.triangles]
+        return np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), np.ascontiguousarray(v[:, 0])
+
 
 def analyse_topology(world_triangles: np.ndarray) -> Topology:
     """Weld a triangle soup, build edge adjacency and classify components as closed 2-manifolds.
@@ -538,11 +545,10 @@ def _analyse(tris: np.ndarray) -> Topology:
 
 def _facing(topology: Topology, light_vec: np.ndarray, directional: bool) -> np.ndarray:
     """(T,) float64 plane-side value: > 0 when the triangle's front faces the light."""
-    v = topology.vertices[topology.triangles]
-    normal = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    normal, first = topology.planes
     if directional:
         return -(normal @ light_vec)
-    return np.einsum("ij,ij->i", normal, light_vec - v[:, 0])
+    return np.einsum("ij,ij->i", normal, light_vec - first)
 
 
 def silhouette_edges(topology: Topology, light: DirectionalLight | PointLight | SpotLight) -> np.ndarray:
@@ -1760,15 +1766,22 @@ def zpass_is_safe(
         for i in range(4):
             n = np.cross(corners[(i + 1) % 4] - corners[i], apex - corners[i])
             planes.append((n, float(n @ corners[i])))
-    separated = np.zeros(len(tris), bool)
     scale = 1.0 + float(np.abs(tris).max(initial=0.0))
-    for n, d in planes:
+    normals = np.empty((len(planes), 3))
+    limits = np.empty(len(planes))
+    for k, (n, d) in enumerate(planes):
         if n @ inside < d:  # orient every plane with the hull on its positive side
             n, d = -n, -d
-        margin = 1e-9 * float(np.linalg.norm(n)) * scale
-        todo = ~separated
-        separated[todo] = np.all(tris[todo] @ n < d - margin, axis=1)
-    return bool(np.all(separated))
+        normals[k] = n
+        limits[k] = d - 1e-9 * float(np.linalg.norm(n)) * scale
+    # every plane at once, a block of triangles at a time (the first one not separated ends it)
+    for start in range(0, len(tris), 1 << 16):
+        block = tris[start : start + (1 << 16)]
+        side = (normals @ block.reshape(-1, 3).T).reshape(len(planes), len(block), 3)
+        farthest = np.maximum(np.maximum(side[:, :, 0], side[:, :, 1]), side[:, :, 2])  # per plane
+        if not np.logical_or.reduce(farthest < limits[:, None], axis=0).all():
+            return False
+    return True
 
 
 def _default_camera(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
