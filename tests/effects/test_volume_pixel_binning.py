@@ -129,7 +129,7 @@ def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
         assert serial._cache._cache_file._index_path != parallel._cache._cache_file._index_path  # cache files
         assert ".serial" in serial.py_func.__qualname__ and ".parallel" in parallel.py_func.__qualname__
     scene = _scene()
-    points, normals, rank = _receivers(scene)
+    points, normals, _rank = _receivers(scene)
     tris = pipeline._world_triangles(scene, pipeline._world_vertices(scene))
     vp = scene.camera.projection @ scene.camera.view
     light = scene.lights[0]
@@ -146,3 +146,4 @@ def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
             sv._PARALLEL_RECEIVERS = sv_receivers
     assert np.any(counts[False] != 0) and np.any(counts[False] == 0)  # lit and shadowed receivers
     np.testing.assert_array_equal(counts[True], counts[False])
+
