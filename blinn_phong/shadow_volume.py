@@ -413,6 +413,71 @@ def _hash_kernels() -> tuple[object, object, object, object]:
     return weld, pair, union_find, digest
 
 
+@functools.lru_cache(maxsize=1)
+def _pair_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def pair_by_vertex(a, b, nv):  # pragma: no cover - compiled
+        """``pair``'s results for directed edges ``a[e] → b[e]`` from the edges grouped by start
+        vertex (a stable counting sort, so a group lists its edges in input order): an edge's
+        own count is how often its end appears in its start's group, its twin's the same with
+        the ends swapped, the twin's first index the first such edge."""
+        m = a.shape[0]
+        start = np.zeros(nv + 1, np.int64)
+        for e in range(m):
+            start[a[e] + 1] += 1
+        for v in range(nv):
+            start[v + 1] += start[v]
+        fill = start[:nv].copy()
+        end = np.empty(m, np.int64)
+        index = np.empty(m, np.int64)
+        for e in range(m):
+            k = fill[a[e]]
+            fill[a[e]] = k + 1
+            end[k] = b[e]
+            index[k] = e
+        own = np.empty(m, np.int64)
+        twin_count = np.empty(m, np.int64)
+        twin_first = np.empty(m, np.int64)
+        for e in numba.prange(m):
+            u = a[e]
+            v = b[e]
+            c = 0
+            for k in range(start[u], start[u + 1]):
+                if end[k] == v:
+                    c += 1
+            own[e] = c
+            c = 0
+            f = -1
+            for k in range(start[v], start[v + 1]):
+                if end[k] == u:
+                    if f < 0:
+                        f = index[k]
+                    c += 1
+            twin_count[e] = c
+            twin_first[e] = f
+        return own, twin_count, twin_first
+
+    return pair_by_vertex
+
+
+#: Edges grouped by start vertex scan each group once per edge of it (and of its twins' group):
+#: ``Σ degree²`` steps. Up to this many steps per edge the groups are used, beyond it (a vertex
+#: shared by thousands of faces) the hash table, whose cost does not depend on degrees.
+_GROUP_STEPS_PER_EDGE = 32
+
+
+def _pair_edges(a: np.ndarray, b: np.ndarray, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per directed edge ``a[e] → b[e]`` (vertex indices below ``nv``): how often it occurs, how
+    often its twin ``b → a`` occurs, and the twin's first index (−1: none). Compiled: edges grouped
+    by start vertex, or a hash table where some vertex has a very high degree."""
+    degree = np.bincount(a, minlength=nv).astype(np.float64)
+    if float(degree @ degree) <= _GROUP_STEPS_PER_EDGE * max(len(a), 1):
+        return _pair_kernel()(a, b, nv)
+    return _hash_kernels()[1](a * nv + b, b * nv + a)
+
+
 def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Connected components of n nodes joined by edges (rows[i], cols[i]): each node's label is
     the smallest node index of its component (the same on both engines)."""
@@ -478,15 +543,15 @@ def _analyse(tris: np.ndarray) -> Topology:
     a = faces[idx][:, [0, 1, 2]].ravel()
     b = faces[idx][:, [1, 2, 0]].ravel()
     owner = np.repeat(idx, 3)
-    key = a * nv + b
-    twin = b * nv + a
     from .fast import numba_available
 
     if numba_available():
-        own_count, twin_count, twin_first = _hash_kernels()[1](key, twin)
+        own_count, twin_count, twin_first = _pair_edges(a, b, nv)
         has_twin = twin_first >= 0
         twin_at = np.maximum(twin_first, 0)
     else:
+        key = a * nv + b
+        twin = b * nv + a
         order = np.argsort(key, kind="stable")
         sorted_key = key[order]
         starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
@@ -504,11 +569,12 @@ def _analyse(tris: np.ndarray) -> Topology:
     labels = _components(n, owner[has_twin], owner[twin_at[has_twin]])
     component = np.full(n, -1, np.int64)
     # relabel valid triangles' components densely
-    _, dense = np.unique(labels[idx], return_inverse=True)
+    present = np.zeros(n, bool)  # a label is its component's smallest triangle index: below n
+    present[labels[idx]] = True
+    dense = (np.cumsum(present) - 1)[labels[idx]]  # each label's rank among the labels (np.unique's)
     component[idx] = dense
     n_comp = int(dense.max()) + 1 if len(idx) else 0
-    comp_bad = np.zeros(n_comp, bool)
-    np.logical_or.at(comp_bad, component[owner], bad_edge)
+    comp_bad = np.bincount(component[owner], weights=bad_edge, minlength=n_comp) > 0
     closed = np.zeros(n, bool)
     closed[idx] = ~comp_bad[component[idx]]
     reasons = []
@@ -528,8 +594,7 @@ def _analyse(tris: np.ndarray) -> Topology:
     # outward orientation of closed components
     v = vertices[faces]
     signed = np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])) / 6.0
-    comp_volume = np.zeros(n_comp)
-    np.add.at(comp_volume, component[idx], signed[idx])
+    comp_volume = np.bincount(component[idx], weights=signed[idx], minlength=n_comp)  # summed in order
     flip = np.zeros(n, bool)
     flip[idx] = closed[idx] & (comp_volume[component[idx]] < 0)
     faces = faces.copy()

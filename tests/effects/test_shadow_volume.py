@@ -323,15 +323,25 @@ def test_auto_matches_embree_from_outside_and_inside(light_name):
 
 
 @pytest.mark.skipif(not numba_available(), reason="numba not installed")
-def test_topology_is_the_same_without_numba(monkeypatch):
-    """Hash-table welding/pairing (numba) and sorting (numpy) build the same volumes, bit for bit."""
+@pytest.mark.parametrize("pairing", ["grouped", "hashed"])
+def test_topology_is_the_same_without_numba(monkeypatch, pairing):
+    """Compiled welding and edge pairing (edges grouped by start vertex, or a hash table where
+    degrees are high) and sorting (numpy) build the same volumes, bit for bit — also for
+    non-manifold input: a triangle given twice, and an edge shared by three faces."""
     import blinn_phong.fast
     import blinn_phong.shadow_volume as sv
 
     scene = scene_with(casters("pair") + casters("torus") + casters("box"), LIGHTS["point"], outside_camera())
     p, t, _ = uv_sphere(12, 6)
-    tris = np.concatenate([world_triangles(scene), (p + 3.0)[t[:, ::-1]]])  # plus an inside-out sphere
+    fin = np.array([[[5.0, 0, 0], [6.0, 0, 0], [5.5, 1, 0]], [[6.0, 0, 0], [5.0, 0, 0], [5.5, -1, 0]]])
+    third = np.array([[[5.0, 0, 0], [6.0, 0, 0], [5.5, 0, 1]]])  # a third face on the fin's edge
+    tris = np.concatenate(
+        [world_triangles(scene), (p + 3.0)[t[:, ::-1]], fin, third, fin[:1]]  # + inside-out sphere
+    )
+    if pairing == "hashed":
+        monkeypatch.setattr(sv, "_GROUP_STEPS_PER_EDGE", 0)
     compiled = sv._analyse(tris)
+    assert any("more than two faces" in r for r in compiled.reasons)  # the fin is non-manifold
     monkeypatch.setattr(blinn_phong.fast, "numba_available", lambda: False)
     reference = sv._analyse(tris)
     for name in ("valid", "closed", "component", "neighbour"):
