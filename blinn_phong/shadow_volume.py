@@ -206,7 +206,8 @@ class Topology:
     @functools.cached_property
     def planes(self) -> tuple[np.ndarray, np.ndarray]:
         """(T, 3) each triangle's unnormalised normal ``(v₁ − v₀) × (v₂ − v₀)`` and (T, 3) its
-        first vertex ``v₀``: what every light's facing test reads (computed once per topology)."""
+        first vertex ``v₀``: what every light's facing test reads (computed once per topology;
+        a topology is cached and shared, so its arrays are never written in place)."""
         v = self.vertices[self.triangles]
         return np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), np.ascontiguousarray(v[:, 0])
 

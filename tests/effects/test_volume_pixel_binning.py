@@ -120,7 +120,8 @@ def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
     """numba's on-disk cache files a kernel under its qualified name and keys it by bytecode and
     closure, not by compile options: unless named apart, the serial and the parallel build of a
     kernel would share one cache entry (the first compiled would serve both, and a parallel
-    kernel could run on one thread). Each variant has its own index file, and both count alike."""
+    kernel could run on one thread). Each variant has its own index file, and both count alike
+    (set-up, tile depths and counting, serial against threaded)."""
     kernels = [(sv._kernel(False), sv._kernel(True))]
     kernels += list(zip(sv._fast_kernels(False), sv._fast_kernels(True), strict=True))
     for serial, parallel in kernels:
@@ -138,12 +139,12 @@ def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
     volume = sv.shadow_volume_triangles(tris, light, caps=True)
     counts = {}
     for parallel in (False, True):
-        sv_receivers = sv._PARALLEL_RECEIVERS
-        try:  # the receivers' count picks the build: force each in turn
+        saved = sv._PARALLEL_RECEIVERS, sv._PARALLEL_FACES
+        try:  # the receivers' and the volume's sizes pick the builds: force each in turn
             sv._PARALLEL_RECEIVERS = 0 if parallel else len(points) + 1
+            sv._PARALLEL_FACES = 0 if parallel else len(volume) + 1
             counts[parallel] = sv._count(volume, vp, rec, zfail=True)
         finally:
-            sv._PARALLEL_RECEIVERS = sv_receivers
+            sv._PARALLEL_RECEIVERS, sv._PARALLEL_FACES = saved
     assert np.any(counts[False] != 0) and np.any(counts[False] == 0)  # lit and shadowed receivers
     np.testing.assert_array_equal(counts[True], counts[False])
-
