@@ -1021,6 +1021,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         visibility,
         slack_x,
         slack_y,
+        counts,
+        out_counts,
+        out_vis,
     ):  # pragma: no cover - compiled
         # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
         # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
@@ -1029,18 +1032,20 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         # and 1.0 where the count is 0, else 0.0; without it the counts and an empty array.
         # slack_x/slack_y: how far a receiver may lie outside its tile (0 when binned from these
         # very positions; see ``project_binned``): every tile is widened by as much, plus 1e-9
-        # of its size for rounding of the binning.
+        # of its size for rounding of the binning. counts (m,) int64: scratch, zeroed here by the
+        # band that owns each receiver; out_counts (m,) or out_vis (m,): the result, every entry
+        # written (the caller allocates them: numpy's memory is reused between frames, without
+        # the page faults of fresh memory).
         n_cells = nx * ny
-        m = px.shape[0]
-        counts = np.zeros(m, np.int64)
-        out_counts = np.zeros(0 if visibility else m, np.int64)
-        out_vis = np.zeros(m if visibility else 0)
         whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
         wx = 1e-9 * cw + slack_x
         wy = 1e-9 * ch + slack_y
         # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
         # gets a share of the busy rows whatever the threads' static split of the bands
         for band in numba.prange(n_bands):
+            for row in range(band, ny, n_bands):
+                for k in range(cell_start[row * nx], cell_start[(row + 1) * nx]):
+                    counts[k] = 0
             for t in range(front.shape[0]):
                 if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
                     continue
@@ -1244,16 +1249,13 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
 
     @_jit(parallel)
     def project_binned(
-        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny
-    ):  # pragma: no cover - compiled
+        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny,
+        sx, sy, sz,
+    ):  # fmt: skip  # pragma: no cover - compiled
         """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
-        at ``k``), with how far any receiver now lies outside its tile (a receiver moved for
-        another light may cross a border: the kernel widens every tile by as much), and each
-        tile's depths (``tile_depths``)."""
-        m = p.shape[0]
-        sx = np.empty(m)
-        sy = np.empty(m)
-        sz = np.empty(m)
+        at ``k``, written into ``sx``, ``sy``, ``sz``), with how far any receiver now lies outside
+        its tile (a receiver moved for another light may cross a border: the kernel widens every
+        tile by as much), and each tile's depths (``tile_depths``)."""
         mat = vh.matrix_entries(vp)
         lv = (light_vec[0], light_vec[1], light_vec[2])
         # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
@@ -1633,8 +1635,9 @@ def _projected(
         if same and len(cached[4]) == m:
             grid, order, cell_start = cached[3:]
             sx, sy, sz, stats, *depths = kernels[4](
-                p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid
-            )
+                p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid,
+                np.empty(m), np.empty(m), np.empty(m),
+            )  # fmt: skip
         else:
             px, py, pz, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
             cached = None
@@ -1674,10 +1677,11 @@ def _pixel_binning_kernel() -> object:  # a numba dispatcher
     import numba
 
     @numba.njit(parallel=True, cache=True)
-    def pixel_bins(rank, width, height, tile, nx, ny):  # pragma: no cover - compiled
+    def pixel_bins(rank, width, height, tile, nx, ny, order):  # pragma: no cover - compiled
         # counting sort of the covered pixels (rank ≥ 0) by tile: tile column col // tile, tile
         # row from the bottom (normalised y grows upwards, pixel rows downwards); each row of
-        # tiles (its own cells) counted and filled in parallel, in row-major order within a tile
+        # tiles (its own cells) counted and filled in parallel, in row-major order within a tile,
+        # into the first entries of ``order`` (width·height entries: room for every pixel)
         n_cells = nx * ny
         cell_start = np.zeros(n_cells + 1, np.int64)
         spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # tile rows interleaved over the threads
@@ -1690,7 +1694,6 @@ def _pixel_binning_kernel() -> object:  # a numba dispatcher
                         cell_start[cy * nx + col // tile + 1] += 1
         for c in range(n_cells):
             cell_start[c + 1] += cell_start[c]
-        order = np.empty(cell_start[n_cells], np.int64)
         for i_band in numba.prange(ny):
             band = spread[i_band]
             cy = ny - 1 - band
@@ -1702,7 +1705,7 @@ def _pixel_binning_kernel() -> object:  # a numba dispatcher
                         c = col // tile
                         order[fill[c]] = r
                         fill[c] += 1
-        return order, cell_start
+        return order[: cell_start[n_cells]], cell_start
 
     return pixel_bins
 
@@ -1732,9 +1735,11 @@ def pixel_binning(
     nx, ny = -(-width // tile), -(-height // tile)
     cw, ch = 2.0 * tile / width, 2.0 * tile / height
     grid = (-1.0, 1.0 - ny * ch, cw, ch, nx, ny)
+    # the order is written into numpy's memory (reused between frames without fresh page faults)
     order, cell_start = _pixel_binning_kernel()(
-        np.ascontiguousarray(rank, dtype=np.int64), int(width), int(height), int(tile), nx, ny
-    )
+        np.ascontiguousarray(rank, dtype=np.int64), int(width), int(height), int(tile), nx, ny,
+        np.empty(width * height, np.int64),
+    )  # fmt: skip
     return grid, order, cell_start
 
 
@@ -1769,12 +1774,14 @@ def _count(
     zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
     n_bands = min(ny, _threads()) if parallel else 1
+    m = len(rec.x)
     counts, lit = _kernel(parallel)(
         n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
         st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
         rec.x, rec.y, rec.z, rec.cell_start, zlo, zhi, fit, rec.order, zfail, visibility,
         slack_x, slack_y,
+        np.empty(m, np.int64), np.empty(0 if visibility else m, np.int64), np.empty(m if visibility else 0),
     )  # fmt: skip
     return lit if visibility else counts
 
