@@ -119,6 +119,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._scratch import carve, carved_bytes
 from .scene import Camera, DirectionalLight, PointLight, SpotLight
 
 __all__ = [
@@ -1400,37 +1401,35 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
 
     @_jit(parallel)
     def setup(
-        src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y
-    ):  # pragma: no cover - compiled
-        """Per triangle the fields of :class:`_Setup` (see :func:`_setup`): first the homogeneous
-        world triangles ``src``, moved to clip space by ``vp`` (those flagged in ``todo`` by
-        ``to_clip`` are left empty), then the clip-space triangles ``cut`` (the flagged ones,
-        clipped), in one set of arrays. Triangles with w ≤ 0 or zero or non-finite area are left
-        empty too. A triangle's tiles are those its bounding box meets once widened by the
-        receivers' slack (see ``count``)."""
+        src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y,
+        ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front, cx0, cx1, cy0, cy1, bx0, bx1, by0, by1,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        """Per triangle the fields of :class:`_Setup` (see :func:`_setup`), written into the
+        given arrays (``_setup_arrays``): first the homogeneous world triangles ``src``, moved to
+        clip space by ``vp`` (those flagged in ``todo`` by ``to_clip`` are left empty), then the
+        clip-space triangles ``cut`` (the flagged ones, clipped). Triangles with w ≤ 0 or zero or
+        non-finite area are left empty too (an empty triangle: ``cx0 > cx1``, its edges unset). A
+        triangle's tiles are those its bounding box meets once widened by the receivers' slack
+        (see ``count``)."""
         n_src = src.shape[0]
         s = n_src + cut.shape[0]
-        ex = np.empty((s, 3))
-        ey = np.empty((s, 3))
-        edx = np.empty((s, 3))
-        edy = np.empty((s, 3))
-        esign = np.empty((s, 3))
-        etie = np.zeros((s, 3), np.bool_)
-        z0 = np.zeros(s)
-        x0 = np.zeros(s)
-        y0 = np.zeros(s)
-        gx = np.zeros(s)
-        gy = np.zeros(s)
-        front = np.zeros(s, np.int64)
-        cx0 = np.ones(s, np.int64)
-        cx1 = np.zeros(s, np.int64)
-        cy0 = np.ones(s, np.int64)
-        cy1 = np.zeros(s, np.int64)
-        bx0 = np.zeros(s)
-        bx1 = np.zeros(s)
-        by0 = np.zeros(s)
-        by1 = np.zeros(s)
         for t in numba.prange(s):
+            for i in range(3):
+                etie[t, i] = False
+            z0[t] = 0.0
+            x0[t] = 0.0
+            y0[t] = 0.0
+            gx[t] = 0.0
+            gy[t] = 0.0
+            front[t] = 0
+            cx0[t] = 1
+            cx1[t] = 0
+            cy0[t] = 1
+            cy1[t] = 0
+            bx0[t] = 0.0
+            bx1[t] = 0.0
+            by0[t] = 0.0
+            by1[t] = 0.0
             if t < n_src and todo[t]:
                 continue
             transform = t < n_src
@@ -1508,10 +1507,6 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             bx1[t] = hi_x + pad_x
             by0[t] = lo_y - pad_y
             by1[t] = hi_y + pad_y
-        return (
-            ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front,
-            cx0, cx1, cy0, cy1, bx0, bx1, by0, by1,
-        )  # fmt: skip
 
     return project, bin_points, setup, tile_depths, project_binned, to_clip
 
@@ -1746,6 +1741,15 @@ def pixel_binning(
 _NO_CLIP = np.zeros((0, 3, 4))  # no clipped triangles (one array type for the set-up kernel)
 
 
+def _setup_arrays(s: int) -> list[np.ndarray]:
+    """Uninitialised arrays for the fields of :class:`_Setup` of ``s`` volume triangles, in its
+    field order, carved from one numpy buffer (the set-up kernel initialises what it needs;
+    numpy's memory is reused between frames without the page faults of fresh memory)."""
+    f8, i8 = np.float64, np.int64
+    parts = [((s, 3), f8)] * 5 + [((s, 3), np.bool_)] + [((s,), f8)] * 5 + [((s,), i8)] * 5 + [((s,), f8)] * 4
+    return carve(np.empty(carved_bytes(*parts), np.uint8), *parts)
+
+
 def _count(
     vol: np.ndarray, vp: np.ndarray, rec: _Receivers, zfail: bool, visibility: bool = False
 ) -> np.ndarray:
@@ -1769,7 +1773,9 @@ def _count(
     todo = to_clip(vol, vp, guard)
     # the few faces crossing the near plane or the guard band: clipped, then set up after the rest
     cut = _clip(_transform(vol[todo], vp), guard) if todo.any() else _NO_CLIP
-    st = _Setup(*setup(vol, cut, todo, vp, *grid, slack_x, slack_y))
+    fields = _setup_arrays(len(vol) + len(cut))
+    setup(vol, cut, todo, vp, *grid, slack_x, slack_y, *fields)
+    st = _Setup(*fields)
     depths = rec.depths
     zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
     # small jobs run serially: a parallel region costs more than it saves on a busy machine
