@@ -23,7 +23,9 @@ Three measurements, each a ratio between methods timed interleaved in the same r
 
 Every shadow-volume call here counts its receivers as new ones (the tile binning a frame's
 next light reuses is cleared first): a repeated call on the same arrays would otherwise skip
-the sort a real next frame, with new sample arrays, pays for.
+the sort a real next frame, with new sample arrays, pays for. Rounds interleave warm and cold
+calls, and a cold call empties the caches: every warm call of ``same_scenes`` and ``frame``
+first restores the caches its warm-up left.
 
 Writes ``shadow_volume.json``.
 """
@@ -78,6 +80,33 @@ def _cold(fn):
     return call
 
 
+def _caches() -> tuple:
+    """Every per-caster cache a warm call relies on: topology, volumes and near-plane proofs,
+    digests, and Embree's BVH."""
+    from blinn_phong import raytrace
+
+    return sv._TOPOLOGY_CACHE, sv._DERIVED_CACHE, sv._DIGESTS, raytrace._SCENE_CACHE
+
+
+def _snapshot() -> list:
+    """The caches as they are now (shallow copies), for :func:`_restored`."""
+    return [cache.copy() for cache in _caches()]
+
+
+def _restored(fn, state: list):
+    """``fn`` run with the caches put back to ``state`` first: rounds interleave cold calls,
+    which empty the caches, so a warm call restores what its warm-up left (the state of the
+    next frame of an unchanged scene)."""
+
+    def call():
+        for cache, saved in zip(_caches(), state, strict=True):
+            cache.clear()
+            cache.update(saved) if isinstance(cache, dict) else cache.extend(saved)
+        return fn()
+
+    return call
+
+
 def _cold_embree(fn):
     from blinn_phong import raytrace
 
@@ -109,9 +138,12 @@ def same_scenes(size: int, repeat: int) -> list[dict]:
             "ray_traced": lambda light=light: light_visibility("ray_traced", light, tris, points, normals),
             "shadow_volume_zfail_cold": _cold(volume("zfail")),
             "shadow_volume_zpass_cold": _cold(volume("zpass")),
-            "shadow_volume_zfail_warm": volume("zfail"),
-            "shadow_volume_auto_warm": volume("auto"),
         }
+        warm = {"shadow_volume_zfail_warm": volume("zfail"), "shadow_volume_auto_warm": volume("auto")}
+        for fn in (methods["ray_traced"], *warm.values()):  # the warm-up: BVH, volumes, proof
+            fn()
+        state = _snapshot()
+        methods.update({name: _restored(fn, state) for name, fn in warm.items()})
         for res in (1024, 2048):
             methods[f"shadow_map_{res}"] = lambda light=light, res=res: light_visibility(
                 "shadow_map", light, tris, points, normals, resolution=res
@@ -158,30 +190,19 @@ def frame(width: int, height: int, repeat: int) -> dict:
     """Frame times with no shadows, shadow volumes and Embree on the two-sphere scene, each method
     warm (the next frame of an unchanged scene: adjacency, volumes and near-plane proofs kept,
     the BVH kept) and cold (new geometry every frame: all of them rebuilt)."""
-    from blinn_phong import raytrace
-
     scene = _frame_scene()
     stages: dict[str, dict] = {}
-    caches = (sv._TOPOLOGY_CACHE, sv._DERIVED_CACHE, sv._DIGESTS, raytrace._SCENE_CACHE)
-    for shadows in ("shadow_volume", "ray_traced"):  # fill both methods' caches
+    for shadows in ("shadow_volume", "ray_traced"):  # the warm-up: both methods' caches
         render(scene, width, height, shadows=shadows)
-    warm = [cache.copy() for cache in caches]
-
-    def set_caches(state: list | None) -> None:
-        # rounds interleave the cold calls, which empty the caches: a warm call puts back
-        # what the warm-up left (the state of the next frame of an unchanged scene)
-        for cache, saved in zip(caches, state or [None] * len(caches), strict=True):
-            cache.clear()
-            if saved is not None:
-                cache.update(saved) if isinstance(cache, dict) else cache.extend(saved)
+    warm = _snapshot()
+    empty = [[] if isinstance(cache, list) else {} for cache in _caches()]
 
     def run_with(name: str, shadows: str, cold: bool):
         def call():
-            set_caches(None if cold else warm)
             sv._BINNING.clear()
             stages[name] = render(scene, width, height, shadows=shadows).stats.seconds
 
-        return call
+        return _restored(call, empty if cold else warm)
 
     candidates = {
         "none": run_with("none", "none", False),
