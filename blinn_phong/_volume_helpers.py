@@ -96,6 +96,18 @@ def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", cache=True)
+def clip_vertex(src, vp, transform, t, v):  # pragma: no cover - compiled
+    """Vertex ``v`` of triangle ``t`` in clip coordinates (x, y, z, w): :func:`component` of
+    each row."""
+    return (
+        component(src, vp, transform, t, v, 0),
+        component(src, vp, transform, t, v, 1),
+        component(src, vp, transform, t, v, 2),
+        component(src, vp, transform, t, v, 3),
+    )
+
+
+@numba.njit(inline="always", cache=True)
 def depth_range(z0, x0, y0, gx, gy, ax, bx, ay, by):  # pragma: no cover - compiled
     """The range of the depth plane ``z0 + (gx·(x − x0) + gy·(y − y0))`` over the rectangle
     [ax, bx] × [ay, by] (its corners), widened past the rounding of evaluating it at a point."""

@@ -1390,10 +1390,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         todo = np.zeros(src.shape[0], np.bool_)
         for t in numba.prange(src.shape[0]):
             for v in range(3):
-                xc = vh.component(src, vp, True, t, v, 0)
-                yc = vh.component(src, vp, True, t, v, 1)
-                zc = vh.component(src, vp, True, t, v, 2)
-                wc = vh.component(src, vp, True, t, v, 3)
+                xc, yc, zc, wc = vh.clip_vertex(src, vp, True, t, v)
                 gw = guard * wc
                 if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
                     todo[t] = True
@@ -1435,18 +1432,9 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             transform = t < n_src
             tri = src if transform else cut
             k = np.int64(t) if transform else np.int64(t) - n_src  # (a parallel loop's index is unsigned)
-            c00 = vh.component(tri, vp, transform, k, 0, 0)
-            c01 = vh.component(tri, vp, transform, k, 0, 1)
-            c02 = vh.component(tri, vp, transform, k, 0, 2)
-            c03 = vh.component(tri, vp, transform, k, 0, 3)
-            c10 = vh.component(tri, vp, transform, k, 1, 0)
-            c11 = vh.component(tri, vp, transform, k, 1, 1)
-            c12 = vh.component(tri, vp, transform, k, 1, 2)
-            c13 = vh.component(tri, vp, transform, k, 1, 3)
-            c20 = vh.component(tri, vp, transform, k, 2, 0)
-            c21 = vh.component(tri, vp, transform, k, 2, 1)
-            c22 = vh.component(tri, vp, transform, k, 2, 2)
-            c23 = vh.component(tri, vp, transform, k, 2, 3)
+            c00, c01, c02, c03 = vh.clip_vertex(tri, vp, transform, k, 0)
+            c10, c11, c12, c13 = vh.clip_vertex(tri, vp, transform, k, 1)
+            c20, c21, c22, c23 = vh.clip_vertex(tri, vp, transform, k, 2)
             if not (c03 > 0 and c13 > 0 and c23 > 0):
                 continue
             xa = c00 / c03
