@@ -48,6 +48,7 @@ bench: setup
 	$(PY) -m benchmarks --out benchmarks/results --charts docs
 	$(PY) -m benchmarks.planner_fuzz 200
 	$(PY) -m benchmarks.cost_check
+	$(PY) -m benchmarks.scene_fuzz 1000
 
 # The trade-off families on small scenes (about 30 s), written outside the repository.
 bench-quick: setup

@@ -24,6 +24,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
+from blinn_phong._checks import choice_error
+
 __all__ = [
     "PANELS",
     "SHADOW_SETTINGS",
@@ -288,15 +292,20 @@ class RenderOptions:
             if spec.items:
                 allowed = [item[0] for item in spec.items]
                 if value not in allowed:
-                    raise ValueError(f"{f.name}: expected one of {allowed}, got {value!r}")
+                    raise choice_error(f.name, value, allowed)
             elif isinstance(f.default, bool):
                 if not isinstance(value, bool):
                     raise TypeError(f"{f.name}: expected a bool, got {value!r}")
             elif isinstance(f.default, int | float):
-                if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.integer | np.floating):
+                    raise ValueError(f"{f.name}: expected a finite number, got {value!r}")
+                if not math.isfinite(value):
                     raise ValueError(f"{f.name}: expected a finite number, got {value!r}")
                 if isinstance(f.default, int) and not float(value).is_integer():
                     raise ValueError(f"{f.name}: expected an integer, got {value!r}")
+                # stored as the field's own type, so every consumer receives what it declares
+                value = int(value) if isinstance(f.default, int) else float(value)
+                object.__setattr__(self, f.name, value)
                 if spec.minimum is not None and value < spec.minimum:
                     raise ValueError(f"{f.name}: expected a value >= {spec.minimum}, got {value!r}")
                 if spec.maximum is not None and value > spec.maximum:

@@ -5,7 +5,9 @@ Every message names the argument, the expectation and what was received.
 
 from __future__ import annotations
 
+import difflib
 import os
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -182,3 +184,25 @@ def check_frame_size(width: object, height: object, samples: object, memory: int
             f"{BYTES_PER_PIXEL} per pixel) but this machine has {_bytes_text(limit)} of memory; "
             "render fewer pixels or samples (or in tiles)"
         )
+
+
+def choice_error(name: str, value: object, allowed: Sequence[object], *, also: str = "") -> ValueError:
+    """The error for ``value`` not among ``allowed``, with a "did you mean" for a near miss.
+
+    Args:
+        name: the argument or field, as the caller spells it (``"shadows"``, ``"Fog.mode"``).
+        value: what was received.
+        allowed: the valid values.
+        also: other accepted values to name first, e.g. ``"None, 'auto' or "``.
+
+    Returns:
+        ``ValueError("{name}: expected {also}one of {allowed}, got {value!r}; did you mean 'x'?")``
+        (the last clause only when a valid name is close to a string ``value``; case is ignored).
+    """
+    message = f"{name}: expected {also}one of {tuple(allowed)}, got {value!r}"
+    if isinstance(value, str):
+        by_folded = {str(a).lower(): a for a in allowed}
+        close = difflib.get_close_matches(value.lower(), list(by_folded), n=1, cutoff=0.6)
+        if close:
+            message += f"; did you mean {by_folded[close[0]]!r}?"
+    return ValueError(message)

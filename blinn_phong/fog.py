@@ -22,7 +22,7 @@ from typing import Literal
 
 import numpy as np
 
-from blinn_phong._checks import number, real_array
+from blinn_phong._checks import choice_error, number, real_array
 
 __all__ = ["FOG_MODES", "apply_fog", "eye_distance", "fog_factor"]
 
@@ -86,7 +86,7 @@ def fog_factor(
         dc = density * c
         f = np.exp(-dc) if mode == "exp" else np.exp(-(dc * dc))
     else:
-        raise ValueError(f"mode: expected one of {FOG_MODES}, got {mode!r}")
+        raise choice_error("mode", mode, FOG_MODES)
     return np.clip(f, 0.0, 1.0).astype(c.dtype, copy=False)
 
 

@@ -13,8 +13,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blinn_phong._checks import colour3, number
+from blinn_phong._checks import choice_error, colour3, number
 from blinn_phong.fog import FOG_MODES
+from blinn_phong.mesh_facts import point_triangle_distances
 from blinn_phong.oit import TRANSPARENCY_METHODS
 from blinn_phong.planner import Choice, Plan, coloured_shadow_reason, embree_available, plan
 from blinn_phong.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
@@ -40,6 +41,9 @@ SHADOW_CHOICES: tuple[str, ...] = (*SHADOW_METHODS, "soft")
 #: McGuire & Bavoil's eq. 10 and the depth-free α weight.
 WBOIT_WEIGHTS: tuple[str, ...] = ("eq10", "constant")
 _AUTO = (None, "auto")
+#: Depth-peeling layers beyond this are peeled as this many: a sample's fragment count is an
+#: int32 in the compiled kernels, so no sample holds more, and extra layers change nothing.
+MAX_PEEL_LAYERS = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -77,9 +81,7 @@ class ShadowOptions:
 
     def __post_init__(self) -> None:
         if self.method not in _AUTO and self.method not in SHADOW_CHOICES:
-            raise ValueError(
-                f"ShadowOptions.method: expected None, 'auto' or one of {SHADOW_CHOICES}, got {self.method!r}"
-            )
+            raise choice_error("ShadowOptions.method", self.method, SHADOW_CHOICES, also="None, 'auto' or ")
         if self.resolution is not None and (
             not isinstance(self.resolution, int | np.integer)
             or isinstance(self.resolution, bool)
@@ -92,9 +94,7 @@ class ShadowOptions:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, number(getattr(self, name), f"ShadowOptions.{name}", low=0.0))
         if self.kernel is not None and self.kernel not in PCF_KERNELS:
-            raise ValueError(
-                f"ShadowOptions.kernel: expected one of {PCF_KERNELS} or None, got {self.kernel!r}"
-            )
+            raise choice_error("ShadowOptions.kernel", self.kernel, PCF_KERNELS, also="None or ")
         if self.plane is not None:
             plane = np.asarray(self.plane, dtype=np.float64)
             if plane.shape != (4,) or not np.isfinite(plane).all() or np.linalg.norm(plane[:3]) == 0:
@@ -138,7 +138,7 @@ class Fog:
 
     def __post_init__(self) -> None:
         if self.mode not in FOG_MODES:
-            raise ValueError(f"Fog.mode: expected one of {FOG_MODES}, got {self.mode!r}")
+            raise choice_error("Fog.mode", self.mode, FOG_MODES)
         object.__setattr__(self, "color", colour3(self.color, "Fog.color"))
         object.__setattr__(self, "density", number(self.density, "Fog.density", low=0.0))
         object.__setattr__(self, "start", number(self.start, "Fog.start"))
@@ -146,7 +146,7 @@ class Fog:
         if self.mode == "linear" and self.start == self.end:
             raise ValueError(f"Fog.end: linear fog needs end != start, got start = end = {self.start}")
         if self.distance not in ("plane", "radial"):
-            raise ValueError(f"Fog.distance: expected 'plane' or 'radial', got {self.distance!r}")
+            raise choice_error("Fog.distance", self.distance, ("plane", "radial"))
 
 
 # --------------------------------------------------------------------------- choices
@@ -160,9 +160,7 @@ def _shadow_list(shadows: object, n_lights: int) -> list[ShadowOptions]:
             return value
         if value in _AUTO or value in SHADOW_CHOICES:
             return ShadowOptions(method=value)  # type: ignore[arg-type]
-        raise ValueError(
-            f"{name}: expected None, 'auto', one of {SHADOW_CHOICES} or a ShadowOptions, got {value!r}"
-        )
+        raise choice_error(name, value, SHADOW_CHOICES, also="a ShadowOptions, None, 'auto' or ")
 
     if isinstance(shadows, list | tuple):
         if len(shadows) != n_lights:
@@ -235,6 +233,58 @@ def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Ch
     return Choice(method, reason, params)
 
 
+#: A light closer than this to a caster's surface, relative to the scene's extent (the largest
+#: world coordinate magnitude, at least 1), counts as lying on it for shadow volumes.
+LIGHT_ON_SURFACE = 1e-7
+
+
+def _light_on_caster(scene: Scene, light: object) -> float | None:
+    """The distance from a point or spot light to the nearest shadow-casting triangle, when that
+    is within :data:`LIGHT_ON_SURFACE` of the scene's extent (else None).
+
+    A light on a caster's vertex, edge or face makes its shadow volume degenerate: the quads
+    extruded from the silhouette edges through the light have no direction there, and the
+    volume test counts pixels inside or outside the caster wrongly.
+    """
+    position = getattr(light, "position", None)
+    if position is None:
+        return None
+    point = np.asarray(position, dtype=np.float64)
+    nearest = np.inf
+    for mesh in scene.meshes:
+        if not mesh.casts_shadows or not len(mesh.triangles):
+            continue
+        world = (np.c_[mesh.positions, np.ones(len(mesh.positions))] @ mesh.transform.T)[:, :3]
+        scale = max(1.0, float(np.abs(world).max()), float(np.abs(point).max()))
+        tol = LIGHT_ON_SURFACE * scale
+        if (point < world.min(axis=0) - tol).any() or (point > world.max(axis=0) + tol).any():
+            continue  # outside the mesh's bounding box: not on its surface
+        tris = world[mesh.triangles]
+        near = ((tris.min(axis=1) - tol <= point) & (point <= tris.max(axis=1) + tol)).all(axis=1)
+        if near.any():
+            distance = float(point_triangle_distances(tris[near], point).min())
+            if distance <= tol:
+                nearest = min(nearest, distance)
+    return None if nearest == np.inf else nearest
+
+
+def _robust_volume(scene: Scene, light: object, choice: Choice) -> Choice:
+    """``choice`` unless it is a shadow volume for a light on a caster's surface: then the exact
+    ray-traced shadows (or, without Embree, a 2048² shadow map), the reason saying why."""
+    if choice.method != "shadow_volume":
+        return choice
+    distance = _light_on_caster(scene, light)
+    if distance is None:
+        return choice
+    why = (
+        f"the light lies on a caster's surface (distance {distance:.3g}): its shadow volume is "
+        f"degenerate there, so"
+    )
+    if embree_available():
+        return Choice("ray_traced", f"{why} exact ray-traced shadows instead ({choice.reason})")
+    return Choice("shadow_map", f"{why} a shadow map instead ({choice.reason})", {"resolution": 2048})
+
+
 def frame_plan(
     scene: Scene,
     *,
@@ -278,17 +328,15 @@ def frame_plan(
         functions that carry them out.
     """
     if shading != "auto" and shading not in SHADINGS:
-        raise ValueError(f"shading: expected 'auto' or one of {SHADINGS}, got {shading!r}")
+        raise choice_error("shading", shading, SHADINGS, also="'auto' or ")
     if transparency not in _AUTO and transparency not in TRANSPARENCY_CHOICES:
-        raise ValueError(
-            f"transparency: expected None, 'auto' or one of {TRANSPARENCY_CHOICES}, got {transparency!r}"
-        )
+        raise choice_error("transparency", transparency, TRANSPARENCY_CHOICES, also="None, 'auto' or ")
     if peel_layers is not None and (
         not isinstance(peel_layers, int | np.integer) or isinstance(peel_layers, bool) or peel_layers < 1
     ):
         raise ValueError(f"peel_layers: expected an integer >= 1 or None, got {peel_layers!r}")
     if wboit_weight not in WBOIT_WEIGHTS:
-        raise ValueError(f"wboit_weight: expected one of {WBOIT_WEIGHTS}, got {wboit_weight!r}")
+        raise choice_error("wboit_weight", wboit_weight, WBOIT_WEIGHTS)
     per_light = _shadow_list(shadows, len(scene.lights))
     planned = plan(scene, tolerance, width=width, height=height, samples=samples, fog=fog)
 
@@ -311,14 +359,21 @@ def frame_plan(
         if transparency not in _AUTO and transparency != t_choice.method:
             t_choice = Choice(str(transparency), _overridden(t_choice, "set by the caller"))
         if t_choice.method == "depth_peeling":
-            layers = peel_layers or planned.transparency.params.get("layers", 8)
-            t_choice = replace(t_choice, params={"layers": int(layers)})  # type: ignore[arg-type]
+            layers = int(peel_layers or planned.transparency.params.get("layers", 8))  # type: ignore[call-overload]
+            if layers > MAX_PEEL_LAYERS:
+                t_choice = replace(
+                    t_choice,
+                    reason=f"{t_choice.reason}; {layers} layers asked, {MAX_PEEL_LAYERS} peeled (no sample "
+                    "holds more fragments, so more layers change nothing)",
+                )
+                layers = MAX_PEEL_LAYERS
+            t_choice = replace(t_choice, params={"layers": layers})
         elif t_choice.method == "weighted_blended":
             t_choice = replace(t_choice, params={"wboit_equation": wboit_weight})
         else:
             t_choice = replace(t_choice, params={})  # sorting and the A-buffer take no parameters
         s_choices = tuple(
-            _shadow_choice(light, options, c)
+            _robust_volume(scene, light, _shadow_choice(light, options, c))
             for light, options, c in zip(scene.lights, per_light, planned.shadows, strict=True)
         )
         # a method set by the caller: say how transparent casters shadow with it (coloured if ray traced)

@@ -27,7 +27,7 @@ import numpy as np
 from .normals import vertex_normals
 from .scene import DirectionalLight, Mesh, PointLight, Scene, SpotLight
 
-__all__ = ["coordinate_tolerance"]
+__all__ = ["coordinate_tolerance", "point_triangle_distances"]
 
 _EPS = 1e-9
 
@@ -608,3 +608,39 @@ def _normal_angle(mesh: Mesh) -> float:
     inverse = np.linalg.inv(mesh.transform[:3, :3])
     normals = np.ascontiguousarray(mesh.normals, dtype=np.float64)
     return float(k["normal_angle"](normals, np.ascontiguousarray(mesh.triangles, dtype=np.int64), inverse))
+
+
+def point_triangle_distances(triangles: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """(T,) Euclidean distance from ``point`` to each triangle (its closest point, edges included).
+
+    Args:
+        triangles: (T, 3, 3) world-space corners.
+        point: (3,) world-space point.
+
+    The closest point is the projection onto the triangle's plane when that falls inside the
+    triangle (all three edge tests agree in sign), else the nearest point of its three edges
+    (segment projection clamped to [0, 1]). Degenerate (zero-area) triangles give their edge
+    distance. Float64 throughout.
+    """
+    tri = np.asarray(triangles, dtype=np.float64)
+    p = np.asarray(point, dtype=np.float64)
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    best = np.full(len(tri), np.inf)
+    for s, e in ((a, b), (b, c), (c, a)):
+        d = e - s
+        length2 = np.einsum("ij,ij->i", d, d)
+        t = np.einsum("ij,ij->i", p - s, d) / np.where(length2 > 0, length2, 1.0)
+        closest = s + np.clip(t, 0.0, 1.0)[:, None] * d
+        best = np.minimum(best, np.linalg.norm(p - closest, axis=1))
+    n = np.cross(b - a, c - a)
+    area2 = np.linalg.norm(n, axis=1)
+    good = area2 > 0
+    unit = n[good] / area2[good, None]
+    height = np.einsum("ij,ij->i", p - a[good], unit)
+    foot = p - height[:, None] * unit
+    inside = np.ones(int(good.sum()), bool)
+    for s, e in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(e[good] - s[good], foot - s[good]), unit) >= 0
+    plane_distance = np.where(inside, np.abs(height), np.inf)
+    best[good] = np.minimum(best[good], plane_distance)
+    return best

@@ -30,6 +30,7 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -42,7 +43,7 @@ from blinn_phong.fast import (
 )
 from blinn_phong.normals import face_normals
 from blinn_phong.planner import Plan
-from blinn_phong.prepared import PreparedScene
+from blinn_phong.prepared import PreparedScene, prepare_scene
 from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.resolve import (
     FogParameters,
@@ -52,7 +53,7 @@ from blinn_phong.resolve import (
     shadow_pass_values,
     side_tables,
 )
-from blinn_phong.scene import AmbientLight, DirectionalLight, Scene, SpotLight
+from blinn_phong.scene import AmbientLight, Camera, DirectionalLight, Scene, SpotLight
 from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragments
 from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
@@ -583,6 +584,83 @@ def _winner_visibility(
 #: Samples shaded and resolved per band of pixel rows: bounds the memory of the shading arrays
 #: (about 250 bytes per visible fragment) whatever the image size.
 BAND_SAMPLES = 1 << 19
+#: Samples per horizontal strip of a large frame. Every stage of a strip (visibility lists,
+#: shadow visibilities, shading) holds only the strip's fragments: a frame with transparency and
+#: ray-traced coloured shadows peaks near 320 bytes per sample, so a strip stays near 1.3 GB
+#: whatever the frame's size and sample count (1920×1080 at 6×6 samples is 18 strips).
+STRIP_SAMPLES = 1 << 22
+
+
+def strip_camera(camera: Camera, height: int, row0: int, row1: int) -> Camera:
+    """The camera that renders rows ``row0 … row1 − 1`` of a ``height``-row frame as a frame of its own.
+
+    Window y is affine in clip y, so the strip's clip y is ``(H/h)·y + (1 − H/h + 2·row0/h)·w``
+    (``h = row1 − row0``): the sample at strip row ``j`` is the frame's sample at row
+    ``row0 + j``, at the same window depth. Only the projection's y row changes; eye space,
+    lighting and shadows see the same scene.
+    """
+    h = row1 - row0
+    strip = np.eye(4)
+    strip[1, 1] = height / h
+    strip[1, 3] = 1.0 - height / h + 2.0 * row0 / h
+    return Camera(camera.view, strip @ camera.projection, camera.kind)
+
+
+def _render_in_strips(
+    prepared: PreparedScene,
+    width: int,
+    height: int,
+    the_plan: Plan,
+    *,
+    seconds: dict[str, float],
+    report: Callable[[str, float], None] | None,
+    **options: object,
+) -> FrameResult:
+    """:func:`render_frame` strip by strip (whole pixel rows, :data:`STRIP_SAMPLES` samples each),
+    each strip through every stage with its own :func:`strip_camera`, following the frame's plan."""
+    samples = int(options["samples"])  # type: ignore[call-overload]
+    rows = max(1, STRIP_SAMPLES // (width * samples))
+    bounds = [(r, min(height, r + rows)) for r in range(0, height, rows)]
+    scene = prepared.scene
+    image: FrameImage | None = None
+    shaded = 0
+    for i, (row0, row1) in enumerate(bounds):
+        strip_scene = replace(scene, camera=strip_camera(scene.camera, height, row0, row1))  # type: ignore[arg-type]
+        t = time.perf_counter()
+        strip_prepared = prepare_scene(strip_scene)
+        seconds["prepare"] = seconds.get("prepare", 0.0) + time.perf_counter() - t
+        strip_seconds: dict[str, float] = {}
+
+        def say(stage: str, fraction: float, i: int = i) -> None:
+            if report is not None:
+                report(stage, (i + fraction) / len(bounds))
+
+        part, n = render_frame(
+            strip_prepared, width, row1 - row0, the_plan, seconds=strip_seconds, report=say,
+            **options,  # type: ignore[arg-type]
+        )  # fmt: skip
+        for stage, value in strip_seconds.items():
+            seconds[stage] = seconds.get(stage, 0.0) + value
+        if image is None:
+            image = FrameImage(
+                np.empty((height, width, 4), np.float32),
+                np.empty((height, width), np.float32),
+                np.empty((height, width, 3), np.float32),
+                {name: np.empty((height, width, p.shape[-1]), np.float32) for name, p in part.passes.items()},
+            )
+        if set(part.passes) != set(image.passes):
+            raise RuntimeError(
+                f"strip rows {row0}–{row1}: passes {sorted(part.passes)}, frame {sorted(image.passes)}"
+            )
+        image.rgba[row0:row1] = part.rgba
+        image.depth[row0:row1] = part.depth
+        image.normal[row0:row1] = part.normal
+        for name, p in part.passes.items():
+            image.passes[name][row0:row1] = p
+        shaded += n
+        del part
+    assert image is not None
+    return image, shaded
 
 
 def render_frame(
@@ -623,6 +701,11 @@ def render_frame(
         fragments shaded (each visible fragment once).
     """
     seconds = {} if seconds is None else seconds
+    if height > 1 and width * height * samples > STRIP_SAMPLES:
+        return _render_in_strips(
+            prepared, width, height, the_plan, shading=shading, samples=samples, gl_compat=gl_compat,
+            cull_backfaces=cull_backfaces, fog=fog, engine=engine, seconds=seconds, report=report,
+        )  # fmt: skip
 
     def say(stage: str, fraction: float) -> None:
         if report is not None:

@@ -1155,10 +1155,11 @@ def plan(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a blinn_phong.Scene, got {type(scene).__name__}")
-    if isinstance(tolerance, bool) or not (
-        isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance >= 0
-    ):
-        raise ValueError(f"tolerance must be a finite number of 8-bit steps >= 0, got {tolerance!r}")
+    if isinstance(tolerance, bool | np.bool_) or not isinstance(tolerance, int | float | np.integer | np.floating):
+        raise TypeError(f"tolerance: expected a number of 8-bit steps >= 0, got {type(tolerance).__name__}")
+    if not (math.isfinite(tolerance) and tolerance >= 0):
+        raise ValueError(f"tolerance: expected a finite number of 8-bit steps >= 0, got {tolerance!r}")
+    tolerance = float(tolerance)
     if fog is not None:
         from .frame import Fog
 

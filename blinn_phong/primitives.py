@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["grid_plane", "uv_sphere"]
+__all__ = ["box", "grid_plane", "uv_sphere"]
 
 
 def uv_sphere(
@@ -75,3 +75,35 @@ def grid_plane(
     tris = np.concatenate([np.stack([v, v + 1, v + nx + 2], 1), np.stack([v, v + nx + 2, v + nx + 1], 1)])
     normals = np.tile([0.0, 0.0, 1.0], (len(pos), 1))
     return pos, tris.astype(np.int64), normals
+
+
+def box(
+    half_extents: tuple[float, float, float] = (1.0, 1.0, 1.0),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An axis-aligned box centred at the origin, four vertices and one normal per face.
+
+    Args:
+        half_extents: half the box's size along X, Y and Z (each > 0).
+
+    Returns:
+        ``(positions, triangles, normals)``: 24 vertices (faces do not share vertices, so each
+        face keeps its own outward normal and the box shades flat), 12 counter-clockwise
+        (outward) triangles, unit face normals.
+    """
+    half = np.asarray(half_extents, dtype=np.float64)
+    if half.shape != (3,) or not np.isfinite(half).all() or not (half > 0).all():
+        raise ValueError(f"box: half_extents must be three finite numbers > 0, got {half_extents!r}")
+    positions, triangles, normals = [], [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            u = np.zeros(3)
+            u[(axis + 1) % 3] = 1.0
+            v = np.cross(n, u)  # (u, v, n) right-handed: corners below run counter-clockwise about n
+            base = len(positions)
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                positions.append((n + a * u + b * v) * half)
+                normals.append(n)
+            triangles += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    return np.array(positions), np.array(triangles, dtype=np.int64), np.array(normals)

@@ -18,6 +18,7 @@ Each has a numpy reference (readable, built on :mod:`blinn_phong.oit` and
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -164,7 +165,9 @@ def shadow_pass_values(visibility: np.ndarray) -> np.ndarray:
     Summed column by column in order, then divided by their count (numpy's ``mean`` over a short
     axis of a long array is several times slower).
     """
-    v = visibility.reshape(len(visibility), -1)
+    # The column count from the trailing axes, never ``-1``: a band or tile with no fragment
+    # gives N = 0, and numpy cannot infer the other axis of an empty array.
+    v = visibility.reshape(visibility.shape[0], math.prod(visibility.shape[1:]))
     if v.shape[1] == 0:
         return np.full(len(v), np.nan)
     total = v[:, 0].astype(np.float64, copy=True)

@@ -50,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from blinn_phong._checks import check_frame_size, colour3, float_array, number, vector3
+from blinn_phong._checks import check_frame_size, choice_error, colour3, float_array, number, vector3
 from blinn_phong.texture import Texture
 
 __all__ = [
@@ -152,10 +152,7 @@ class Material:
         object.__setattr__(self, "shininess", number(self.shininess, "Material.shininess", low=0.0))
         object.__setattr__(self, "opacity", number(self.opacity, "Material.opacity", low=0.0, high=1.0))
         if self.transparency_model not in TRANSPARENCY_MODELS:
-            raise ValueError(
-                f"Material.transparency_model: expected one of {TRANSPARENCY_MODELS}, "
-                f"got {self.transparency_model!r}"
-            )
+            raise choice_error("Material.transparency_model", self.transparency_model, TRANSPARENCY_MODELS)
         if self.kay_greenberg is not None:
             values = tuple(self.kay_greenberg) if isinstance(self.kay_greenberg, tuple | list) else ()
             if len(values) != 3:
@@ -514,7 +511,7 @@ class Mesh:
                 f"Mesh.back_material: expected a Material or None, got {type(self.back_material).__name__}"
             )
         if self.shading is not None and self.shading not in SHADINGS:
-            raise ValueError(f"Mesh.shading: expected one of {SHADINGS} or None, got {self.shading!r}")
+            raise choice_error("Mesh.shading", self.shading, SHADINGS, also="None or ")
         if self.normal_weighting not in ("area", "angle"):
             raise ValueError(
                 f"Mesh.normal_weighting: expected 'area' or 'angle', got {self.normal_weighting!r}"

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blinn_phong._checks import choice_error
 from blinn_phong.fast import PlainTables, numba_available, surface_at_fragments_compiled
 from blinn_phong.lighting import ShadingTerms, gl_clamp, light_tables, material_tables, shade, shade_many
 from blinn_phong.normals import normalize
@@ -60,7 +61,7 @@ class FragmentShading:
 
 def _check_shading(shading: object) -> str:
     if shading not in SHADINGS:
-        raise ValueError(f"shading: expected one of {SHADINGS}, got {shading!r}")
+        raise choice_error("shading", shading, SHADINGS)
     return str(shading)
 
 

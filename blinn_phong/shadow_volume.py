@@ -119,6 +119,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._checks import choice_error
 from ._scratch import carve, carved_bytes
 from .scene import Camera, DirectionalLight, PointLight, SpotLight
 
@@ -1508,7 +1509,7 @@ def _threads() -> int:
 
 def _use_numba(engine: str) -> bool:
     if engine not in _ENGINES:
-        raise ValueError(f"engine: expected one of {_ENGINES}, got {engine!r}")
+        raise choice_error("engine", engine, _ENGINES)
     if engine == "numpy":
         return False
     from .fast import numba_available
@@ -1543,7 +1544,7 @@ def stencil_counts(
         (n,) int64 counts; 0 means outside every volume (lit) when the method is valid.
     """
     if stencil not in STENCIL_METHODS:
-        raise ValueError(f"stencil: expected one of {STENCIL_METHODS}, got {stencil!r}")
+        raise choice_error("stencil", stencil, STENCIL_METHODS)
     vol = np.asarray(volume_triangles, dtype=np.float64)
     if vol.ndim != 3 or vol.shape[1:] != (3, 4) or not np.all(np.isfinite(vol)):
         raise ValueError(f"volume_triangles: expected finite (m, 3, 4), got shape {vol.shape}")
@@ -1908,14 +1909,16 @@ def shadow_volume_visibility(
     n = _points("normals", normals, check_finite=False)
     if n.shape != p.shape:
         raise ValueError(f"normals: expected the shape of points {p.shape}, got {n.shape}")
-    if not (isinstance(offset, int | float) and math.isfinite(offset) and offset >= 0):
+    if isinstance(offset, bool) or not (
+        isinstance(offset, int | float | np.integer | np.floating) and math.isfinite(offset) and offset >= 0
+    ):
         raise ValueError(f"offset: expected a finite number >= 0, got {offset!r}")
     if camera is not None and not isinstance(camera, Camera):
         raise TypeError(f"camera: expected a blinn_phong Camera or None, got {type(camera).__name__}")
     tris = _triangles("world_triangles", world_triangles)
     light_vec, directional = _light(light)
     if stencil not in (*STENCIL_METHODS, "auto"):
-        raise ValueError(f"stencil: expected 'auto' or one of {STENCIL_METHODS}, got {stencil!r}")
+        raise choice_error("stencil", stencil, STENCIL_METHODS, also="'auto' or ")
     _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
         _points("points", p)
@@ -1924,6 +1927,9 @@ def shadow_volume_visibility(
     numba_path = _use_numba(engine)
     q = None
     if camera is None:
+        # the default camera is built from the points: refuse non-finite ones by their own name
+        _points("points", p)
+        _points("normals", n)
         q = _offset_numpy(p, n, light_vec, directional, float(offset))
         view, proj = _default_camera(q, tris)
     else:

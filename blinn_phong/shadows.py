@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._checks import choice_error
 from .raster import rasterize
 from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographic_matrix, perspective_matrix
 
@@ -94,7 +95,7 @@ def _numba_available() -> bool:
 def _compiled(engine: str) -> bool:
     """True when ``engine`` selects the compiled kernels; raises for an unknown engine."""
     if engine not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        raise choice_error("engine", engine, ENGINES)
     if engine == "numpy":
         return False
     if _numba_available():

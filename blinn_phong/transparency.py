@@ -46,7 +46,7 @@ from typing import Literal
 import numpy as np
 
 import compositing
-from blinn_phong._checks import number, real_array, unit_interval_array
+from blinn_phong._checks import choice_error, number, real_array, unit_interval_array
 
 __all__ = [
     "TRANSPARENCY_MODELS",
@@ -217,7 +217,7 @@ def blend_transparent_surface(
         ValueError: unknown model, a missing parameter, or a parameter the model does not use.
     """
     if model not in TRANSPARENCY_MODELS:
-        raise ValueError(f"model: expected one of {TRANSPARENCY_MODELS}, got {model!r}")
+        raise choice_error("model", model, TRANSPARENCY_MODELS)
     if model == "absorption":
         if opacity is not None:
             raise ValueError(
@@ -256,7 +256,7 @@ def transparent_fragment(surface_rgb: np.ndarray, opacity: object, model: Transp
         (..., 4) premultiplied RGBA in the float dtype of ``surface_rgb`` (float64 for integers).
     """
     if model not in TRANSPARENCY_MODELS:
-        raise ValueError(f"model: expected one of {TRANSPARENCY_MODELS}, got {model!r}")
+        raise choice_error("model", model, TRANSPARENCY_MODELS)
     rgb = real_array(surface_rgb, "surface_rgb", last_axis=3)
     a = _opacity(opacity, rgb.dtype)
     shape = np.broadcast_shapes(rgb.shape[:-1], a.shape[:-1])
