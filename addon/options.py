@@ -297,7 +297,8 @@ class RenderOptions:
                 if not isinstance(value, bool):
                     raise TypeError(f"{f.name}: expected a bool, got {value!r}")
             elif isinstance(f.default, int | float):
-                if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.integer | np.floating):
+                number = int | float | np.integer | np.floating
+                if isinstance(value, bool | np.bool_) or not isinstance(value, number):
                     raise ValueError(f"{f.name}: expected a finite number, got {value!r}")
                 if not math.isfinite(value):
                     raise ValueError(f"{f.name}: expected a finite number, got {value!r}")

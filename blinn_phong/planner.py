@@ -1155,7 +1155,8 @@ def plan(
     """
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a blinn_phong.Scene, got {type(scene).__name__}")
-    if isinstance(tolerance, bool | np.bool_) or not isinstance(tolerance, int | float | np.integer | np.floating):
+    real = int | float | np.integer | np.floating
+    if isinstance(tolerance, bool | np.bool_) or not isinstance(tolerance, real):
         raise TypeError(f"tolerance: expected a number of 8-bit steps >= 0, got {type(tolerance).__name__}")
     if not (math.isfinite(tolerance) and tolerance >= 0):
         raise ValueError(f"tolerance: expected a finite number of 8-bit steps >= 0, got {tolerance!r}")

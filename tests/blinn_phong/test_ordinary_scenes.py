@@ -66,7 +66,7 @@ def test_strip_camera_maps_strip_rows_to_frame_rows() -> None:
     cam = sphere_on_floor(4 / 3).camera
     height, row0, row1 = 480, 130, 190
     strip = pipeline.strip_camera(cam, height, row0, row1)
-    pts = np.random.default_rng(2).uniform(-1, 1, (50, 3)) + [0, 0, 0]
+    pts = np.random.default_rng(2).uniform(-1, 1, (50, 3))
     hom = np.c_[pts, np.ones(len(pts))]
 
     def window_y(camera: bp.Camera, rows: int) -> np.ndarray:
