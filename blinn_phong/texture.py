@@ -23,10 +23,20 @@ Filtering (OpenGL 2.1 §3.8.8, equations 3.25–3.27):
 
 Extension (wrap) of texel indices outside the image:
 
-* ``"repeat"`` (``GL_REPEAT``): ``i mod W``;
+* ``"repeat"`` (``GL_REPEAT``): ``i mod W``. GL 2.1 §3.8.7: the integer part of the
+  coordinate is ignored, so ``u`` is first reduced to ``fmod(u, 1)`` (exact in float64,
+  the sign of ``u``; the index ``mod W`` then makes it ``u mod 1``). Where
+  ``|u| ≥ 2^52`` float64 has no fractional bits (its spacing is ≥ 1): every such ``u``
+  is an integer, ``u mod 1 = 0`` exactly, and the lookup is the one at ``u = 0``
+  (closest: column 0; linear: half column ``W − 1``, half column 0).
 * ``"extend"`` (``GL_CLAMP_TO_EDGE``): ``clamp(i, 0, W − 1)``;
 * ``"clip"`` (Blender's *Clip*; ``GL_CLAMP_TO_BORDER`` with a transparent black border):
   texels outside the image are ``(0, 0, 0, 0)``.
+
+  For these two, ``u`` and ``v`` are first clamped to ``[−1, 2]``: a coordinate a whole
+  image outside looks up only edge (or border) texels, wherever it lies beyond, so the
+  result is the same and texel indices stay small integers for any finite coordinate
+  (``1e300`` included; an unclamped ``floor(u·W)`` overflows int64 above ``2^63/W``).
 
 Colour spaces of the input image: ``"linear"`` (alias ``"Linear Rec.709"``) and
 ``"Non-Color"`` are used as given; ``"sRGB"`` is decoded with the exact sRGB EOTF of
@@ -45,6 +55,7 @@ __all__ = [
     "COLORSPACES",
     "EXTENSIONS",
     "INTERPOLATIONS",
+    "UV_LIMIT",
     "Texture",
     "srgb_to_linear",
     "straight_colour",
@@ -54,6 +65,10 @@ INTERPOLATIONS: tuple[str, ...] = ("closest", "linear")
 EXTENSIONS: tuple[str, ...] = ("repeat", "extend", "clip")
 COLORSPACES: tuple[str, ...] = ("linear", "Linear Rec.709", "Non-Color", "sRGB")
 ALPHAS: tuple[str, ...] = ("premultiplied", "straight")
+#: ``2^53``: from here on every float64 is an even integer, so ``u mod 1 = 0`` and every
+#: clamped extension is decided; the texture stage clamps interpolated coordinates to
+#: ``±UV_LIMIT`` (only an interpolation overflowing to ±inf near the float64 maximum changes).
+UV_LIMIT = 2.0**53
 
 
 def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
@@ -175,6 +190,19 @@ class Texture:
         """The image with row 0 at the bottom (OpenGL's ``glTexImage2D`` order), C-contiguous."""
         return np.ascontiguousarray(self.image[::-1])
 
+    def texel_coordinates(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, y) = (u'·W, v'·H)``, float64, with ``u', v'`` the coordinates the extension needs.
+
+        ``"repeat"``: ``u' = fmod(u, 1) = u − trunc(u)`` (exact; the sign of ``u``), ``"extend"``/``"clip"``:
+        ``u' = clamp(u, −1, 2)`` (module docstring). Either way ``|x| ≤ 2W``, ``|y| ≤ 2H``.
+        """
+        u, v = uv[:, 0], uv[:, 1]
+        if self.extension == "repeat":
+            u, v = u - np.trunc(u), v - np.trunc(v)  # fmod(·, 1), exact
+        else:
+            u, v = np.clip(u, -1.0, 2.0), np.clip(v, -1.0, 2.0)
+        return u * self.width, v * self.height
+
     def _fetch(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """Texels at integer column ``i`` (from the left) and row ``j`` (from the bottom), wrapped."""
         w, h = self.width, self.height
@@ -192,28 +220,29 @@ class Texture:
         """Filtered texels at texture coordinates ``uv`` (N, 2): (N, 4) float64 premultiplied linear RGBA.
 
         ``u`` left → right, ``v`` bottom → top (module docstring); filtering and wrapping as
-        ``interpolation`` and ``extension`` say (OpenGL 2.1 §3.8.7–3.8.8).
+        ``interpolation`` and ``extension`` say (OpenGL 2.1 §3.8.7–3.8.8); any finite
+        coordinate is valid.
         """
         coords = np.asarray(uv, dtype=np.float64)
         if coords.ndim != 2 or coords.shape[1] != 2:
             raise ValueError(f"uv: expected shape (N, 2), got {coords.shape}")
         if not np.isfinite(coords).all():
             raise ValueError("uv: expected finite texture coordinates")
-        x = coords[:, 0] * self.width
-        y = coords[:, 1] * self.height
+        x, y = self.texel_coordinates(coords)
         if self.interpolation == "closest":
-            return self._fetch(np.floor(x).astype(np.int64), np.floor(y).astype(np.int64))
-        x -= 0.5
-        y -= 0.5
-        i0, j0 = np.floor(x), np.floor(y)
-        fa, fb = (x - i0)[:, None], (y - j0)[:, None]
-        i0, j0 = i0.astype(np.int64), j0.astype(np.int64)
-        out = (
-            (1 - fa) * (1 - fb) * self._fetch(i0, j0)
-            + fa * (1 - fb) * self._fetch(i0 + 1, j0)
-            + (1 - fa) * fb * self._fetch(i0, j0 + 1)
-            + fa * fb * self._fetch(i0 + 1, j0 + 1)
-        )
-        # A convex blend of alphas in [0, 1]: only rounding (an ulp) can leave [0, 1].
-        np.clip(out[:, 3], 0.0, 1.0, out=out[:, 3])
+            out = self._fetch(np.floor(x).astype(np.int64), np.floor(y).astype(np.int64))
+        else:
+            x -= 0.5
+            y -= 0.5
+            i0, j0 = np.floor(x), np.floor(y)
+            fa, fb = (x - i0)[:, None], (y - j0)[:, None]
+            i0, j0 = i0.astype(np.int64), j0.astype(np.int64)
+            out = (
+                (1 - fa) * (1 - fb) * self._fetch(i0, j0)
+                + fa * (1 - fb) * self._fetch(i0 + 1, j0)
+                + (1 - fa) * fb * self._fetch(i0, j0 + 1)
+                + fa * fb * self._fetch(i0 + 1, j0 + 1)
+            )
+            # A convex blend of alphas in [0, 1]: only rounding (an ulp) can leave [0, 1].
+            np.clip(out[:, 3], 0.0, 1.0, out=out[:, 3])
         return out

@@ -38,7 +38,7 @@ from blinn_phong.fast import numba_available
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.shading import FragmentShading
-from blinn_phong.texture import EXTENSIONS, INTERPOLATIONS, straight_colour
+from blinn_phong.texture import EXTENSIONS, INTERPOLATIONS, UV_LIMIT, straight_colour
 
 __all__ = ["texture_fragments", "vertex_uv"]
 
@@ -91,8 +91,9 @@ def texture_fragments(
         here = np.flatnonzero(side == s)
         texture = material.base_color_texture
         if texture is not None:
-            if uv is None:
+            if uv is None:  # ±UV_LIMIT: an interpolation overflowing to ±inf is its limit
                 uv = interpolate(fragments, prepared.triangles, vertex_uv(prepared))
+                np.clip(uv, -UV_LIMIT, UV_LIMIT, out=uv)
             texel = texture.sample(uv[here])
             colour = straight_colour(texel)
             a, d, sp = shaded.ambient[here], shaded.diffuse[here], shaded.specular[here]
@@ -161,6 +162,7 @@ def _texture_compiled(
         np.ascontiguousarray(shaded.rgb, dtype=np.float64),
         np.asarray(shaded.alpha, dtype=np.float64),
         mode,
+        UV_LIMIT,
     )
     return dataclasses.replace(shaded, rgb=rgb, ambient=ambient, diffuse=diffuse, alpha=alpha)
 
@@ -202,6 +204,7 @@ def _kernel() -> object:  # a numba dispatcher
         rgb_in,
         alpha_in,
         mode,
+        uv_limit,
     ):  # pragma: no cover - compiled
         n = len(triangle)
         rgb = rgb_in.copy()
@@ -220,6 +223,15 @@ def _kernel() -> object:  # a numba dispatcher
                     v += bary[f, q] * uv[tris[t, q], 1]
                 w, h = shape[k, 0], shape[k, 1]
                 ext = modes[k, 1]
+                # Texture.texel_coordinates: bounded before the integer conversion.
+                u = min(max(u, -uv_limit), uv_limit)
+                v = min(max(v, -uv_limit), uv_limit)
+                if ext == 0:  # repeat: fmod(u, 1) = u − trunc(u), exact
+                    u = u - np.trunc(u)
+                    v = v - np.trunc(v)
+                else:  # extend, clip: a whole image outside is the edge or the border
+                    u = min(max(u, -1.0), 2.0)
+                    v = min(max(v, -1.0), 2.0)
                 x = u * w
                 y = v * h
                 texel = np.zeros(4)
