@@ -53,6 +53,7 @@ import numpy as np
 __all__ = [
     "ALPHAS",
     "COLORSPACES",
+    "DTYPES",
     "EXTENSIONS",
     "INTERPOLATIONS",
     "UV_LIMIT",
@@ -65,6 +66,8 @@ INTERPOLATIONS: tuple[str, ...] = ("closest", "linear")
 EXTENSIONS: tuple[str, ...] = ("repeat", "extend", "clip")
 COLORSPACES: tuple[str, ...] = ("linear", "Linear Rec.709", "Non-Color", "sRGB")
 ALPHAS: tuple[str, ...] = ("premultiplied", "straight")
+#: The accepted texel dtypes (half-float images, e.g. from EXR files, included).
+DTYPES: tuple[np.dtype, ...] = (np.dtype(np.float16), np.dtype(np.float32), np.dtype(np.float64))
 #: ``2^53``: from here on every float64 is an even integer, so ``u mod 1 = 0`` and every
 #: clamped extension is decided; the texture stage clamps interpolated coordinates to
 #: ``±UV_LIMIT`` (only an interpolation overflowing to ±inf near the float64 maximum changes).
@@ -93,7 +96,8 @@ class Texture:
     """An image texture sampled by ``(u, v)`` texture coordinates (see the module docstring).
 
     Attributes:
-        image: (H, W, 4) or (H, W, 3) real image, row 0 at the top (3 channels: alpha 1).
+        image: (H, W, 4) or (H, W, 3) float16, float32 or float64 image, row 0 at the top
+            (3 channels: alpha 1).
             After construction: the (H, W, 4) float32 linear premultiplied RGBA.
         interpolation: ``"closest"`` (GL_NEAREST) or ``"linear"`` (GL_LINEAR).
         extension: ``"repeat"`` (GL_REPEAT), ``"extend"`` (GL_CLAMP_TO_EDGE) or ``"clip"``
@@ -126,10 +130,10 @@ class Texture:
             if getattr(self, name) not in allowed:
                 raise ValueError(f"Texture.{name}: expected one of {allowed}, got {getattr(self, name)!r}")
         arr = np.asarray(self.image)
-        if arr.dtype.kind != "f":
+        if arr.dtype not in DTYPES:
             raise TypeError(
-                f"Texture.image: expected a float32/float64 array (linear values, not bytes: divide "
-                f"8-bit data by 255), got dtype {arr.dtype}"
+                "Texture.image: expected a float16, float32 or float64 array (linear values, not "
+                f"bytes: divide 8-bit data by 255), got dtype {arr.dtype}"
             )
         if arr.ndim != 3 or arr.shape[2] not in (3, 4) or arr.shape[0] < 1 or arr.shape[1] < 1:
             raise ValueError(

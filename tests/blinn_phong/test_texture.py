@@ -102,6 +102,21 @@ def test_bad_texture_arguments_are_named(kwargs: dict, error: type, match: str) 
         Texture(**args)
 
 
+def test_accepted_texel_dtypes_are_the_ones_the_message_names() -> None:
+    # float16 (half-float EXR data) is accepted and converted exactly (every float16 is a float32).
+    half = IMAGE.astype(np.float16)
+    np.testing.assert_array_equal(Texture(half).image, half.astype(np.float32))
+    with pytest.raises(TypeError) as refused:
+        Texture(np.zeros((2, 2, 4), np.uint8))
+    named = str(refused.value)
+    for dtype in (np.float16, np.float32, np.float64):
+        assert np.dtype(dtype).name in named, named  # the message lists every accepted dtype
+        Texture(IMAGE.astype(dtype))
+    if np.dtype(np.longdouble) != np.float64:  # extended precision: a float dtype not accepted
+        with pytest.raises(TypeError, match=r"float16, float32 or float64 .*got dtype float128"):
+            Texture(IMAGE.astype(np.longdouble))
+
+
 def test_material_and_mesh_validation() -> None:
     with pytest.raises(TypeError, match=r"Material\.base_color_texture"):
         bp.Material(base_color_texture=IMAGE)
