@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import weakref
 
 import numpy as np
 
@@ -122,26 +123,7 @@ def _texture_compiled(
     separate: bool,
 ) -> FragmentShading:
     """The compiled twin of the reference loop of :func:`texture_fragments`."""
-    textures: list = []
-    tex_of_side = np.full(len(materials), -1, np.int64)
-    clip_of_side = np.full(len(materials), -1.0)
-    kg_of_side = np.array([m.kay_greenberg is not None for m in materials], dtype=np.bool_)
-    for s, m in enumerate(materials):
-        if m.base_color_texture is not None:
-            if m.base_color_texture not in textures:
-                textures.append(m.base_color_texture)
-            tex_of_side[s] = textures.index(m.base_color_texture)
-        if m.alpha_clip is not None:
-            clip_of_side[s] = m.alpha_clip
-    sizes = [t.image.size for t in textures]
-    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    pixels = np.concatenate([t.image.ravel() for t in textures]) if textures else np.zeros(4, np.float32)
-    shape = np.array([[t.width, t.height] for t in textures] or [[1, 1]], np.int64)
-    modes = np.array(
-        [[INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension)] for t in textures]
-        or [[0, 0]],
-        np.int64,
-    )
+    tex_of_side, clip_of_side, kg_of_side, pixels, offsets, shape, modes = _packed(prepared, materials)
     mode = 0 if not gl_compat else (1 if separate else 2)
     rgb, ambient, diffuse, alpha = _kernel()(
         fragments.triangle,
@@ -167,6 +149,51 @@ def _texture_compiled(
     return dataclasses.replace(shaded, rgb=rgb, ambient=ambient, diffuse=diffuse, alpha=alpha)
 
 
+#: The textures of a prepared scene packed for the kernel, kept while the scene lives (the
+#: frame calls the texture stage once per band of rows: the packing is done once).
+_PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _packed(prepared: PreparedScene, materials: list) -> tuple[np.ndarray, ...]:
+    """Per side: texture index, alpha clip, Kay–Greenberg flag; all texels, offsets, sizes, modes.
+
+    One texture's texels are its stored image itself (no copy); several are concatenated once
+    per prepared scene.
+    """
+    cached = _PACKED.get(prepared)
+    if cached is not None:
+        return cached
+    textures: list = []
+    tex_of_side = np.full(len(materials), -1, np.int64)
+    clip_of_side = np.full(len(materials), -1.0)
+    kg_of_side = np.array([m.kay_greenberg is not None for m in materials], dtype=np.bool_)
+    for s, m in enumerate(materials):
+        if m.base_color_texture is not None:
+            if m.base_color_texture not in textures:
+                textures.append(m.base_color_texture)
+            tex_of_side[s] = textures.index(m.base_color_texture)
+        if m.alpha_clip is not None:
+            clip_of_side[s] = m.alpha_clip
+    sizes = [t.image.size for t in textures]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    if len(textures) == 1:  # the stored (C-contiguous) image itself
+        pixels = textures[0].image.reshape(-1)
+    else:
+        pixels = np.concatenate([t.image.ravel() for t in textures]) if textures else np.zeros(4, np.float32)
+    shape = np.array([[t.width, t.height] for t in textures] or [[1, 1]], np.int64)
+    modes = np.array(
+        [[INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension)] for t in textures]
+        or [[0, 0]],
+        np.int64,
+    )
+    packed = (tex_of_side, clip_of_side, kg_of_side, pixels, offsets, shape, modes)
+    _PACKED[prepared] = packed
+    return packed
+
+
+_fetch = None  # the compiled texel fetch, set by _kernel()
+
+
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
     import numba
@@ -183,6 +210,11 @@ def _kernel() -> object:  # a numba dispatcher
         base = offset + ((h - 1 - j) * w + i) * 4
         for c in range(4):
             out[c] += weight * np.float64(pixels[base + c])
+
+    # A module global, not a closure variable: numba's disk-cache key hashes closure variables,
+    # and a compiled function in one changes it in every process (the kernel was never cached).
+    global _fetch
+    _fetch = fetch
 
     @numba.njit(parallel=True, cache=True)
     def run(
@@ -236,17 +268,17 @@ def _kernel() -> object:  # a numba dispatcher
                 y = v * h
                 texel = np.zeros(4)
                 if modes[k, 0] == 0:  # closest
-                    fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
+                    _fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
                 else:
                     x -= 0.5
                     y -= 0.5
                     fx, fy = np.floor(x), np.floor(y)
                     a, b = x - fx, y - fy
                     i0, j0 = int(fx), int(fy)
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
                     texel[3] = min(max(texel[3], 0.0), 1.0)
                 ta = texel[3]
                 for c in range(3):
