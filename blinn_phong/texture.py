@@ -38,6 +38,14 @@ Extension (wrap) of texel indices outside the image:
   result is the same and texel indices stay small integers for any finite coordinate
   (``1e300`` included; an unclamped ``floor(u·W)`` overflows int64 above ``2^63/W``).
 
+Alpha: with ``use_alpha=True`` (the default) a lookup returns the filtered premultiplied
+RGBA. With ``use_alpha=False`` the texture is an RGB texture (OpenGL's base internal format
+``RGB``: the texture contributes no alpha, §3.8.13 table 3.22, and the border colour's alpha
+is dropped): a lookup returns the filtered **premultiplied** RGB with alpha 1, so a
+transparent texel, and in ``"clip"`` the outside of the image, is opaque black. This is
+Blender's Image Texture node when only its Color output is used: Cycles gives the Color
+output associated (premultiplied) unless the Alpha output is linked.
+
 Colour spaces of the input image: ``"linear"`` (alias ``"Linear Rec.709"``) and
 ``"Non-Color"`` are used as given; ``"sRGB"`` is decoded with the exact sRGB EOTF of
 IEC 61966-2-1:1999 (:func:`srgb_to_linear`) before filtering, as OpenGL does for sRGB
@@ -173,6 +181,10 @@ class Texture:
             project's convention) or ``"straight"``. sRGB encoding applies to the straight
             colour, so a premultiplied sRGB image is un-premultiplied, decoded and
             premultiplied again.
+        use_alpha: True: lookups return the filtered RGBA (the texel alpha modulates the
+            opacity). False: an RGB texture — lookups return the filtered premultiplied RGB
+            and alpha 1 (transparent texels and the outside of a ``"clip"`` texture are opaque
+            black; Blender's Image Texture with only its Color output used).
 
     Raises ValueError/TypeError naming the field for a wrong shape, dtype, non-finite value,
     alpha outside [0, 1], negative colour, sRGB values outside [0, 1], an unknown option, or a
@@ -184,6 +196,7 @@ class Texture:
     extension: str = "repeat"
     colorspace: str = "linear"
     alpha: str = "premultiplied"
+    use_alpha: bool = True
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -194,6 +207,9 @@ class Texture:
         ):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"Texture.{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+        if not isinstance(self.use_alpha, bool | np.bool_):
+            raise TypeError(f"Texture.use_alpha: expected True or False, got {self.use_alpha!r}")
+        object.__setattr__(self, "use_alpha", bool(self.use_alpha))
         arr = np.asarray(self.image)
         if arr.dtype not in DTYPES:
             raise TypeError(
@@ -271,7 +287,9 @@ class Texture:
 
     @property
     def min_alpha(self) -> float:
-        """The smallest alpha any lookup can return (0 with ``extension="clip"``)."""
+        """The smallest alpha any lookup can return (0 with ``extension="clip"``; 1 without alpha)."""
+        if not self.use_alpha:
+            return 1.0
         if self.extension == "clip":
             return 0.0
         return float(self.image[..., 3].min())
@@ -311,7 +329,7 @@ class Texture:
 
         ``u`` left → right, ``v`` bottom → top (module docstring); filtering and wrapping as
         ``interpolation`` and ``extension`` say (OpenGL 2.1 §3.8.7–3.8.8); any finite
-        coordinate is valid.
+        coordinate is valid. With ``use_alpha=False`` the alpha returned is 1.
         """
         coords = np.asarray(uv, dtype=np.float64)
         if coords.ndim != 2 or coords.shape[1] != 2:
@@ -335,4 +353,6 @@ class Texture:
             )
             # A convex blend of alphas in [0, 1]: only rounding (an ulp) can leave [0, 1].
             np.clip(out[:, 3], 0.0, 1.0, out=out[:, 3])
+        if not self.use_alpha:
+            out[:, 3] = 1.0
         return out

@@ -9,7 +9,9 @@ fragment of a material with a ``base_color_texture`` (:class:`blinn_phong.textur
 * ``uv`` is the mesh's per-vertex ``uv`` interpolated with the rasterizer's
   perspective-correct barycentrics (:func:`blinn_phong.raster.interpolate`; OpenGL 2.1 §3.5.1
   eq. 3.9), and ``T`` the filtered texel there (premultiplied), of straight colour ``t``
-  and alpha ``a``;
+  and alpha ``a`` (a texture with ``use_alpha=False`` is an RGB texture: ``a = 1`` and ``t``
+  the filtered premultiplied colour, so its texels never change the opacity — GL's
+  ``GL_MODULATE`` on an ``RGB`` texture, table 3.22: ``A = Af``);
 * the colour is OpenGL's ``GL_MODULATE`` (2.1 §3.8.13, table 3.22: ``C = Cf·Ct``,
   ``A = Af·At``) applied before the colour sum (§3.9), i.e. with
   ``GL_SEPARATE_SPECULAR_COLOR`` the specular term is added after texturing:
@@ -182,8 +184,11 @@ def _packed(prepared: PreparedScene, materials: list) -> tuple[np.ndarray, ...]:
         pixels = np.concatenate([t.image.ravel() for t in textures]) if textures else np.zeros(4, np.float32)
     shape = np.array([[t.width, t.height] for t in textures] or [[1, 1]], np.int64)
     modes = np.array(
-        [[INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension)] for t in textures]
-        or [[0, 0]],
+        [
+            [INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension), int(t.use_alpha)]
+            for t in textures
+        ]
+        or [[0, 0, 1]],
         np.int64,
     )
     packed = (tex_of_side, clip_of_side, kg_of_side, pixels, offsets, shape, modes)
@@ -280,6 +285,8 @@ def _kernel() -> object:  # a numba dispatcher
                     _fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
                     _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
                     texel[3] = min(max(texel[3], 0.0), 1.0)
+                if modes[k, 2] == 0:  # use_alpha=False: an RGB texture, alpha 1
+                    texel[3] = 1.0
                 ta = texel[3]
                 for c in range(3):
                     colour = texel[c] / ta if ta > 0.0 else 0.0

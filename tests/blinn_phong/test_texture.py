@@ -94,6 +94,7 @@ def test_straight_and_srgb_inputs_become_linear_premultiplied() -> None:
         ({"image": np.full((1, 1, 4), 2.0)}, ValueError, "alpha in"),
         ({"image": np.full((1, 1, 4), np.nan)}, ValueError, "finite"),
         ({"image": np.full((1, 1, 3), 1.5), "colorspace": "sRGB"}, ValueError, "sRGB"),
+        ({"use_alpha": "no"}, TypeError, "Texture.use_alpha"),
     ],
 )
 def test_bad_texture_arguments_are_named(kwargs: dict, error: type, match: str) -> None:
@@ -270,7 +271,7 @@ def test_compiled_texture_stage_equals_the_reference(gl_compat: bool, separate: 
             specular=(0.4, 0.4, 0.4),
             shininess=10.0,
             emission=(0.3, 0.1, 0.0),
-            base_color_texture=Texture(img, interpolation=interp, extension=ext),
+            base_color_texture=Texture(img, interpolation=interp, extension=ext, use_alpha=k % 3 != 2),
             alpha_clip=0.3 if k % 2 else None,
         )
         shift = np.eye(4)
