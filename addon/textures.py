@@ -212,6 +212,7 @@ def textured_material(
     blender_material: bpy.types.Material | None,
     notes: list[str],
     uvs: dict[str, np.ndarray],
+    cache: dict | None = None,
 ) -> tuple[Material, np.ndarray | None]:
     """``material`` with the Image Texture of ``blender_material``'s Principled BSDF, and the UVs.
 
@@ -220,6 +221,8 @@ def textured_material(
         blender_material: its Blender material.
         notes: conversion notes, appended to (and stale "linked" notes removed).
         uvs: :func:`mesh_uvs` of the mesh.
+        cache: textures converted so far in this conversion (filled here): an image used by
+            several objects with the same settings becomes one :class:`Texture`, not one each.
 
     Returns ``(material, uv)``: unchanged and None when no Image Texture feeds the Principled
     BSDF, or when the mesh lacks the UV layer (with a note).
@@ -239,7 +242,16 @@ def textured_material(
             f"{blender_material.name}: the mesh has no UV layer {layer or '(active)'!r}; texture ignored"
         )
         return material, None
-    texture = texture_from_node(node, base, alpha, notes)
+    key = (node.image.as_pointer(), node.interpolation, node.extension, base, alpha)
+    if cache is not None and key in cache:
+        texture, texture_notes = cache[key]
+        notes.extend(texture_notes)
+    else:
+        texture_notes = []
+        texture = texture_from_node(node, base, alpha, texture_notes)
+        notes.extend(texture_notes)
+        if cache is not None:
+            cache[key] = (texture, texture_notes)
     changes: dict[str, object] = {"base_color_texture": texture}
     settings = getattr(blender_material, "blinn_phong", None)
     if base and (settings is None or settings.source != "CUSTOM"):
