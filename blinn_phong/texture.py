@@ -65,7 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong._checks import _bytes_text, physical_memory
+from blinn_phong._checks import _bytes_text, choice_error, physical_memory
 
 __all__ = [
     "ALPHAS",
@@ -83,6 +83,21 @@ __all__ = [
     "straight_colour",
     "texture_bytes",
 ]
+
+#: OpenGL's and other tools' names for the interpolation and extension modes (for error hints).
+_ALIASES = {
+    "nearest": "closest",
+    "gl_nearest": "closest",
+    "bilinear": "linear",
+    "gl_linear": "linear",
+    "clamp": "extend",
+    "clamp_to_edge": "extend",
+    "gl_clamp_to_edge": "extend",
+    "clamp_to_border": "clip",
+    "gl_clamp_to_border": "clip",
+    "gl_repeat": "repeat",
+    "wrap": "repeat",
+}
 
 INTERPOLATIONS: tuple[str, ...] = ("closest", "linear")
 EXTENSIONS: tuple[str, ...] = ("repeat", "extend", "clip")
@@ -206,7 +221,7 @@ class Texture:
             ("alpha", ALPHAS),
         ):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"Texture.{name}: expected one of {allowed}, got {getattr(self, name)!r}")
+                raise choice_error(f"Texture.{name}", getattr(self, name), allowed, aliases=_ALIASES)
         if not isinstance(self.use_alpha, bool | np.bool_):
             raise TypeError(f"Texture.use_alpha: expected True or False, got {self.use_alpha!r}")
         object.__setattr__(self, "use_alpha", bool(self.use_alpha))
