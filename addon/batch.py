@@ -18,21 +18,32 @@ With ``--background`` each frame is composited over an image or colour with any 
 ``compositing`` (``<output>_<operator>.exr`` linear and ``.png`` preview, next to the render);
 ``--verify`` runs the same composite through Blender's compositor (``addon.verify``) and compares.
 
-Every input is checked before the first render: files, frame ranges, operator, numbers, and the
-background's size against each file's render size. Every file is written to a temporary name in its
-directory and renamed over the target, so a failed or killed task never leaves a truncated file.
-``--skip-existing`` (Blender's Overwrite off, also taken from the file) renders only frames whose
-outputs are missing; ``--placeholders`` (Blender's Placeholders) marks frames in progress with an
-empty file. ``OUT/report.json`` lists every task, every file written, skipped frames, retries and
-warnings.
+Every input is checked before the first render: files, frame ranges (Blender's ±1,048,574),
+operator, numbers, the scheduler's address, every output folder (writable), and the background's
+size against each file's render size. Every file is written to a temporary name in its directory
+(carrying the job's id), read back whole (every part decoded, the render's size) and only then
+renamed over the target: a failed write — also one Blender only logs, such as a full disk — fails
+the task and keeps the previous file, and a killed task never leaves a truncated file. A job removes
+only its own temporary files, so jobs may share an output folder. ``--skip-existing`` (Blender's
+Overwrite off, also taken from the file) renders only frames whose outputs are not whole images;
+``--placeholders`` (Blender's Placeholders) marks frames in progress with an empty file. Each job
+writes its record to ``OUT/reports/<time>-<job>.json`` and to ``OUT/report.json`` (the last job to
+end): every task, every file written, files outside ``--out``, skipped frames, retries, warnings.
+
+Once the job has returned, no file it could write changes: every write holds a permit in the job's
+folder ``OUT/.batch-<job>``, which the job renames (so no permit can be taken) and empties at its
+end, after the writes under way have finished (see :func:`write_permit`).
 
 Parallelism: ``--workers N`` runs tasks in N worker processes, each with its own ``bpy``. A worker
 that dies (or exceeds ``--timeout``) is replaced by a fresh process and only its own task is
 retried, at most ``--retries`` times; healthy tasks are untouched and every attempt is in the
 report. ``--scheduler tcp://host:8786`` sends the tasks to a Dask distributed cluster whose workers
 have this repository and ``bpy`` installed and share the output storage (see ``docs/addon.md``);
-Dask reschedules the task of a lost worker itself. ``--dask-local N`` starts a Dask cluster of N
-workers on loopback. Under ``blender -P`` tasks run in the Blender process itself.
+it must answer within ``--connect-timeout`` seconds. Dask reschedules the task of a lost worker
+itself, as often as the scheduler's ``allowed-failures`` setting says (``--retries`` is refused with
+``--scheduler``); each result is released as soon as it arrives, so a worker lost later never makes
+the cluster render a finished frame again. ``--dask-local N`` starts a Dask cluster of N workers
+on loopback. Under ``blender -P`` tasks run in the Blender process itself.
 
 Exit codes (the same for ``python -m addon.verify``): 0 every task rendered and every verification
 stayed within ``--tolerance``; 1 a task or a check failed, or the job was interrupted (SIGINT,
@@ -395,6 +406,11 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 # under the outputs changes once the job has returned.
 
 
+_PERMITS_BY_HANDLE = hasattr(os, "O_DIRECTORY") and all(
+    f in os.supports_dir_fd for f in (os.open, os.utime, os.unlink)
+)
+
+
 def _job_dir_closed(directory: str | os.PathLike) -> Path:
     """Where a job's folder goes when the job ends."""
     return Path(f"{os.fspath(directory)}.closed")
@@ -412,23 +428,36 @@ def write_permit(task: Task) -> Iterator[None]:
         yield
         return
     closed = f"the job has ended; {task.stem} writes nothing"
+    # Through a handle on the folder where the system allows (POSIX): the permit then follows the
+    # folder when the job renames it, and the job sees it there.
+    dir_fd: int | None = None
     try:
-        dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+        if _PERMITS_BY_HANDLE:
+            dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+            reference = os.fstat(dir_fd)
+        else:
+            reference = os.stat(directory)
     except OSError:
         raise JobClosed(closed) from None
+    where = {"dir_fd": dir_fd} if dir_fd is not None else {}
     name = f"write.{uuid.uuid4().hex}"
+    if dir_fd is None:
+        name = os.path.join(directory, name)
     stop = threading.Event()
     beat: threading.Thread | None = None
     created = False
     try:
-        fd = os.open(name, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644, dir_fd=dir_fd)
+        try:
+            fd = os.open(name, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644, **where)
+        except FileNotFoundError:
+            raise JobClosed(closed) from None
         created = True
         try:
             os.write(fd, json.dumps({"host": socket.gethostname(), "pid": os.getpid()}).encode())
         finally:
             os.close(fd)
         try:  # the folder may have been renamed between opening it and creating the permit
-            still_open = os.path.samestat(os.stat(directory), os.fstat(dir_fd))
+            still_open = os.path.samestat(os.stat(directory), reference)
         except OSError:
             still_open = False
         if not still_open:
@@ -437,7 +466,7 @@ def write_permit(task: Task) -> Iterator[None]:
         def heartbeat() -> None:
             while not stop.wait(1.0):
                 with contextlib.suppress(OSError):
-                    os.utime(name, dir_fd=dir_fd)
+                    os.utime(name, **where)
 
         beat = threading.Thread(target=heartbeat, name="batch-permit", daemon=True)
         beat.start()
@@ -448,8 +477,9 @@ def write_permit(task: Task) -> Iterator[None]:
             beat.join()
         if created:
             with contextlib.suppress(OSError):
-                os.unlink(name, dir_fd=dir_fd)
-        os.close(dir_fd)
+                os.unlink(name, **where)
+        if dir_fd is not None:
+            os.close(dir_fd)
 
 
 def _pid_alive(pid: int) -> bool:
@@ -1621,6 +1651,7 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
     attempt_dir = str(out_dir / f".batch-{job}")
     outside_out: list[str] = []
     checked_dirs: dict[Path, str | None] = {}
+    planned: list[tuple[Task, tuple[int, int] | None]] = []  # each task, and its size if it may be skipped
     # An opaque source decides the result of these operators: the composite equals the render.
     opaque = np.array([[[0.25, 0.5, 0.75, 1.0]]], np.float32)
     probe_bg = np.array([[[0.1, 0.7, 0.3, 0.6]]], np.float32)
@@ -1707,17 +1738,7 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
                         problems.append(str(error))
                 if not Path(target).is_relative_to(out_dir):
                     outside_out.append(target)
-            if skip:
-                missing = _incomplete(task.outputs(), size)
-                if not missing:
-                    skipped.append({"blend": str(path), "frame": frame, "outputs": task.outputs()})
-                    continue
-                for target, why in missing:
-                    if why:  # a file is there but is not a whole image: rendered again
-                        warnings.append(
-                            f"{target} is not a whole image ({why}); rendering frame {frame} again"
-                        )
-            tasks.append(task)
+            planned.append((task, size if skip else None))
     if any("both write" in p for p in problems):
         problems.append(
             "give each file its own output path (render.filepath in the file, or --output-pattern "
@@ -1725,6 +1746,24 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
         )
     if problems:
         raise UsageError("\n  ".join(problems))
+    # --skip-existing: decode the outputs that exist (in threads: OpenImageIO decodes without the GIL).
+    from concurrent.futures import ThreadPoolExecutor
+
+    checks = [(task.outputs(), size) for task, size in planned if size is not None]
+    with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
+        verdicts = iter(list(pool.map(lambda check: _incomplete(*check), checks)))
+    for task, size in planned:
+        if size is not None:
+            missing = next(verdicts)
+            if not missing:
+                skipped.append({"blend": task.blend, "frame": task.frame, "outputs": task.outputs()})
+                continue
+            for target, why in missing:
+                if why:  # a file is there but is not a whole image: rendered again
+                    warnings.append(
+                        f"{target} is not a whole image ({why}); rendering frame {task.frame} again"
+                    )
+        tasks.append(task)
     if args.output_pattern is not None and outside_out:
         warnings.append(
             f"--output-pattern {args.output_pattern!r} writes {len(outside_out)} file(s) outside --out "
