@@ -91,6 +91,7 @@ __all__ = [
     "main",
     "parse_frames",
     "read_back",
+    "readable",
     "run_task",
     "run_tasks",
     "write_permit",
@@ -344,7 +345,19 @@ def atomic_target(
 _TGA_FOOTER = b"TRUEVISION-XFILE.\x00"
 
 
-def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> None:
+def readable(path: str | os.PathLike) -> bool:
+    """Whether OpenImageIO has a reader for the file's extension (e.g. no JPEG 2000 in some builds)."""
+    import OpenImageIO as oiio  # noqa: N813
+
+    extensions = {
+        ext
+        for entry in oiio.get_string_attribute("extension_list").split(";")
+        for ext in entry.partition(":")[2].split(",")
+    }
+    return Path(path).suffix.lower().lstrip(".") in extensions
+
+
+def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> bool:
     """Decode every pixel of every part of an image file; raise when it is not a whole image.
 
     What proves a file whole: OpenImageIO opens it, every part (subimage: a multilayer EXR has one
@@ -352,12 +365,18 @@ def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> N
     JPEG decodes with an error message, which counts as failing — each part is ``size``
     (width, height) when given, and a TGA still ends with its footer.
 
+    Returns:
+        True when the file was checked; False (nothing checked) when OpenImageIO has no reader for
+        its format (see :func:`readable`).
+
     Raises:
         OSError: naming the file and what is wrong with it.
     """
     import OpenImageIO as oiio  # noqa: N813
 
     path = Path(path)
+    if not readable(path):
+        return False
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise OSError(f"{path}: not a readable image ({oiio.geterror().strip() or 'unknown format'})")
@@ -385,6 +404,7 @@ def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> N
             handle.seek(max(0, path.stat().st_size - len(_TGA_FOOTER)))
             if handle.read() != _TGA_FOOTER:
                 raise OSError(f"{path}: cut off (no TGA footer)")
+    return True
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -729,6 +749,11 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         except OSError as error:
             raise OSError(f"writing {output} failed, the previous file is kept: {error}") from None
         result["seconds"]["write"] = time.perf_counter() - t
+        if not readable(output):
+            result["warnings"].append(
+                f"{output.suffix} files cannot be read back here (OpenImageIO has no reader for them): "
+                "written without the check that the write succeeded"
+            )
         placeholder = None
         result["outputs"]["render"] = str(output)
         result["written"].append(str(output))

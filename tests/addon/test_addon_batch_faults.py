@@ -36,6 +36,7 @@ from addon.batch import (
     main,
     parse_frames,
     read_back,
+    readable,
     write_permit,
 )
 
@@ -221,6 +222,35 @@ def test_read_back_refuses_cut_off_images_of_every_batch_format(tmp_path: Path) 
             path.write_bytes(whole[: int(len(whole) * keep)])
             with pytest.raises(OSError, match=str(path)):
                 read_back(path)
+
+
+@pytest.mark.blender
+@pytest.mark.timeout(120)
+def test_a_format_openimageio_cannot_read_is_written_with_a_warning(
+    blends: tuple[Path, Path], tmp_path: Path
+) -> None:
+    small, _ = blends
+    jp2 = tmp_path / "ball_jp2.blend"  # the file's own format: JPEG 2000
+    run_bpy(
+        """
+import sys
+import bpy
+from addon import compat
+bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+compat.set_image_format(bpy.context.scene.render.image_settings, "JPEG2000", None)
+bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+emit(True)
+""",
+        tmp_path,
+        args=(str(small), str(jp2)),
+    )
+    out = tmp_path / "out"
+    done = _batch(str(jp2), "--frames", "1", "--out", str(out))
+    assert done.returncode == 0, done.stdout + done.stderr
+    written = _report(out)["written"]
+    assert [Path(p).suffix for p in written] == [".jp2"] and Path(written[0]).stat().st_size > 0
+    unchecked = [w for w in _report(out)["warnings"] if "cannot be read back here" in w]
+    assert len(unchecked) == (0 if readable(written[0]) else 1), _report(out)["warnings"]
 
 
 # --------------------------------------------------------------------------- two jobs, one --out
