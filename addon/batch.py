@@ -121,8 +121,8 @@ MAX_PIXELS = 1 << 26
 #: any frame outside it, so a file named after such a frame would hold another frame's image.
 MIN_FRAME, MAX_FRAME = -1_048_574, 1_048_574
 
-#: Seconds without a heartbeat after which a write permit belongs to a lost process (see
-#: :func:`write_permit`); and the longest wait at the end of a job for writes still in progress.
+#: Seconds without a heartbeat (measured by the job) after which a write permit belongs to a lost
+#: process (see :func:`write_permit`); and the longest wait at the end of a job for writes under way.
 PERMIT_STALE_S = 5.0
 CLOSE_WAIT_S = 60.0
 
@@ -512,18 +512,34 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _permit_live(permit: Path, now: float) -> bool:
-    """A permit whose holder still runs: refreshed within PERMIT_STALE_S, its process alive (this host)."""
-    try:
-        age = now - permit.stat().st_mtime
-        holder = json.loads(permit.read_text() or "{}")
-    except (OSError, ValueError):
-        return permit.exists()
-    if age > PERMIT_STALE_S:
-        return False
-    if holder.get("host") == socket.gethostname() and isinstance(holder.get("pid"), int):
-        return _pid_alive(holder["pid"])
-    return True
+class _Permits:
+    """The permits in a closed job folder, watched for signs of life.
+
+    A permit is live while its holder refreshes it: its modification time changes (every second)
+    within ``PERMIT_STALE_S`` seconds of this process's clock — measured here, so a cluster node's
+    clock being off does not matter. A permit of a process on this host that is gone is dead at once.
+    """
+
+    def __init__(self) -> None:
+        self.seen: dict[str, tuple[int, float]] = {}
+
+    def live(self, permit: Path) -> bool:
+        try:
+            mtime = permit.stat().st_mtime_ns
+            holder = json.loads(permit.read_text() or "{}")
+        except FileNotFoundError:
+            return False
+        except (OSError, ValueError):
+            return True  # being written
+        if holder.get("host") == socket.gethostname() and isinstance(holder.get("pid"), int):
+            if not _pid_alive(holder["pid"]):
+                return False
+        now = time.monotonic()
+        previous = self.seen.get(permit.name)
+        if previous is None or previous[0] != mtime:
+            self.seen[permit.name] = (mtime, now)
+            return True
+        return now - previous[1] <= PERMIT_STALE_S
 
 
 def close_job(directory: str | os.PathLike, wait: float = CLOSE_WAIT_S) -> tuple[Path | None, list[str]]:
@@ -538,16 +554,19 @@ def close_job(directory: str | os.PathLike, wait: float = CLOSE_WAIT_S) -> tuple
     except FileNotFoundError:
         return None, []
     deadline = time.monotonic() + wait
+    permits = _Permits()
     while True:
-        live = [p for p in closed.glob("write.*") if _permit_live(p, time.time())]
+        live = [p for p in closed.glob("write.*") if permits.live(p)]
         if not live or time.monotonic() >= deadline:
             break
         time.sleep(0.05)
-    warnings = [
-        f"a write was still under way when the job ended ({p.read_text(errors='replace')}): its "
-        "temporary file may be left next to its output"
-        for p in live
-    ]
+    warnings = []
+    for permit in live:
+        with contextlib.suppress(OSError):
+            warnings.append(
+                f"a write was still under way when the job ended ({permit.read_text(errors='replace')}): "
+                "its temporary file may be left next to its output"
+            )
     return closed, warnings
 
 

@@ -603,3 +603,20 @@ emit(paths)
         assert pattern == f"//render/{name}/####", (blend, pattern)
         assert Path(frame).parent == REPO / "blend_files" / "render" / name, frame
     assert len({frame for _, frame in facts.values()}) == len(facts) == 5
+
+
+def test_a_lost_writer_on_another_node_holds_the_job_up_only_briefly(tmp_path: Path) -> None:
+    from addon.batch import PERMIT_STALE_S
+
+    task = _task(tmp_path)
+    # What a node that died mid-write leaves: its permit, never refreshed again, stamped by a clock
+    # an hour ahead of this one (the job judges by its own clock whether the permit still changes).
+    permit = Path(task.attempt_dir) / "write.lost"
+    permit.write_text(json.dumps({"host": "render-node-7.invalid", "pid": 4242}))
+    ahead = time.time() + 3600
+    os.utime(permit, (ahead, ahead))
+    started = time.monotonic()
+    closed, _ = close_job(task.attempt_dir, wait=60)
+    seconds = time.monotonic() - started
+    assert PERMIT_STALE_S <= seconds < PERMIT_STALE_S + 5, seconds
+    assert closed is not None and (closed / "write.lost").exists()
