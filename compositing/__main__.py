@@ -22,6 +22,9 @@ valid names and the closest match).
 from __future__ import annotations
 
 import argparse
+import difflib
+import itertools
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -94,6 +97,44 @@ def _blend_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Argument names in the library's messages and the command-line flags that set them.
+_FLAG_OF = {
+    "factor": "--factor",
+    "op": "OP (or --operator)",
+    "src_factor": "--src-factor",
+    "dst_factor": "--dst-factor",
+    "src_factor_alpha": "--src-factor-alpha",
+    "dst_factor_alpha": "--dst-factor-alpha",
+    "equation": "--equation",
+    "equation_alpha": "--equation-alpha",
+    "target": "--target",
+    "bits": "--bits",
+}
+
+
+def _cli_message(text: str, out: Path | None = None) -> str:
+    """A library message in the command line's words: flags (``--clip``) instead of keywords (``clip=True``).
+
+    The leading argument name (``factor: ...``) becomes its flag; ``clip:``/``flatten:``/``rgba:``
+    (about the result) become ``--out PATH:``; a misspelled GL name gets the closest valid one.
+    """
+    text = text.replace("pass clip=True", "give --clip").replace("pass flatten=True", "give --flatten")
+    name, sep, rest = text.partition(": ")
+    if sep and name in _FLAG_OF:
+        text = f"{_FLAG_OF[name]}: {rest}"
+        if name.startswith(("src_factor", "dst_factor", "equation")):
+            from .gl_blend import GL_BLEND_EQUATIONS, GL_BLEND_FACTORS
+
+            names = GL_BLEND_EQUATIONS if name.startswith("equation") else GL_BLEND_FACTORS
+            match = re.search(r"unknown blend (?:factor|equation) '([^']*)'", rest)
+            close = difflib.get_close_matches(match[1].upper(), list(names), n=1) if match else []
+            if close:
+                text += f" (did you mean {close[0]}?)"
+    elif sep and name in ("clip", "flatten", "rgba") and out is not None:
+        text = f"--out {out}: {rest}"
+    return text
+
+
 def _list() -> None:
     for name, spec in ALL_OPERATORS.items():
         print(f"{name:<18} Fa = {describe(spec.fa_expr)}")
@@ -123,7 +164,7 @@ def _blend(argv: list[str]) -> None:
         )
     except ValueError as exc:
         if "blend factor" in str(exc) or "equation" in str(exc) or "target" in str(exc):
-            parser.error(str(exc))
+            parser.error(_cli_message(str(exc)))
         raise
     _write(args, result)
 
@@ -148,7 +189,7 @@ def _composite(argv: list[str]) -> None:
     try:
         spec = resolve_operator(op)
     except ValueError as exc:
-        parser.error(str(exc))
+        parser.error(_cli_message(str(exc)))
     src, dst = (Path(p) for p in images)
     result = composite(read_image(src), read_image(dst), spec, factor=args.factor)
     _write(args, result)
@@ -168,7 +209,8 @@ def main(argv: list[str] | None = None) -> int:
                 _composite(argv)
         except (ValueError, TypeError, OSError) as exc:
             status = 1
-            print(f"error: {exc}", file=sys.stderr)
+            out = next((Path(a) for flag, a in itertools.pairwise(argv) if flag in ("-o", "--out")), None)
+            print(f"error: {_cli_message(str(exc), out)}", file=sys.stderr)
         else:
             status = 0
         finally:
