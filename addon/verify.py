@@ -59,12 +59,14 @@ __all__ = [
     "Verification",
     "ours",
     "read_exr_layers",
+    "relative_bound",
     "run_blender",
     "run_compositor_job",
     "sample_images",
     "standard_cases",
     "verify",
     "verify_cases",
+    "within_bound",
     "write_exr",
 ]
 
@@ -427,6 +429,31 @@ def standard_cases(alpha_over_operators: Sequence[str] = ALPHA_OVER_OPERATORS) -
     return cases
 
 
+def relative_bound(case: Case, blender_version: str) -> bool:
+    """True where ``case`` is held to 1 ulp relative rather than to an absolute tolerance.
+
+    Blender before 4.4 (the CPU compositor's ``COM_*Operation`` code; 4.2 LTS) computes Alpha
+    Convert "To Straight" as ``rgb·(1/a)``, one rounding away from our ``rgb/a``: the difference is
+    ≤ 1 ulp of the result, so its absolute size grows with rgb/a (2.4e-4 where rgb/a ≈ 2300 in the
+    sample images). docs/blender_compositor.md, "Results", documents this bound.
+
+    Args:
+        case: the verified case.
+        blender_version: ``bpy.app.version_string`` of the Blender that ran it, e.g. ``"4.2.23 LTS"``.
+    """
+    major, minor = (int(part) for part in blender_version.split()[0].split(".")[:2])
+    return (case.kind, case.operator) == ("alpha_convert", "unpremultiply") and (major, minor) < (4, 4)
+
+
+def within_bound(result: Verification, tolerance: float, blender_version: str) -> bool:
+    """Whether ``result`` passes: every value within ``tolerance`` absolute, or, for a case under
+    :func:`relative_bound`, each value within ``tolerance`` or 1 ulp relative (``ε₃₂·|ours|``)."""
+    if not relative_bound(result.case, blender_version):
+        return result.max_abs_error <= tolerance
+    ulp = np.finfo(np.float32).eps * np.abs(result.ours.astype(np.float64))
+    return bool((result.difference <= np.maximum(tolerance, ulp)).all())
+
+
 #: Largest ``--size`` side: sample images, their EXR copies and Blender's buffers stay in memory.
 MAX_SIDE = 8192
 
@@ -570,9 +597,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"Blender {report['blender_version']}, {src.shape[1]}x{src.shape[0]}, {len(results)} case(s)")
     print(f"{'case':48s} {'max abs error':>14s} {'mean abs error':>15s}")
     worst = 0.0
+    failed = 0
+    version = report["blender_version"]
     for result in results:
         worst = max(worst, result.max_abs_error)
-        flag = "" if result.max_abs_error <= args.tolerance else "  FAIL"
+        passed = within_bound(result, args.tolerance, version)
+        failed += not passed
+        flag = "" if passed else "  FAIL"
+        if relative_bound(result.case, version):
+            flag += f"  (bound: {args.tolerance:g} or 1 ulp relative, Blender {version.split()[0]})"
         print(f"{result.case.label:48s} {result.max_abs_error:14.3e} {result.mean_abs_error:15.3e}{flag}")
     if args.out and len(results) == 1:
         out = Path(args.out)
@@ -582,8 +615,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             with atomic_path(target) as tmp:  # a failed write keeps the previous image
                 write_exr(tmp, getattr(results[0], name))
             print(f"wrote {target}")
-    print(f"worst max abs error {worst:.3e} (tolerance {args.tolerance:g})")
-    return 0 if worst <= args.tolerance else 1
+    print(f"worst max abs error {worst:.3e} (tolerance {args.tolerance:g}); {failed} case(s) failed")
+    return 0 if failed == 0 else 1
 
 
 if __name__ == "__main__":

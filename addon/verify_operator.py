@@ -1,17 +1,31 @@
 """ "Verify against Blender": the last render over a background, by our operator and by Alpha Over.
 
-Inside a running Blender (no second process): the Render Result is saved to a 32-bit EXR and read
-with OpenImageIO (which Blender bundles); the background image is read from its file (EXR as
-stored, other formats decoded by ``compositing.io``). Ours is
-``compositing.composite(render, background, operator)``. Blender's is a throw-away scene whose
-compositor holds two Image nodes (the same arrays written as EXR, loaded ``Non-Color``/``Channel
-Packed`` so Blender converts nothing) and an Alpha Over node, rendered once. The operator reports
-the largest difference and shows ``|ours − Blender|`` as the image "Blinn-Phong Verify Difference"
-in an Image Editor.
+Inside a running Blender (no second process), and every image goes through Blender's own image
+API, so the operator needs nothing beyond Blender and the add-on: no OpenImageIO (the bpy 4.2
+module has none; 4.5 and later carry it outside ``sys.path``) and no colour-science.
+
+* The Render Result is saved with ``Image.save_render`` as a 32-bit float RGBA EXR (lossless ZIP;
+  a float format gets no view transform) and loaded back.
+* The background: an EXR file is read as stored (the project convention: premultiplied linear
+  RGBA), any other image (PNG, JPEG, TIFF, packed or generated) is decoded by Blender with the
+  image's own colour space and alpha mode (``save_render`` to a float EXR converts it to scene-linear
+  premultiplied RGBA).
+* Arrays become Blender images with ``bpy.data.images.new(float_buffer=True)`` and
+  ``Image.pixels.foreach_set``, and EXR files are read with ``bpy.data.images.load`` and
+  ``Image.pixels.foreach_get``, as ``Non-Color``/``Channel Packed`` so Blender converts nothing
+  (bit-exact both ways; tests/addon/test_addon_verify_operator.py checks the files with
+  OpenImageIO).
+
+Ours is ``compositing.composite(render, background, operator)``. Blender's is a throw-away scene
+whose compositor holds two Image nodes (the same arrays) and an Alpha Over node, rendered once. The
+operator reports the largest difference and shows ``|ours − Blender|`` as the image "Blinn-Phong
+Verify Difference" in an Image Editor.
 """
 
+import contextlib
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import bpy
@@ -25,8 +39,12 @@ __all__ = [
     "BLINN_PHONG_PT_verify",
     "blender_alpha_over",
     "classes",
+    "image_to_array",
+    "read_background",
+    "read_exr",
     "register",
     "unregister",
+    "write_exr",
 ]
 
 LAST_VERIFY: dict = {}
@@ -36,43 +54,109 @@ LAST_VERIFY: dict = {}
 DIFFERENCE_IMAGE = "Blinn-Phong Verify Difference"
 
 
-def read_rgba_exr(path: Path | str) -> np.ndarray:
-    """An RGBA EXR as (H, W, 4) float32, row 0 at the top, values as stored (OpenImageIO)."""
-    import OpenImageIO as oiio  # noqa: N813 (the library's documented alias)
+@contextlib.contextmanager
+def _float_exr_output(scene: bpy.types.Scene) -> Iterator[None]:
+    """Make ``scene``'s output a lossless 32-bit float RGBA EXR for the ``with`` block, then restore it.
 
-    image = oiio.ImageInput.open(str(path))
-    if image is None:
-        raise OSError(f"path: cannot open {path}: {oiio.geterror()}")
+    ``Image.save_render`` writes in the scene's output format; a user's scene may hold PNG, half
+    floats or a lossy EXR codec (DWAA, B44). Linear float formats get no view transform.
+    """
+    settings = scene.render.image_settings
+    names = ("media_type", "file_format", "color_depth", "color_mode", "exr_codec", "color_management")
+    saved = {name: getattr(settings, name) for name in names if hasattr(settings, name)}
     try:
-        spec = image.spec()
-        names = list(spec.channelnames)
-        pixels = image.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        compat.set_image_format(settings, "OPEN_EXR", "32")
+        settings.color_mode = "RGBA"
+        settings.exr_codec = "ZIP"
+        if "color_management" in saved:
+            settings.color_management = "FOLLOW_SCENE"
+        yield
     finally:
-        image.close()
-    picked = [
-        next(i for i, n in enumerate(names) if n.split(".")[-1] == c)
-        for c in "RGBA"
-        if any(n.split(".")[-1] == c for n in names)
-    ]
-    if len(picked) != 4:
-        raise ValueError(f"path: {path} has channels {names}, expected R, G, B and A")
-    return np.ascontiguousarray(pixels[..., picked], dtype=np.float32)
+        for name in names:  # media_type first: it decides which file formats are valid (5.0)
+            if name in saved:
+                setattr(settings, name, saved[name])
 
 
-def _read_background(path: str) -> np.ndarray:
-    """A background file in the project convention: EXR as stored; other formats via ``compositing.io``."""
-    if Path(path).suffix.lower() == ".exr":
-        return read_rgba_exr(path)
-    from compositing.io import read_image  # decodes sRGB (needs colour-science)
+def image_to_array(image: bpy.types.Image) -> np.ndarray:
+    """The pixels of a Blender image as (H, W, 4) float32, row 0 at the top.
 
-    return read_image(path)
+    ``Image.pixels`` holds the bottom row first; an RGB image gets alpha 1. Values are Blender's
+    buffer as it is (for an EXR loaded ``Non-Color``/``Channel Packed``: the file's values).
+    """
+    width, height = image.size
+    channels = image.channels
+    if width == 0 or height == 0 or channels not in (3, 4):
+        raise ValueError(
+            f"image: {image.name!r} has {width}×{height} pixels and {channels} channels; expected an "
+            "RGB or RGBA image with pixels"
+        )
+    flat = np.empty(width * height * channels, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    pixels = flat.reshape(height, width, channels)[::-1]
+    if channels == 3:
+        pixels = np.concatenate([pixels, np.ones((height, width, 1), np.float32)], axis=-1)
+    return np.ascontiguousarray(pixels)
 
 
-def _load_exact(path: Path) -> bpy.types.Image:
-    image = bpy.data.images.load(str(path), check_existing=False)
+def _new_image(name: str, rgba: np.ndarray) -> bpy.types.Image:
+    """A float Blender image holding ``rgba`` ((H, W, 4), row 0 at the top) unconverted."""
+    rgba = np.asarray(rgba, dtype=np.float32)
+    if rgba.ndim != 3 or rgba.shape[2] != 4:
+        raise ValueError(f"rgba: expected shape (height, width, 4), got {rgba.shape}")
+    height, width = rgba.shape[:2]
+    image = bpy.data.images.new(name, width, height, alpha=True, float_buffer=True)
+    # Colour space and alpha mode first: changing them regenerates a generated image's buffer.
     image.colorspace_settings.name = "Non-Color"
     image.alpha_mode = "CHANNEL_PACKED"
+    image.pixels.foreach_set(np.ascontiguousarray(rgba[::-1]).ravel())
+    image.update()
     return image
+
+
+def read_exr(path: Path | str) -> np.ndarray:
+    """An EXR file as (H, W, 4) float32, row 0 at the top, values as stored (Blender's image loader).
+
+    Loaded ``Non-Color`` with alpha mode ``Channel Packed``: no colour-space conversion and no
+    (un)premultiplication; the temporary image data-block is removed again.
+    """
+    image = bpy.data.images.load(str(path), check_existing=False)
+    try:
+        image.colorspace_settings.name = "Non-Color"
+        image.alpha_mode = "CHANNEL_PACKED"
+        return image_to_array(image)
+    finally:
+        bpy.data.images.remove(image)
+
+
+def write_exr(path: Path | str, rgba: np.ndarray, scene: bpy.types.Scene) -> None:
+    """Write (H, W, 4) float RGBA, row 0 at the top, as a lossless 32-bit float EXR (``Image.save_render``).
+
+    ``scene`` lends its output settings (switched to EXR for the call, then restored).
+    """
+    image = _new_image("Blinn-Phong Verify Output", rgba)
+    try:
+        with _float_exr_output(scene):
+            image.save_render(str(path), scene=scene)
+    finally:
+        bpy.data.images.remove(image)
+
+
+def read_background(image: bpy.types.Image, workdir: Path, scene: bpy.types.Scene) -> np.ndarray:
+    """A background image in the project convention: (H, W, 4) linear premultiplied float32, row 0 on top.
+
+    An EXR file is read as stored (:func:`read_exr`; EXR holds premultiplied linear RGBA). Any other
+    image is decoded by Blender with the data-block's own colour space and alpha mode: saved with
+    ``save_render`` as a float EXR (scene-linear, premultiplied) and read back.
+    """
+    path = bpy.path.abspath(image.filepath) if image.filepath else ""
+    if path.lower().endswith(".exr") and image.packed_file is None:
+        if not Path(path).is_file():
+            raise ValueError(f"background: image {image.name!r} reads {path}, which does not exist")
+        return read_exr(path)
+    decoded = workdir / "background_linear.exr"
+    with _float_exr_output(scene):
+        image.save_render(str(decoded), scene=scene)
+    return read_exr(decoded)
 
 
 def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir: Path) -> np.ndarray:
@@ -82,21 +166,20 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
         src: foreground, (H, W, 4) float32 premultiplied linear RGBA, row 0 at the top.
         dst: background, same shape.
         operator: ``src_over``, ``disjoint_over`` or ``conjoint_over`` (the last two need 5.0).
-        workdir: directory for the temporary EXR files.
+        workdir: directory receiving Blender's result, ``blender.exr``.
 
     Returns:
         Blender's result, (H, W, 4) float32, row 0 at the top.
     """
-    from .verify import write_exr
-
     if src.shape != dst.shape or src.ndim != 3 or src.shape[2] != 4:
         raise ValueError(
             f"src, dst: expected two (H, W, 4) images of one shape, got {src.shape} and {dst.shape}"
         )
-    write_exr(workdir / "src.exr", src)
-    write_exr(workdir / "dst.exr", dst)
     scene = bpy.data.scenes.new("Blinn-Phong Verify")
-    images = [_load_exact(workdir / "src.exr"), _load_exact(workdir / "dst.exr")]
+    images = [
+        _new_image("Blinn-Phong Verify Foreground", src),
+        _new_image("Blinn-Phong Verify Background", dst),
+    ]
     camera = bpy.data.objects.new(
         "Blinn-Phong Verify Camera", bpy.data.cameras.new("Blinn-Phong Verify Camera")
     )
@@ -108,7 +191,8 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
         scene.render.resolution_percentage = 100
         scene.view_settings.view_transform = "Standard"
         settings = scene.render.image_settings
-        settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
+        compat.set_image_format(settings, "OPEN_EXR", "32")
+        settings.color_mode, settings.exr_codec = "RGBA", "ZIP"
         compat.set_full_precision(scene)
         tree = compat.compositor_tree(scene)
         sockets = []
@@ -122,7 +206,7 @@ def blender_alpha_over(src: np.ndarray, dst: np.ndarray, operator: str, workdir:
         tree.links.new(over.outputs["Image"], compat.add_render_output(tree))
         scene.render.filepath = str(workdir / "blender.exr")
         bpy.ops.render.render(write_still=True, scene=scene.name)
-        return read_rgba_exr(workdir / "blender.exr")
+        return read_exr(workdir / "blender.exr")
     finally:
         tree_group = getattr(scene, "compositing_node_group", None)
         bpy.data.scenes.remove(scene)
@@ -139,24 +223,17 @@ def verify_last_render(background: bpy.types.Image, operator: str, workdir: Path
     """Compare ours and Blender's composite of the current Render Result over ``background``."""
     from compositing import composite
 
-    from .verify import write_exr
-
     result = bpy.data.images.get("Render Result")
     if result is None:
         raise ValueError("Render Result: there is no render yet; render a frame first (F12)")
-    if not background.filepath:
-        raise ValueError(f"background: image {background.name!r} has no file to read")
+    scene = bpy.context.scene
     started = time.perf_counter()
-    render_path = workdir / "render.exr"
-    settings = bpy.context.scene.render.image_settings
-    saved = (settings.file_format, settings.color_depth, settings.color_mode)
-    try:  # save_render writes in the scene's output format: make it a 32-bit float RGBA EXR
-        settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
-        result.save_render(str(render_path), scene=bpy.context.scene)
-    finally:
-        settings.file_format, settings.color_depth, settings.color_mode = saved
-    render = read_rgba_exr(render_path)
-    plate = _read_background(bpy.path.abspath(background.filepath))
+    names = ("render", "background", "ours", "blender", "difference")
+    files = {name: workdir / f"{name}.exr" for name in names}
+    with _float_exr_output(scene):
+        result.save_render(str(files["render"]), scene=scene)
+    render = read_exr(files["render"])
+    plate = read_background(background, workdir, scene)
     if plate.shape != render.shape:
         raise ValueError(
             f"background: {background.name!r} is {plate.shape[1]}×{plate.shape[0]}, "
@@ -165,15 +242,14 @@ def verify_last_render(background: bpy.types.Image, operator: str, workdir: Path
     ours = composite(render, plate, operator)
     theirs = blender_alpha_over(render, plate, operator, workdir)
     difference = np.abs(ours.astype(np.float64) - theirs).astype(np.float32)
-    files = {"render": render_path, "ours": workdir / "ours.exr", "difference": workdir / "difference.exr"}
-    write_exr(files["ours"], ours)
-    write_exr(files["difference"], difference)
+    for name, pixels in (("background", plate), ("ours", ours), ("difference", difference)):
+        write_exr(files[name], pixels, scene)
     return {
         "operator": operator,
         "max_abs_error": float(difference.max()),
         "mean_abs_error": float(difference.mean()),
         "seconds": time.perf_counter() - started,
-        "files": {**{k: str(v) for k, v in files.items()}, "blender": str(workdir / "blender.exr")},
+        "files": {k: str(v) for k, v in files.items()},
         "difference": difference,
     }
 

@@ -18,16 +18,21 @@ Steps:
    packages by their plain names; the installed extension imports nothing by absolute name and
    cannot pick up another copy of the packages from ``sys.path`` (the approach of pip's
    ``vendoring`` tool).
-3. With ``--wheels``: download the compiled dependencies (:data:`WHEEL_PACKAGES`: numba + llvmlite,
-   embreex, colour-science and what they need, at the versions pinned in
-   ``requirements/main.lock``; numpy is not bundled, every Blender ships its own) with pip, unmodified
-   from the package index, once per platform and per Python (3.11 for Blender 4.2–5.0, 3.13 for
-   5.1+), into a cache outside the checkout; copy them into ``wheels/`` of the staged add-on and list
-   them in the staged manifest's ``wheels = [...]`` with the ``platforms``. Blender installs only the
-   wheels matching its own platform and Python.
+3. With ``--wheels``: one zip per Python ABI and platform (:data:`TARGETS`). Blender 4.2–5.0
+   embed CPython 3.11, 5.1 and later 3.13; each zip carries only the wheels of its Python, and its
+   manifest says which Blender versions it is for (``blender_version_min``, and
+   ``blender_version_max``, which is exclusive: Blender refuses the zip from that version on), so a
+   user downloads about half of what a zip for both Pythons weighs. The wheels are
+   :data:`WHEEL_PACKAGES` (what the code imports at run time inside Blender: numba + llvmlite,
+   embreex, scipy), at the versions pinned in ``requirements/main.lock``, downloaded with pip,
+   unmodified from the package index, into a cache outside the checkout; they are copied into
+   ``wheels/`` of the staged add-on and listed in the staged manifest's ``wheels = [...]`` with the
+   ``platforms``. numpy is not bundled (every Blender ships its own).
 4. Run Blender's extension CLI (``bl_pkg/cli/blender_ext.py`` inside the installed ``bpy`` package,
    plain Python, no Blender binary) to ``build`` the zip (``--split-platforms`` with wheels: one zip
-   per platform), then ``validate`` each zip, with Blender's own list of valid tags.
+   per platform, renamed to say its Blender versions and Python, e.g.
+   ``blinn_phong_render-0.1.0-blender4.2-5.0-python3.11-linux_x64.zip``), then ``validate`` each
+   zip, with Blender's own list of valid tags.
 
 Prints the zip path(s) on success; exits non-zero with the validator's message otherwise.
 """
@@ -43,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,22 +57,53 @@ VENDORED = ("blinn_phong", "compositing")
 IGNORED = shutil.ignore_patterns("__pycache__", "*.pyc", ".*", "*.zip", "tests")
 LOCK = REPO / "requirements" / "main.lock"
 
-WHEEL_PACKAGES = (
-    "numba",
-    "llvmlite",
-    "embreex",
-    "colour-science",
-    "scipy",
-    "imageio",
-    "pillow",
-    "typing-extensions",
-)
-"""Bundled distributions: the compiled kernels (numba, llvmlite), Embree (embreex), colour-science and
-its run-time dependencies (scipy, imageio → pillow, typing-extensions). numpy is left out: Blender
-bundles it (1.26 in 4.2–5.0, 2.x in 5.1+) and every pinned version here supports both."""
+WHEEL_PACKAGES = ("numba", "llvmlite", "embreex", "scipy")
+"""Bundled distributions: what the add-on imports at run time inside Blender and Blender lacks.
 
-PYTHON_VERSIONS = ("3.11", "3.13")
-"""Blender 4.2–5.0 embed CPython 3.11; 5.1 and later 3.13."""
+* numba + llvmlite: the compiled kernels (without them the numpy kernels run, with a warning);
+* embreex: Embree, for ray-traced and soft shadows;
+* scipy: ``scipy.spatial.ConvexHull`` in :func:`blinn_phong.mesh_facts._projected_width`, which the
+  planner calls to size a shadow map for a directional light (no fallback: a render needs it).
+
+Not bundled: numpy (every Blender ships its own: 1.26 in 4.2–5.0, 2.x in 5.1+, both supported by
+the pinned versions), and :data:`NOT_BUNDLED`: OpenImageIO, colour-science and the rest are imported
+only by the repository's command lines (``compositing.io`` under ``addon.batch``, ``addon.demo``,
+``python -m compositing``), which run in the project's environment; inside Blender the add-on reads
+and writes images through Blender's image API (``verify_operator``). colour-science would also pull
+in scipy, imageio and typing-extensions at import (``colour.algebra`` imports ``scipy.interpolate``).
+``tests/addon/test_addon_packaging.py`` checks both lists against the imports of every module in
+the zip."""
+
+NOT_BUNDLED: dict[str, str] = {
+    "OpenImageIO": "compositing.io, addon.batch, addon.verify (command lines); the add-on uses Blender's API",
+    "colour": "compositing.io only (sRGB transfer functions for 8/16-bit files)",
+    "PIL": "compositing.demo only (a repository command line)",
+    "dask": "addon.batch's Dask cluster mode (a repository command line)",
+    "distributed": "addon.batch's Dask cluster mode (a repository command line)",
+    "tqdm": "addon.batch's progress bar (a repository command line)",
+}
+"""Third-party modules imported somewhere in the zip's code but deliberately not bundled, and why."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """One Python ABI of Blender: the Blender versions embedding it and the zip's name for them.
+
+    ``blender_max`` is exclusive, as the manifest's ``blender_version_max`` (Blender refuses the
+    extension from that version on); None: no upper bound.
+    """
+
+    python: str
+    blender_min: str
+    blender_max: str | None
+    label: str
+
+
+TARGETS: tuple[Target, ...] = (
+    Target("3.11", "4.2.0", "5.1.0", "blender4.2-5.0-python3.11"),
+    Target("3.13", "5.1.0", None, "blender5.1+-python3.13"),
+)
+"""Blender 4.2–5.0 embed CPython 3.11; 5.1 and later 3.13 (one wheel set and one zip each)."""
 
 PLATFORMS: dict[str, tuple[str, ...]] = {
     "linux-x64": ("manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"),
@@ -205,39 +242,36 @@ def default_wheel_cache() -> Path:
     return Path(base) / "blinn-phong-render" / "wheels"
 
 
-def download_wheels(
-    platform: str, cache: Path, python_versions: tuple[str, ...] = PYTHON_VERSIONS
-) -> list[Path]:
-    """Download :data:`WHEEL_PACKAGES` for one Blender platform and every Python in ``python_versions``.
+def download_wheels(platform: str, cache: Path, python: str) -> list[Path]:
+    """Download :data:`WHEEL_PACKAGES` for one Blender platform and one Python (``"3.11"``).
 
     Uses ``pip download --only-binary=:all: --no-deps`` with the pinned versions (the dependency
-    closure is :data:`WHEEL_PACKAGES` itself), into ``cache/<platform>-py<version>``; pip skips
-    files already there. Returns the wheel paths.
+    closure is :data:`WHEEL_PACKAGES` itself), into ``cache/<platform>-py<python>``; pip skips
+    files already there. Returns the paths of the pinned wheels (other files in the cache, from
+    builds with other pins or packages, are left out).
     """
     if platform not in PLATFORMS:
         raise BuildError(f"platform: expected one of {list(PLATFORMS)}, got {platform!r}")
-    requirements = [f"{name}=={version}" for name, version in pinned_versions().items()]
-    wheels: dict[str, Path] = {}
-    for python in python_versions:
-        dest = cache / f"{platform}-py{python}"
-        dest.mkdir(parents=True, exist_ok=True)
-        command = [sys.executable, "-m", "pip", "download", "--quiet", "--disable-pip-version-check"]
-        command += ["--only-binary=:all:", "--no-deps", "--python-version", python, "--dest", str(dest)]
-        for tag in PLATFORMS[platform]:
-            command += ["--platform", tag]
-        done = subprocess.run(
-            command + requirements, capture_output=True, text=True, check=False, timeout=1800
-        )
-        if done.returncode != 0:
-            raise BuildError(
-                f"pip download for {platform}, Python {python} failed:\n{done.stdout}{done.stderr}"
-            )
-        wanted = {name.replace("-", "_") for name in WHEEL_PACKAGES}
-        for wheel in sorted(dest.glob("*.whl")):
-            name, version = wheel.name.split("-")[:2]
-            if name.lower() in wanted and version == pinned_versions()[name.lower().replace("_", "-")]:
-                wheels.setdefault(wheel.name, wheel)  # pure-Python wheels are shared by both Pythons
-    return sorted(wheels.values())
+    pins = pinned_versions()
+    requirements = [f"{name}=={version}" for name, version in pins.items()]
+    dest = cache / f"{platform}-py{python}"
+    dest.mkdir(parents=True, exist_ok=True)
+    command = [sys.executable, "-m", "pip", "download", "--quiet", "--disable-pip-version-check"]
+    command += ["--only-binary=:all:", "--no-deps", "--python-version", python, "--dest", str(dest)]
+    for tag in PLATFORMS[platform]:
+        command += ["--platform", tag]
+    done = subprocess.run(command + requirements, capture_output=True, text=True, check=False, timeout=1800)
+    if done.returncode != 0:
+        raise BuildError(f"pip download for {platform}, Python {python} failed:\n{done.stdout}{done.stderr}")
+    wheels = []
+    for wheel in sorted(dest.glob("*.whl")):
+        name, version = wheel.name.split("-")[:2]
+        if pins.get(name.lower().replace("_", "-")) == version:
+            wheels.append(wheel)
+    found = {w.name.split("-")[0].lower().replace("_", "-") for w in wheels}
+    if found != set(pins):
+        raise BuildError(f"{dest}: no wheel for {sorted(set(pins) - found)} after pip download")
+    return wheels
 
 
 def add_wheels(staged: Path, wheels: list[Path], platforms: list[str]) -> None:
@@ -264,6 +298,68 @@ def json_list(items: list[str]) -> str:
     return "[" + ", ".join(f'"{item}"' for item in items) + "]"
 
 
+def set_blender_versions(staged: Path, target: Target) -> None:
+    """Narrow the staged manifest's Blender range to ``target``'s (``blender_version_min``/``_max``).
+
+    The range is the intersection of the manifest's and the target's; ``blender_version_max`` is
+    exclusive, as Blender reads it.
+
+    Raises:
+        BuildError: the manifest's range does not meet the target's.
+    """
+    manifest_path = staged / "blender_manifest.toml"
+    text = manifest_path.read_text(encoding="utf-8")
+    manifest = tomllib.loads(text)
+    low = max(manifest["blender_version_min"], target.blender_min, key=version_tuple)
+    highs = [v for v in (manifest.get("blender_version_max"), target.blender_max) if v]
+    high = min(highs, key=version_tuple) if highs else None
+    if high is not None and version_tuple(low) >= version_tuple(high):
+        raise BuildError(
+            f"blender_manifest.toml: Blender {manifest['blender_version_min']}"
+            f"–{manifest.get('blender_version_max', '')} does not meet Python {target.python}'s "
+            f"Blender {target.blender_min}–{target.blender_max or ''}"
+        )
+    text = re.sub(r"^blender_version_max\s*=.*\n", "", text, flags=re.MULTILINE)
+    line = f'blender_version_min = "{low}"\n' + (f'blender_version_max = "{high}"\n' if high else "")
+    text, count = re.subn(r"^blender_version_min\s*=.*\n", line, text, count=1, flags=re.MULTILINE)
+    if count != 1:
+        raise BuildError("blender_manifest.toml: no blender_version_min line")
+    manifest_path.write_text(text, encoding="utf-8")
+
+
+def version_tuple(version: str) -> tuple[int, ...]:
+    """``"4.2.0"`` -> ``(4, 2, 0)``."""
+    return tuple(int(part) for part in version.split("."))
+
+
+def targets_for(manifest: dict) -> list[Target]:
+    """The :data:`TARGETS` whose Blender range meets the manifest's."""
+    low = version_tuple(manifest["blender_version_min"])
+    high = version_tuple(manifest["blender_version_max"]) if manifest.get("blender_version_max") else None
+    return [
+        t
+        for t in TARGETS
+        if (t.blender_max is None or low < version_tuple(t.blender_max))
+        and (high is None or version_tuple(t.blender_min) < high)
+    ]
+
+
+def target_for_blender(version: tuple[int, ...]) -> Target:
+    """The entry of :data:`TARGETS` for a Blender version, e.g. ``(4, 5, 3)`` -> Python 3.11."""
+    for target in TARGETS:
+        above = tuple(version) >= version_tuple(target.blender_min)
+        if above and (target.blender_max is None or tuple(version) < version_tuple(target.blender_max)):
+            return target
+    raise BuildError(
+        f"Blender {'.'.join(map(str, version))}: not supported (supported from {TARGETS[0].blender_min})"
+    )
+
+
+def zip_name(manifest: dict, target: Target, platform: str) -> str:
+    """``<id>-<version>-<label>-<platform>.zip``, e.g. ``…-blender4.2-5.0-python3.11-linux_x64.zip``."""
+    return f"{manifest['id']}-{manifest['version']}-{target.label}-{platform.replace('-', '_')}.zip"
+
+
 def build(
     out_dir: Path,
     bpy_root: Path | None = None,
@@ -273,11 +369,11 @@ def build(
     platforms: tuple[str, ...] = ("linux-x64",),
     wheel_cache: Path | None = None,
 ) -> Path:
-    """Assemble, build and validate the extension; return the path of the zip.
+    """Assemble, build and validate the extension; return the path of the (first) zip.
 
     Args:
-        out_dir: directory receiving ``<id>-<version>.zip`` (with ``wheels``:
-            ``<id>-<version>-<platform>.zip``, one per platform; the first is returned).
+        out_dir: directory receiving ``<id>-<version>.zip`` (with ``wheels``: one zip per
+            :data:`TARGETS` entry and platform, named by :func:`zip_name`).
         bpy_root: ``bpy/<X.Y>`` directory holding Blender's scripts (default: the installed bpy).
         build_dir: staging directory (default: a temporary directory, removed afterwards).
         wheels: bundle the compiled dependencies (:func:`download_wheels`).
@@ -299,15 +395,15 @@ def build_all(
     platforms: tuple[str, ...] = ("linux-x64",),
     wheel_cache: Path | None = None,
 ) -> list[Path]:
-    """:func:`build`, returning every zip written (one per platform with ``wheels``)."""
+    """:func:`build`, returning every zip written (with ``wheels``: per target, then per platform)."""
     bpy_root = bpy_root or find_bpy_root()
+    out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="blinn_phong_extension_") as scratch:
-        staged = stage(build_dir or Path(scratch) / "extension")
-        manifest = tomllib.loads((staged / "blender_manifest.toml").read_text(encoding="utf-8"))
-        out_dir.mkdir(parents=True, exist_ok=True)
-        stem = f"{manifest['id']}-{manifest['version']}"
+        root = build_dir or Path(scratch) / "extension"
         if not wheels:
-            zip_path = out_dir / f"{stem}.zip"
+            staged = stage(root)
+            manifest = tomllib.loads((staged / "blender_manifest.toml").read_text(encoding="utf-8"))
+            zip_path = out_dir / f"{manifest['id']}-{manifest['version']}.zip"
             zip_path.unlink(missing_ok=True)
             run_blender_ext(
                 bpy_root, "build", "--source-dir", str(staged), "--output-filepath", str(zip_path)
@@ -315,21 +411,30 @@ def build_all(
             run_blender_ext(bpy_root, "validate", str(zip_path))
             return [zip_path]
         cache = wheel_cache or default_wheel_cache()
-        files: dict[str, Path] = {}
-        for platform in platforms:
-            for wheel in download_wheels(platform, cache):
-                files.setdefault(wheel.name, wheel)  # pure-Python wheels are shared by every platform
-        add_wheels(staged, [files[name] for name in sorted(files)], list(platforms))
-        zips = [out_dir / f"{stem}-{platform.replace('-', '_')}.zip" for platform in platforms]
-        for zip_path in zips:
-            zip_path.unlink(missing_ok=True)
-        run_blender_ext(
-            bpy_root, "build", "--source-dir", str(staged), "--output-dir", str(out_dir), "--split-platforms"
-        )
-        for zip_path in zips:
-            if not zip_path.exists():
-                raise BuildError(f"Blender's build wrote no {zip_path.name} into {out_dir}")
-            run_blender_ext(bpy_root, "validate", str(zip_path))
+        manifest = tomllib.loads((ADDON_DIR / "blender_manifest.toml").read_text(encoding="utf-8"))
+        zips: list[Path] = []
+        for target in targets_for(manifest):
+            staged = stage(root / target.label)
+            set_blender_versions(staged, target)
+            files: dict[str, Path] = {}
+            for platform in platforms:
+                for wheel in download_wheels(platform, cache, target.python):
+                    files.setdefault(wheel.name, wheel)  # pure-Python wheels are shared by every platform
+            add_wheels(staged, [files[name] for name in sorted(files)], list(platforms))
+            built = Path(scratch) / "zips" / target.label
+            built.mkdir(parents=True)
+            run_blender_ext(
+                bpy_root,
+                *("build", "--source-dir", str(staged), "--output-dir", str(built), "--split-platforms"),
+            )
+            for platform in platforms:
+                written = built / f"{manifest['id']}-{manifest['version']}-{platform.replace('-', '_')}.zip"
+                if not written.exists():
+                    raise BuildError(f"Blender's build wrote no {written.name} for Python {target.python}")
+                run_blender_ext(bpy_root, "validate", str(written))
+                zip_path = out_dir / zip_name(manifest, target, platform)
+                shutil.move(written, zip_path)  # replaces an older build only once this one validated
+                zips.append(zip_path)
         return zips
 
 
@@ -338,7 +443,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO / "dist", help="output directory (default dist/)")
     parser.add_argument("--bpy-root", type=Path, default=None, help="site-packages/bpy directory")
-    parser.add_argument("--wheels", action="store_true", help="bundle numba, embreex, colour-science wheels")
+    parser.add_argument(
+        "--wheels", action="store_true", help="bundle numba, llvmlite, embreex, scipy: one zip per Python ABI"
+    )
     parser.add_argument(
         "--platform",
         action="append",

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import ast
+import importlib.metadata
 import importlib.util
 import shutil
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -129,6 +131,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
         """,
         tmp_path,
         args=(str(built_zip), str(tmp_path / "repo"), str(tmp_path / "installed.exr")),
+        timeout=280,  # the kernels compile into the fresh extension's cache: ~60 s alone, more under load
     )
     assert got["result"] == ["FINISHED"]
     assert got["enabled"] == [True, True]  # (loaded by default, loaded now)
@@ -190,8 +193,6 @@ def test_wheel_list_and_platforms_are_written_into_the_staged_manifest(tmp_path:
     wheel = tmp_path / "numba-0.68.1-cp311-cp311-manylinux_2_28_x86_64.whl"
     wheel.write_bytes(b"not a real wheel")
     build_extension.add_wheels(stage, [wheel], ["linux-x64"])
-    import tomllib
-
     manifest = tomllib.loads((stage / "blender_manifest.toml").read_text())
     assert manifest["platforms"] == ["linux-x64"]
     assert manifest["wheels"] == ["./wheels/numba-0.68.1-cp311-cp311-manylinux_2_28_x86_64.whl"]
@@ -199,3 +200,103 @@ def test_wheel_list_and_platforms_are_written_into_the_staged_manifest(tmp_path:
     assert (stage / "wheels" / wheel.name).read_bytes() == b"not a real wheel"
     pins = build_extension.pinned_versions()
     assert set(pins) == set(build_extension.WHEEL_PACKAGES) and "numpy" not in pins
+
+
+BLENDER_MODULES = {"bpy", "gpu", "gpu_extras", "numpy"}
+"""What every Blender's Python provides (numpy included: 1.26 in 4.2–5.0, 2.x in 5.1+)."""
+
+
+def test_bundled_wheels_are_what_the_zip_imports_from_outside_blender(built_zip: Path) -> None:
+    # Every absolute import of every module in the zip, lazy ones included: what is neither the
+    # standard library nor Blender's must be bundled or listed as deliberately left out.
+    imported: set[str] = set()
+    with zipfile.ZipFile(built_zip) as zf:
+        for name in (n for n in zf.namelist() if n.endswith(".py")):
+            for node in ast.walk(ast.parse(zf.read(name).decode("utf-8"))):
+                if isinstance(node, ast.Import):
+                    imported |= {a.name.split(".")[0] for a in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                    imported.add(node.module.split(".")[0])
+    outside = imported - set(sys.stdlib_module_names) - BLENDER_MODULES
+    imports = {"numba": "numba", "embreex": "embreex", "scipy": "scipy"}  # distribution -> module
+    assert outside == set(imports.values()) | set(build_extension.NOT_BUNDLED)
+    # llvmlite is not imported by the add-on: it is numba's run-time requirement (numba's metadata).
+    requires = importlib.metadata.requires("numba") or []
+    assert any(r.split(";")[0].replace(" ", "").startswith("llvmlite") for r in requires)
+    assert set(build_extension.WHEEL_PACKAGES) == {*imports, "llvmlite"}
+
+
+def _blender_ext_module():
+    """Blender's extension CLI (``bl_pkg/cli/blender_ext.py``) as a module, for its own filter."""
+    path = build_extension.find_bpy_root() / "scripts" / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    spec = importlib.util.spec_from_file_location("blender_ext_cli", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_each_zip_is_accepted_by_exactly_the_blender_versions_of_its_python(tmp_path: Path) -> None:
+    # Blender's own compatibility filter (the one "Install from Disk" applies) on each target's
+    # staged manifest: 4.2-5.0 (CPython 3.11) and 5.1+ (3.13) split every version between them.
+    cli = _blender_ext_module()
+    manifests = {}
+    for target in build_extension.TARGETS:
+        stage = tmp_path / target.label
+        shutil.copytree(REPO / "addon", stage, ignore=shutil.ignore_patterns("__pycache__"))
+        build_extension.set_blender_versions(stage, target)
+        build_extension.run_blender_ext(build_extension.find_bpy_root(), "validate", str(stage))
+        manifests[target.python] = tomllib.loads((stage / "blender_manifest.toml").read_text())
+
+    def accepts(manifest: dict, version: tuple[int, int, int]) -> bool:
+        def error(exception: Exception) -> None:
+            raise exception
+
+        return not cli.repository_filter_skip(
+            manifest,
+            filter_blender_version=version,
+            filter_platform="linux-x64",
+            filter_python_version=(0, 0, 0),
+            skip_message_fn=lambda message: None,
+            error_fn=error,
+        )
+
+    expected = {
+        (4, 1, 99): set(),
+        (4, 2, 0): {"3.11"},
+        (4, 5, 15): {"3.11"},
+        (5, 0, 99): {"3.11"},
+        (5, 1, 0): {"3.13"},  # blender_version_max = 5.1.0 is exclusive
+        (5, 2, 3): {"3.13"},
+        (6, 0, 0): {"3.13"},
+    }
+    for version, pythons in expected.items():
+        assert {p for p, m in manifests.items() if accepts(m, version)} == pythons, version
+        if pythons:
+            assert build_extension.target_for_blender(version).python in pythons
+        else:
+            with pytest.raises(build_extension.BuildError, match="not supported"):
+                build_extension.target_for_blender(version)
+    # The running Blender embeds the Python its target names (this bpy runs on this interpreter).
+    bpy_version = tuple(int(p) for p in importlib.metadata.version("bpy").split(".")[:3])
+    assert build_extension.target_for_blender(bpy_version).python == "{}.{}".format(*sys.version_info)
+
+
+def test_a_manifest_range_outside_a_target_is_refused(tmp_path: Path) -> None:
+    stage = tmp_path / "stage"
+    shutil.copytree(REPO / "addon", stage, ignore=shutil.ignore_patterns("__pycache__"))
+    manifest = stage / "blender_manifest.toml"
+    text = manifest.read_text().replace('blender_version_min = "4.2.0"', 'blender_version_min = "5.1.0"')
+    manifest.write_text(text)
+    parsed = tomllib.loads(manifest.read_text())
+    assert build_extension.targets_for(parsed) == [build_extension.TARGETS[1]]
+    with pytest.raises(build_extension.BuildError, match="does not meet"):
+        build_extension.set_blender_versions(stage, build_extension.TARGETS[0])
+
+
+def test_zip_names_say_blender_python_and_platform() -> None:
+    manifest = {"id": "blinn_phong_render", "version": "0.1.0"}
+    names = [build_extension.zip_name(manifest, t, "linux-x64") for t in build_extension.TARGETS]
+    assert names == [
+        "blinn_phong_render-0.1.0-blender4.2-5.0-python3.11-linux_x64.zip",
+        "blinn_phong_render-0.1.0-blender5.1+-python3.13-linux_x64.zip",
+    ]

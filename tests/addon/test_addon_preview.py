@@ -1,11 +1,14 @@
 """Material previews rendered by the engine (``bl_use_preview``) through Blender's own preview job.
 
-The bpy module renders previews in background mode through ``bpy.ops.wm.previews_ensure``; the
-preview images themselves are not readable there (``ImagePreview.image_size`` stays 0×0), so the
-frame the engine hands to Blender is captured at ``engine.render_converted``. Check: the Diffuse
-pass is ``kd · Σ (light colour · n·l)`` with white preview lights, so its red/green ratio on every
-lit pixel is the Base Color's, 0.8/0.1 = 8 (Principled → Blinn-Phong: ``kd = base_color`` for a
-dielectric; ``addon/mapping.py``).
+The bpy module renders previews in background mode through ``bpy.ops.wm.previews_ensure``, and
+the preview is readable afterwards: ``Material.preview.image_size`` is 128×128 and
+``image_pixels_float`` holds the displayed 8-bit image (checked with bpy 4.2.23, 4.5.15, 5.0.1 and
+5.2.3). The frame the engine hands to Blender is also captured at ``engine.render_converted``.
+Checks: the Diffuse pass is ``kd · Σ (light colour · n·l)`` with white preview lights, so its
+red/green ratio on every lit pixel is the Base Color's, 0.8/0.1 = 8 (Principled → Blinn-Phong:
+``kd = base_color`` for a dielectric; ``addon/mapping.py``); and the preview Blender stores is that
+frame through the scene's view transform, as Blender's own ``save_render`` to an 8-bit PNG
+displays it (within one 8-bit step), the right way up.
 """
 
 from __future__ import annotations
@@ -46,6 +49,19 @@ try:
     big = [f for f in frames if f[0] == (128, 128) and f[3]]
     np.save(sys.argv[1] + "/diffuse.npy", big[0][1])
     np.save(sys.argv[1] + "/rgba.npy", big[0][2])
+    # The stored preview (bottom row first) against Blender's display of the captured frame.
+    width, height = material.preview.image_size
+    preview = np.array(material.preview.image_pixels_float[:], np.float32).reshape(height, width, 4)
+    frame = bpy.data.images.new("frame", 128, 128, alpha=True, float_buffer=True)
+    frame.pixels.foreach_set(np.ascontiguousarray(big[-1][2][::-1]).ravel())
+    output = bpy.context.scene.render.image_settings
+    output.file_format, output.color_depth, output.color_mode = "PNG", "8", "RGBA"
+    frame.save_render(sys.argv[1] + "/displayed.png", scene=bpy.context.scene)
+    displayed = np.empty(128 * 128 * 4, np.float32)
+    bpy.data.images.load(sys.argv[1] + "/displayed.png").pixels.foreach_get(displayed)
+    displayed = displayed.reshape(128, 128, 4)
+    np.save(sys.argv[1] + "/preview.npy", preview)
+    np.save(sys.argv[1] + "/displayed.npy", displayed)
     emit({"sizes": sorted({tuple(f[0]) for f in frames}), "preview": {k: engine.LAST_PREVIEW.get(k)
           for k in ("ok", "error", "size")}, "engine": engine.LAST_PREVIEW["choices"]["engine"],
           "last_render": dict(engine.LAST_RENDER)})
@@ -70,3 +86,10 @@ finally:
     # Only pixels where the red object is the sole contributor: R/G = 8 exactly (float32 rounding).
     ratio = diffuse[..., 0][lit] / diffuse[..., 1][lit]
     assert np.count_nonzero(np.abs(ratio - 8.0) < 1e-4) > 500
+    # The preview Blender keeps is the engine's frame as displayed: equal to Blender's own view
+    # transform of the frame within one 8-bit step (rounding), and not upside down.
+    preview = np.load(tmp_path / "preview.npy")
+    displayed = np.load(tmp_path / "displayed.npy")
+    assert preview.shape == (128, 128, 4)
+    assert np.abs(preview - displayed).max() <= 1.0 / 255 + 1e-6
+    assert np.abs(preview - displayed[::-1]).max() > 0.1
