@@ -78,14 +78,21 @@ def _float_samples(x: object, name: str, shape_tail: tuple[int, ...], copy: bool
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         expected = "(N,)" if not shape_tail else f"(N, {', '.join(map(str, shape_tail))})"
         raise ValueError(f"{name}: expected shape {expected}, got {arr.shape}")
-    out = np.array(arr, dtype=np.float32, order="C", copy=copy)
-    if not np.isfinite(out).all():  # after rounding: a float64 beyond float32's range is refused too
-        n_nan = int(np.count_nonzero(np.isnan(out)))
-        n_inf = int(np.count_nonzero(np.isinf(out)))
-        raise ValueError(
-            f"{name}: expected finite float32 values; got {n_nan + n_inf} non-finite of {out.size} "
-            f"({n_nan} NaN, {n_inf} Inf{' after rounding to float32' if arr.dtype != np.float32 else ''})"
+
+    def nonfinite(values: np.ndarray, what: str) -> ValueError:
+        n_nan = int(np.count_nonzero(np.isnan(values)))
+        n_inf = int(np.count_nonzero(np.isinf(values)))
+        return ValueError(
+            f"{name}: expected finite values{what}; got {n_nan + n_inf} non-finite of {values.size} "
+            f"({n_nan} NaN, {n_inf} Inf)"
         )
+
+    if not np.isfinite(arr).all():
+        raise nonfinite(arr, "")
+    with np.errstate(over="ignore"):
+        out = np.array(arr, dtype=np.float32, order="C", copy=copy)
+    if not np.isfinite(out).all():
+        raise nonfinite(out, f" within float32's range (|x| < {float(np.finfo(np.float32).max):.4g})")
     return out
 
 
@@ -428,8 +435,9 @@ def holdout(image: DeepImage, mask: DeepImage) -> DeepImage:
     transmittance, so that ``flatten(holdout(image, mask))`` is exactly ``image``'s part of
     ``flatten(merge(image, mask))`` (colour and alpha) and
     ``flatten(holdout(a, b)) + flatten(holdout(b, a)) = flatten(merge(a, b))``. Samples
-    wholly behind an opaque ``mask`` sample disappear; with an empty ``mask`` pixel the result
-    is the tidy ``image`` pixel. The result is tidy.
+    that contribute nothing (all four channels 0) are dropped, and so is everything behind
+    the depth where the merged image becomes opaque; with an empty ``mask`` pixel the result
+    is otherwise the tidy ``image`` pixel. The result is tidy.
 
     Raises:
         TypeError: an argument is not a DeepImage.
