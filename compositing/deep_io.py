@@ -1,11 +1,11 @@
 """Deep OpenEXR files to and from :class:`compositing.deep.DeepImage`, through OpenImageIO's DeepData.
 
 * Writing: channels ``R, G, B, A, Z, ZBack`` (premultiplied linear RGBA, depth), one part,
-  scanline (default) or tiled, compression ``zips`` (default), ``rle`` or ``none`` — the
-  ones OpenEXR allows for deep data. RGBA is float32 or half (``float_format``); depth is
-  always float32. The file is written under a temporary name and renamed over the target
-  only after a successful close (:mod:`compositing._atomic`): a failed write leaves an
-  existing file intact.
+  scanline (default) or tiled, compression ``zips`` (default) or ``none`` (OpenImageIO
+  writes deep files with no other; OpenEXR would also allow ``rle``). RGBA is float32 or
+  half (``float_format``); depth is always float32. The file is written under a temporary
+  name and renamed over the target only after a successful close
+  (:mod:`compositing._atomic`): a failed write leaves an existing file intact.
 * Reading: channels are found by name as the OpenEXR deep document defines them: depth
   ``Z`` (required) and ``ZBack`` (OpenImageIO also accepts ``Zback``; missing: a copy of
   ``Z``, point samples), alpha ``A`` (required), colour ``R, G, B`` (or ``Y``, grey). Other
@@ -35,8 +35,8 @@ from .deep import DeepImage
 
 __all__ = ["COMPRESSIONS", "from_deepdata", "read_deep", "to_deepdata", "write_deep"]
 
-#: Compressions OpenEXR allows for deep data.
-COMPRESSIONS = ("zips", "rle", "none")
+#: Compressions OpenImageIO writes deep files with (it turns any other into zips).
+COMPRESSIONS = ("zips", "none")
 
 #: Channel names written, in file order.
 CHANNELS = ("R", "G", "B", "A", "Z", "ZBack")
@@ -196,7 +196,7 @@ def write_deep(
         image: the deep image.
         tiled: write tiles of ``tile_size × tile_size`` pixels instead of scanlines.
         tile_size: tile edge in pixels (≥ 1).
-        compression: ``"zips"``, ``"rle"`` or ``"none"``.
+        compression: ``"zips"`` or ``"none"``.
         float_format: ``"float"`` or ``"half"`` for RGBA (depth is float32).
         progress: called with the fraction of values handed to OpenImageIO.
 
@@ -210,7 +210,10 @@ def write_deep(
     if os.path.splitext(path)[1].lower() != ".exr":
         raise ValueError(f"path: deep images are written as OpenEXR; expected a .exr path, got {path!r}")
     if compression not in COMPRESSIONS:
-        raise ValueError(f"compression: expected one of {COMPRESSIONS} (deep OpenEXR), got {compression!r}")
+        raise ValueError(
+            f"compression: expected one of {COMPRESSIONS} (deep OpenEXR through OpenImageIO), "
+            f"got {compression!r}"
+        )
     if isinstance(tile_size, bool) or not isinstance(tile_size, int) or tile_size < 1:
         raise ValueError(f"tile_size: expected an integer >= 1, got {tile_size!r}")
     h, w = image.shape
