@@ -26,7 +26,9 @@ P. Hillman; openexr.com/en/latest/InterpretingDeepPixels.html), "the document" b
   ``flatten(merge(a, b))``, so ``flatten(holdout(a, b)) + flatten(holdout(b, a))`` equals
   ``flatten(merge(a, b))``.
 * :func:`crop`, :func:`from_flat` (a flat image as one sample per pixel at a depth),
-  :meth:`DeepImage.from_samples` (samples listed by pixel index, as a renderer's fragments).
+  :meth:`DeepImage.from_samples` (samples listed by pixel index), :func:`from_fragments`
+  (a renderer's fragments, supersampled or not: each subpixel's fragment enters its pixel
+  with weight 1/samples, the fragments of one surface in one pixel summed into one sample).
 
 Compiled kernels: :mod:`compositing._deep_kernels` (numba, cached on disk); a call runs
 ranges of pixels on the calling thread and the helper threads of :mod:`compositing._fused`.
@@ -49,7 +51,7 @@ from . import _deep_kernels as _k
 from ._fused import MIN_PIXELS_PER_THREAD, RANGES_PER_THREAD, THREADS, _pool
 from .validate import as_rgba
 
-__all__ = ["DeepImage", "crop", "flatten", "from_flat", "holdout", "merge", "tidy"]
+__all__ = ["DeepImage", "crop", "flatten", "from_flat", "from_fragments", "holdout", "merge", "tidy"]
 
 #: Samples per range below which a call runs on the calling thread only.
 _MIN_SAMPLES_PER_RANGE = 1 << 15
@@ -527,3 +529,63 @@ def from_flat(rgba: np.ndarray, z: float | np.ndarray, zback: float | np.ndarray
         img.reshape(-1, 4)[pixel],
         depth["zback"].reshape(-1)[pixel],
     )
+
+
+def from_fragments(
+    shape: tuple[int, int],
+    pixel: np.ndarray,
+    depth: np.ndarray,
+    rgba: np.ndarray,
+    *,
+    samples_per_pixel: int = 1,
+    surface: np.ndarray | None = None,
+) -> DeepImage:
+    """A deep image from a renderer's fragments (point samples), with supersampling coverage.
+
+    Args:
+        shape: ``(H, W)`` of the image.
+        pixel: ``(N,)`` flat index ``row·W + column`` of the pixel each fragment's subpixel
+            belongs to.
+        depth: ``(N,)`` fragment depth (≥ 0, nearer is smaller).
+        rgba: ``(N, 4)`` premultiplied RGBA of each fragment (as resolved for its subpixel).
+        samples_per_pixel: subpixels per pixel ``s``: a fragment covers ``1/s`` of its pixel.
+        surface: ``(N,)`` integer id of the surface (primitive, object) each fragment lies on,
+            or None to keep every fragment as its own sample.
+
+    Coverage: a subpixel's fragment enters its pixel with weight ``1/s``. Fragments of one
+    surface in one pixel are summed into one point sample (premultiplied RGBA
+    ``Σ rgba / s``, depth = the nearest of them), so a surface covering ``k`` of the ``s``
+    subpixels has alpha ``k/s·α``: the coverage adds, it is not merged as coincident samples
+    (which would make ``s`` quarter-covering copies of an opaque surface opaque). Flattening
+    then treats the coverage of different surfaces as uncorrelated: where two surfaces share
+    a pixel only in part, or change depth order inside it, the flat result differs from the
+    average of the subpixels' resolved colours (docs/compositing.md gives the bound).
+    """
+    if isinstance(samples_per_pixel, bool) or not isinstance(samples_per_pixel, int) or samples_per_pixel < 1:
+        raise ValueError(f"samples_per_pixel: expected an integer >= 1, got {samples_per_pixel!r}")
+    pix = np.asarray(pixel)
+    if pix.ndim != 1 or pix.dtype.kind not in "iu":
+        raise TypeError(f"pixel: expected a 1-D integer array, got {_describe(pix)}")
+    c = _float_samples(rgba, "rgba", (4,), copy=False).astype(np.float64)
+    d = _float_samples(depth, "depth", (), copy=False)
+    if not len(pix) == len(c) == len(d):
+        raise ValueError(
+            f"fragments: expected equal lengths, got pixel {len(pix)}, depth {len(d)}, rgba {len(c)}"
+        )
+    weight = 1.0 / samples_per_pixel
+    if surface is None:
+        return DeepImage.from_samples(shape, pix, d, c * weight)
+    surf = np.asarray(surface)
+    if surf.shape != pix.shape or surf.dtype.kind not in "iu":
+        raise TypeError(f"surface: expected an integer array of shape {pix.shape}, got {_describe(surf)}")
+    if not len(pix):
+        return DeepImage.from_samples(shape, pix, d, c)
+    keys, inverse = np.unique(
+        np.stack([pix.astype(np.int64), surf.astype(np.int64)]), axis=1, return_inverse=True
+    )
+    inverse = inverse.reshape(-1)
+    summed = np.zeros((keys.shape[1], 4))
+    np.add.at(summed, inverse, c * weight)
+    nearest = np.full(keys.shape[1], np.inf)
+    np.minimum.at(nearest, inverse, d)
+    return DeepImage.from_samples(shape, keys[0], nearest, summed)
