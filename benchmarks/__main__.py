@@ -39,6 +39,7 @@ MODULES = (
     "shadows_mesa",
     "frame",
     "planning",
+    "deep",
 )
 
 
@@ -85,6 +86,10 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_planning
 
         return lambda: bench_planning.run(out, repeat=repeat)
+    if name == "deep":
+        from benchmarks import bench_deep
+
+        return lambda: bench_deep.run(out, repeat=repeat, quick=quick)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
