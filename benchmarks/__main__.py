@@ -39,6 +39,7 @@ MODULES = (
     "shadows_mesa",
     "frame",
     "planning",
+    "compile",
 )
 
 
@@ -85,6 +86,11 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_planning
 
         return lambda: bench_planning.run(out, repeat=repeat)
+    if name == "compile":
+        from benchmarks import bench_compile
+
+        # every case in a fresh process with an empty kernel cache, then warm (about an hour)
+        return lambda: bench_compile.run(out)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
