@@ -18,12 +18,14 @@ sphere on a grey floor under a sun and a point light, unless stated):
 
 Measured per run, by the parent process: seconds from the process's start to its first image
 (the first ``blinn_phong.render`` returning; the first preview; the first output file of the
-batch) and to its exit, and the peak resident memory of the largest process of the run
-(``ru_maxrss`` from ``os.wait4``: the child's, or its largest reaped descendant's — the batch
-workers). Measured inside, with numba's ``numba:compile`` event
-(:func:`compositing._kernel_cache.compile_clock`): compile seconds per module of the compiled
-kernels (a kernel's own time; numba library functions it compiled count as its time). The
-batch's compile seconds are the sum over its frames of the engine's ``stats["compile"]``.
+batch) and to its exit, its CPU seconds (user + system, with its reaped descendants: the batch
+workers) and the peak resident memory of the largest process of the run (``ru_maxrss`` from
+``os.wait4``). Measured inside, with numba's ``numba:compile`` event
+(:func:`compositing._kernel_cache.compile_clock`): compile seconds, wall and the compiling
+thread's CPU, per module and per kernel (a kernel's own time; numba library functions it
+compiled count as its time). The batch's compile seconds are the sum over its frames of the
+engine's ``stats["compile"]``. On a shared machine the wall times stretch with the load; the
+CPU seconds much less.
 
 Usage::
 
@@ -133,7 +135,8 @@ with compile_clock() as log:
     exec(compile(source, "<case>", "exec"), {"__name__": "__case__"})
 print("__MARK__" + json.dumps({
     "first_image_at": first[0], "compile_s": log.seconds, "by_module": dict(log.by_module),
-    "compilations": log.compiled,
+    "compile_cpu_s": log.cpu_seconds, "cpu_by_module": dict(log.cpu_by_module),
+    "cpu_by_kernel": dict(log.cpu_by_kernel), "compilations": log.compiled,
 }), flush=True)
 """.replace("__MARK__", MARK)
 
@@ -169,7 +172,9 @@ try:
         bpy.ops.wm.previews_ensure()
     print("__MARK__" + json.dumps({
         "first_image_at": first[0], "compile_s": log.seconds, "by_module": dict(log.by_module),
-        "compilations": log.compiled, "previews": len(engine.PREVIEW_TIMES),
+        "compile_cpu_s": log.cpu_seconds, "cpu_by_module": dict(log.cpu_by_module),
+        "cpu_by_kernel": dict(log.cpu_by_kernel), "compilations": log.compiled,
+        "previews": len(engine.PREVIEW_TIMES),
         "ok": engine.LAST_PREVIEW.get("ok"),
     }), flush=True)
 finally:
@@ -227,6 +232,7 @@ def _measure(command: list[str], env: dict[str, str], cwd: Path, watch: Path | N
         "stdout": streams.get("out", ""),
         "stderr": streams.get("err", ""),
         "peak_rss_gb": usage.ru_maxrss * 1024 / 1e9,  # ru_maxrss is in KiB on Linux
+        "cpu_s": usage.ru_utime + usage.ru_stime,  # the process and its reaped descendants
     }
 
 
@@ -257,6 +263,7 @@ def run_case(name: str, cache: Path, scratch: Path, cases: dict[str, str], timeo
         return {
             "first_image_s": run["first_file_s"],
             "exit_s": run["wall_s"],
+            "cpu_s": run["cpu_s"],
             "peak_rss_gb": run["peak_rss_gb"],
             "compile_s": compile_s,
             "by_module": {},
@@ -273,12 +280,20 @@ def run_case(name: str, cache: Path, scratch: Path, cases: dict[str, str], timeo
         script.write_text(CHILD, encoding="utf-8")
         run = _measure([sys.executable, str(script), str(source)], env, scratch, None, timeout)
     child = _report(run)
+
+    def ranked(values: dict[str, float], top: int | None = None) -> dict[str, float]:
+        return {k: round(v, 3) for k, v in sorted(values.items(), key=lambda kv: -kv[1])[:top]}
+
     return {
         "first_image_s": child["first_image_at"] - run["started"],
         "exit_s": run["wall_s"],
+        "cpu_s": run["cpu_s"],
         "peak_rss_gb": run["peak_rss_gb"],
         "compile_s": child["compile_s"],
-        "by_module": {k: round(v, 3) for k, v in sorted(child["by_module"].items(), key=lambda kv: -kv[1])},
+        "compile_cpu_s": child["compile_cpu_s"],
+        "by_module": ranked(child["by_module"]),
+        "cpu_by_module": ranked(child["cpu_by_module"]),
+        "cpu_by_kernel_top": ranked(child["cpu_by_kernel"], 12),
         "compilations": child.get("compilations"),
     }
 
@@ -324,14 +339,16 @@ def table(data: dict) -> str:
     rows = []
     for name, row in data["cases"].items():
         cold, warm = row["cold"], row["warm"]
-        top = ", ".join(f"{m} {s:.0f}" for m, s in list(cold["by_module"].items())[:3])
+        by = cold.get("cpu_by_module") or cold["by_module"]
+        top = ", ".join(f"{m} {s:.0f}" for m, s in list(by.items())[:3])
         rows.append([
-            name, f"{cold['first_image_s']:.1f}", f"{cold['compile_s']:.1f}", f"{cold['peak_rss_gb']:.2f}",
+            name, f"{cold['first_image_s']:.1f}", f"{cold['cpu_s']:.0f}", f"{cold['compile_s']:.1f}",
+            f"{cold.get('compile_cpu_s', float('nan')):.1f}", f"{cold['peak_rss_gb']:.2f}",
             f"{warm['first_image_s']:.1f}", f"{warm['compile_s']:.2f}", f"{warm['peak_rss_gb']:.2f}", top,
         ])  # fmt: skip
     header = [
-        "case", "cold: first image s", "compile s", "peak GB", "warm: first image s", "compile s", "peak GB",
-        "cold compile s by module (top 3)",
+        "case", "cold: first image s", "CPU s", "compile s", "compile CPU s", "peak GB",
+        "warm: first image s", "compile s", "peak GB", "cold compile CPU s by module (top 3)",
     ]  # fmt: skip
     return markdown_table(header, rows)
 

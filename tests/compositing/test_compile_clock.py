@@ -53,6 +53,11 @@ def test_a_compilation_is_counted_once_with_its_callee() -> None:
     # the callee ran inside the caller's compilation: counted once, not added again
     assert log.seconds < held + 0.5 * _lock_seconds(callee)
     assert sum(log.by_module.values()) == pytest.approx(log.seconds)
+    # the compiling thread's CPU time: positive, never more than the wall time it took
+    assert 0 < log.cpu_seconds <= log.seconds + 0.01
+    assert sum(log.cpu_by_module.values()) == pytest.approx(log.cpu_seconds)
+    caller_name = f"{__name__}.{caller.py_func.__qualname__}"
+    assert set(log.by_kernel) == {caller_name}  # the non-project callee is part of its caller
 
     with compile_clock() as again:
         caller(np.arange(3.0))  # same signature: nothing compiles
