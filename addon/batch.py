@@ -752,7 +752,8 @@ def run_task(task: Task | dict) -> dict[str, Any]:
             raise RuntimeError(_trim(status.get("error") or error)) from None
         result["seconds"]["render"] = time.perf_counter() - t
         status = dict(_engine_module().LAST_RENDER)
-        result["render"] = {k: status.get(k) for k in ("ok", "error", "choices", "notes", "size")}
+        # stats: seconds per stage, and "compile" when the frame waited for kernels to compile
+        result["render"] = {k: status.get(k) for k in ("ok", "error", "choices", "notes", "size", "stats")}
         if not status.get("ok"):
             raise RuntimeError(_trim(status.get("error") or "the engine reported no successful render"))
         render = scene.render

@@ -40,6 +40,7 @@ MODULES = (
     "frame",
     "planning",
     "deep",
+    "compile",
 )
 
 
@@ -90,6 +91,11 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_deep
 
         return lambda: bench_deep.run(out, repeat=repeat, quick=quick)
+    if name == "compile":
+        from benchmarks import bench_compile
+
+        # every case in a fresh process with an empty kernel cache, then warm (about an hour)
+        return lambda: bench_compile.run(out)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 
