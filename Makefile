@@ -32,9 +32,11 @@ $(VENV)/.synced: $(LOCK) pyproject.toml
 setup: $(VENV)/.synced
 
 # The main job: render the bundled showcase with the Blender engine, composite it over the
-# bundled backplate with our core and with Blender's Alpha Over, print errors and timings.
+# bundled backplate with our core and with Blender's Alpha Over, print errors and timings;
+# then the deep-compositing pair (a sphere through a pane) as deep OpenEXR files.
 demo: setup
 	$(PY) -m addon.demo --out $(OUT)/demo
+	$(PY) -m compositing.deep_demo --out $(OUT)/demo/deep
 
 # Every compositing operator on the two bundled sample images.
 demo-compositing: setup

@@ -103,6 +103,8 @@ class RenderResult:
         stats: :class:`RenderStats`.
         plan: the :class:`~blinn_phong.planner.Plan` the render followed (``plan.reasons()``
             gives one line per decision; the caller's overrides say so).
+        deep: with ``render(..., deep=True)`` the frame's fragments as a
+            :class:`compositing.deep.DeepImage` (:mod:`blinn_phong.deep_output`), else None.
     """
 
     rgba: np.ndarray
@@ -111,6 +113,7 @@ class RenderResult:
     passes: dict[str, np.ndarray]
     stats: RenderStats
     plan: Plan | None = None
+    deep: object = None
 
 
 def render(
@@ -131,6 +134,7 @@ def render(
     fog: Fog | None = None,
     tolerance: float = 0.0,
     layers: int | None = None,
+    deep: bool = False,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
 
@@ -175,6 +179,9 @@ def render(
             :func:`blinn_phong.planner.plan` for the error each concern bounds).
         layers: layers for depth peeling, the name the plan's parameters use
             (``result.plan.transparency.params["layers"]``); same as ``peel_layers``.
+        deep: also return the frame's fragments as a deep image (``result.deep``, made by a
+            second pass of the stages, :func:`blinn_phong.deep_output.render_deep`); the plan's
+            transparency method must be ``a_buffer``, ``depth_peeling`` or ``zbuffer``.
 
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
@@ -250,4 +257,15 @@ def render(
     )
     report("done", 1.0)
     stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
-    return RenderResult(image.rgba, image.depth, image.normal, image.passes, stats, plan=the_plan)
+    deep_image = None
+    if deep:
+        from blinn_phong.deep_output import render_deep
+
+        deep_image = render_deep(
+            scene, width, height, shading=shading, samples=samples, gl_compat=gl_compat,
+            cull_backfaces=cull_backfaces, engine=engine, transparency=the_plan.transparency.method,
+            layers=the_plan.transparency.params.get("layers"), shadows=shadows, fog=fog, tolerance=tolerance,
+        )  # fmt: skip
+    return RenderResult(
+        image.rgba, image.depth, image.normal, image.passes, stats, plan=the_plan, deep=deep_image
+    )

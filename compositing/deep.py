@@ -92,7 +92,8 @@ def _float_samples(x: object, name: str, shape_tail: tuple[int, ...], copy: bool
     if not np.isfinite(arr).all():
         raise nonfinite(arr, "")
     with np.errstate(over="ignore"):
-        out = np.array(arr, dtype=np.float32, order="C", copy=copy)
+        # (numpy 2 reads copy=False as "never copy": ascontiguousarray copies only when needed)
+        out = np.array(arr, dtype=np.float32, order="C") if copy else np.ascontiguousarray(arr, np.float32)
     if not np.isfinite(out).all():
         raise nonfinite(out, f" within float32's range (|x| < {float(np.finfo(np.float32).max):.4g})")
     return out
