@@ -20,10 +20,13 @@ OUT ?= out
 
 .PHONY: extension extension-wheels test-extension scenes setup demo demo-compositing test test-blender lint bench bench-quick test-blender42 test-blender45 test-blender52 bench-preview clean
 
-$(VENV)/.synced: $(LOCK)
+# The pinned packages, then this checkout itself in editable mode (no dependencies: the lock has
+# them), so scripts in any directory import this checkout's packages with $(PY).
+$(VENV)/.synced: $(LOCK) pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet uv==0.13.8
 	$(UV) pip sync --quiet --compile-bytecode --python $(PY) $(LOCK)
+	$(UV) pip install --quiet --no-deps --python $(PY) --editable .
 	touch $@
 
 setup: $(VENV)/.synced

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import sys
 from types import ModuleType
 
 #: Sub-modules with their own ``register()``/``unregister()``, registered in this order and
@@ -28,34 +27,35 @@ def _submodules() -> list[ModuleType]:
     return [importlib.import_module(f".{name}", __name__) for name in SUBMODULES]
 
 
-def numba_cache_directory() -> str | None:
-    """Point numba's on-disk kernel cache at the extension's user directory and return it.
+def kernel_cache_directory() -> str | None:
+    """Point the compiled-kernel cache at the extension's user directory and return it.
 
-    numba caches compiled kernels next to their source file by default, so every install location
-    (and a read-only System repository) compiles again. Installed as an extension, the cache goes to
-    ``bpy.utils.extension_path_user(__package__, path="numba_cache")``, which survives Blender
-    sessions and upgrades of the extension: the kernels compile once per machine. Nothing changes
-    when ``NUMBA_CACHE_DIR`` is already set, or when this package is not an installed extension
-    (a plain import from the repository, a legacy add-on): then None is returned.
+    The project's numba kernels are cached once per user and machine
+    (``compositing/_kernel_cache.py``; ``$BLINN_PHONG_KERNEL_CACHE``, else the user's cache
+    directory). Installed as an extension, the cache goes to
+    ``bpy.utils.extension_path_user(__package__, path="kernels")`` instead — Blender's place for an
+    extension's own files, which survives Blender sessions and upgrades of the extension and goes
+    away with it — by setting ``BLINN_PHONG_KERNEL_CACHE`` before any kernel module is imported
+    (numba's own ``NUMBA_CACHE_DIR``, which every other add-on's numba code would follow, is left
+    alone). Nothing changes when ``BLINN_PHONG_KERNEL_CACHE`` is already set, or when this package
+    is not an installed extension (a plain import from the repository, a legacy add-on): then
+    None is returned.
     """
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    if os.environ.get("BLINN_PHONG_KERNEL_CACHE"):
         return None
     try:
         import bpy
 
-        path = bpy.utils.extension_path_user(__package__, path="numba_cache", create=True)
+        path = bpy.utils.extension_path_user(__package__, path="kernels", create=True)
     except (ImportError, ValueError):  # no bpy, or "The "package" does not name an extension"
         return None
-    os.environ["NUMBA_CACHE_DIR"] = path  # read when numba is first imported
-    config = sys.modules.get("numba.core.config")
-    if config is not None:  # numba already imported (by another add-on): its config is live
-        config.CACHE_DIR = path
+    os.environ["BLINN_PHONG_KERNEL_CACHE"] = path  # read each time a kernel is decorated
     return path
 
 
 def register() -> None:
-    """Register every sub-module in :data:`SUBMODULES` (after :func:`numba_cache_directory`)."""
-    numba_cache_directory()
+    """Register every sub-module in :data:`SUBMODULES` (after :func:`kernel_cache_directory`)."""
+    kernel_cache_directory()
     for module in _submodules():
         module.register()
 

@@ -18,21 +18,32 @@ With ``--background`` each frame is composited over an image or colour with any 
 ``compositing`` (``<output>_<operator>.exr`` linear and ``.png`` preview, next to the render);
 ``--verify`` runs the same composite through Blender's compositor (``addon.verify``) and compares.
 
-Every input is checked before the first render: files, frame ranges, operator, numbers, and the
-background's size against each file's render size. Every file is written to a temporary name in its
-directory and renamed over the target, so a failed or killed task never leaves a truncated file.
-``--skip-existing`` (Blender's Overwrite off, also taken from the file) renders only frames whose
-outputs are missing; ``--placeholders`` (Blender's Placeholders) marks frames in progress with an
-empty file. ``OUT/report.json`` lists every task, every file written, skipped frames, retries and
-warnings.
+Every input is checked before the first render: files, frame ranges (Blender's ±1,048,574),
+operator, numbers, the scheduler's address, every output folder (writable), and the background's
+size against each file's render size. Every file is written to a temporary name in its directory
+(carrying the job's id), read back whole (every part decoded, the render's size) and only then
+renamed over the target: a failed write — also one Blender only logs, such as a full disk — fails
+the task and keeps the previous file, and a killed task never leaves a truncated file. A job removes
+only its own temporary files, so jobs may share an output folder. ``--skip-existing`` (Blender's
+Overwrite off, also taken from the file) renders only frames whose outputs are not whole images;
+``--placeholders`` (Blender's Placeholders) marks frames in progress with an empty file. Each job
+writes its record to ``OUT/reports/<time>-<job>.json`` and to ``OUT/report.json`` (the last job to
+end): every task, every file written, files outside ``--out``, skipped frames, retries, warnings.
+
+Once the job has returned, no file it could write changes: every write holds a permit in the job's
+folder ``OUT/.batch-<job>``, which the job renames (so no permit can be taken) and empties at its
+end, after the writes under way have finished (see :func:`write_permit`).
 
 Parallelism: ``--workers N`` runs tasks in N worker processes, each with its own ``bpy``. A worker
 that dies (or exceeds ``--timeout``) is replaced by a fresh process and only its own task is
 retried, at most ``--retries`` times; healthy tasks are untouched and every attempt is in the
 report. ``--scheduler tcp://host:8786`` sends the tasks to a Dask distributed cluster whose workers
 have this repository and ``bpy`` installed and share the output storage (see ``docs/addon.md``);
-Dask reschedules the task of a lost worker itself. ``--dask-local N`` starts a Dask cluster of N
-workers on loopback. Under ``blender -P`` tasks run in the Blender process itself.
+it must answer within ``--connect-timeout`` seconds. Dask reschedules the task of a lost worker
+itself, as often as the scheduler's ``allowed-failures`` setting says (``--retries`` is refused with
+``--scheduler``); each result is released as soon as it arrives, so a worker lost later never makes
+the cluster render a finished frame again. ``--dask-local N`` starts a Dask cluster of N workers
+on loopback. Under ``blender -P`` tasks run in the Blender process itself.
 
 Exit codes (the same for ``python -m addon.verify``): 0 every task rendered and every verification
 stayed within ``--tolerance``; 1 a task or a check failed, or the job was interrupted (SIGINT,
@@ -44,13 +55,18 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
+import glob
 import json
 import math
 import os
 import re
+import shutil
 import signal
 import socket
+import stat
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -65,13 +81,20 @@ __all__ = [
     "EXIT_OK",
     "EXIT_USAGE",
     "FORMATS",
+    "MAX_FRAME",
+    "MIN_FRAME",
+    "JobClosed",
+    "SchedulerUnreachable",
     "Task",
     "UsageError",
     "atomic_target",
     "main",
     "parse_frames",
+    "read_back",
+    "readable",
     "run_task",
     "run_tasks",
+    "write_permit",
 ]
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -94,9 +117,35 @@ FORMATS: dict[str, tuple[str, ...]] = {
 #: copies): refuse backgrounds whose decoded size alone exceeds this many pixels.
 MAX_PIXELS = 1 << 26
 
+#: Blender's frame range (``MINAFRAME``/``MAXAFRAME`` in its source): ``Scene.frame_set`` clamps
+#: any frame outside it, so a file named after such a frame would hold another frame's image.
+MIN_FRAME, MAX_FRAME = -1_048_574, 1_048_574
+
+#: Seconds without a heartbeat (measured by the job) after which a write permit belongs to a lost
+#: process (see :func:`write_permit`); and the longest wait at the end of a job for writes under way.
+PERMIT_STALE_S = 5.0
+CLOSE_WAIT_S = 60.0
+
+#: Default ``--connect-timeout``: seconds to reach a ``--scheduler`` before giving up.
+CONNECT_TIMEOUT_S = 5.0
+
 
 class UsageError(ValueError):
     """A bad command-line input, found before anything ran; the message names the flag."""
+
+
+class JobClosed(RuntimeError):
+    """The job a task belongs to has ended: the task may not write anything any more."""
+
+
+class SchedulerUnreachable(OSError):
+    """``--scheduler`` did not answer within ``--connect-timeout``; nothing was rendered."""
+
+
+def _did_you_mean(value: str, names: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``names`` (difflib), or an empty string."""
+    close = difflib.get_close_matches(value, list(names), n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 @dataclass(frozen=True)
@@ -105,6 +154,9 @@ class Task:
 
     ``output`` is the absolute path of the render (resolved before the job starts);
     ``file_format``/``color_depth`` the image settings it is written with (None: the file's own).
+    ``job`` names the job (its temporary files carry it, so a job removes only its own);
+    ``attempt_dir`` is the job's folder on the output storage: each attempt leaves a marker there,
+    and every write needs it to exist (see :func:`write_permit`).
     """
 
     blend: str
@@ -121,6 +173,7 @@ class Task:
     placeholder: bool = False
     timeout: float | None = None
     attempt_dir: str | None = None
+    job: str = ""
 
     @property
     def stem(self) -> str:
@@ -149,7 +202,8 @@ def parse_frames(text: str) -> list[int]:
     """Frames from ``"1-5,7,10-12"`` (inclusive ranges), in the given order, without repeats.
 
     Raises:
-        ValueError: empty text, a malformed item or a range running backwards.
+        ValueError: empty text, a malformed item, a range running backwards, or a frame outside
+            Blender's range ``MIN_FRAME..MAX_FRAME`` (±1,048,574).
     """
     frames: list[int] = []
     seen: set[int] = set()
@@ -164,6 +218,11 @@ def parse_frames(text: str) -> list[int]:
             raise ValueError(f"frames: expected integers or ranges like '1-5', got {item!r}") from None
         if hi < lo:
             raise ValueError(f"frames: range {item!r} runs backwards")
+        for value in (lo, hi):
+            if not MIN_FRAME <= value <= MAX_FRAME:
+                raise ValueError(
+                    f"frames: {value} in {item!r} is outside Blender's frame range {MIN_FRAME}..{MAX_FRAME}"
+                )
         if hi - lo > 1_000_000:
             raise ValueError(f"frames: range {item!r} has more than a million frames")
         for f in range(lo, hi + 1):
@@ -217,24 +276,135 @@ def _background_image(spec: str, height: int, width: int) -> Any:
 # --------------------------------------------------------------------------- atomic files
 
 
+def temporary_prefix(target: str | os.PathLike, job: str = "") -> str:
+    """The start of every temporary name for ``target``: ``.<name>.<job>.`` (``.<name>.`` without a job).
+
+    Temporary names are ``<prefix><random>.part<ext>``; a job removes only names with its own prefix.
+    """
+    name = Path(target).name
+    return f".{name}.{job}." if job else f".{name}."
+
+
 @contextlib.contextmanager
-def atomic_target(target: str | os.PathLike) -> Iterator[Path]:
+def atomic_target(
+    target: str | os.PathLike, *, job: str = "", check: Callable[[Path], None] | None = None
+) -> Iterator[Path]:
     """Context manager: a temporary path in the target's directory, renamed over it on success.
 
-    :func:`compositing._atomic.atomic_path` (the project's one atomic writer) plus two things a
-    render job needs: the directory is created, and a writer that silently wrote nothing (an empty
-    temporary file) is an error rather than an empty output. The temporary name keeps the
-    extension (writers choose the format by it). On an exception the temporary file is removed
-    and the target is left as it was.
+    The same protocol as :func:`compositing._atomic.atomic_path` (the project's atomic writer: same
+    directory, same extension so writers choose the format by it, flushed to disk, ``os.replace``,
+    the old file's permission bits or ``0o666`` minus the umask), plus what a render job needs:
+
+    * the directory is created;
+    * the temporary name carries the job (``.<name>.<job>.<random>.part<ext>``), so that a job
+      cleaning up after its killed attempts never touches another job's file in progress;
+    * the written file must prove whole before it replaces anything: a writer that wrote nothing is
+      an error, and ``check`` (e.g. :func:`read_back`) runs on the temporary file; a writer that
+      failed without raising (Blender's ``save_render`` on a full disk) is caught there.
+
+    On any exception the temporary file is removed and the target is left exactly as it was.
+
+    Raises:
+        OSError: the directory cannot be written, nothing was written, or ``check`` found the file bad.
     """
-    from compositing._atomic import atomic_path
+    from compositing._atomic import _current_umask, _fsync
 
     path = Path(target)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        yield Path(tmp)
+    fd, name = tempfile.mkstemp(
+        prefix=temporary_prefix(path, job), suffix=f".part{path.suffix}", dir=path.parent
+    )
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        try:
+            mode = stat.S_IMODE(os.stat(path).st_mode)
+        except OSError:
+            mode = 0o666 & ~_current_umask()
+        os.chmod(tmp, mode)
+        yield tmp
         if os.path.getsize(tmp) == 0:
             raise OSError(f"nothing was written to the temporary file {tmp} for {path}")
+        if check is not None:
+            try:
+                check(tmp)
+            except OSError as error:
+                detail = str(error).replace(f"{tmp}: ", "")
+                raise OSError(
+                    f"the written file does not read back whole ({detail}); the disk may be full"
+                ) from None
+        _fsync(str(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+#: The last bytes of a TGA 2.0 file (Blender writes this footer): a cut-off file lacks them.
+_TGA_FOOTER = b"TRUEVISION-XFILE.\x00"
+
+
+def readable(path: str | os.PathLike) -> bool:
+    """Whether OpenImageIO has a reader for the file's extension (e.g. no JPEG 2000 in some builds)."""
+    import OpenImageIO as oiio  # noqa: N813
+
+    extensions = {
+        ext
+        for entry in oiio.get_string_attribute("extension_list").split(";")
+        for ext in entry.partition(":")[2].split(",")
+    }
+    return Path(path).suffix.lower().lstrip(".") in extensions
+
+
+def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> bool:
+    """Decode every pixel of every part of an image file; raise when it is not a whole image.
+
+    What proves a file whole: OpenImageIO opens it, every part (subimage: a multilayer EXR has one
+    per pass) decodes without an error — a cut-off EXR, PNG, BMP fails here, and a cut-off TIFF or
+    JPEG decodes with an error message, which counts as failing — each part is ``size``
+    (width, height) when given, and a TGA still ends with its footer.
+
+    Returns:
+        True when the file was checked; False (nothing checked) when OpenImageIO has no reader for
+        its format (see :func:`readable`).
+
+    Raises:
+        OSError: naming the file and what is wrong with it.
+    """
+    import OpenImageIO as oiio  # noqa: N813
+
+    path = Path(path)
+    if not readable(path):
+        return False
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(f"{path}: not a readable image ({oiio.geterror().strip() or 'unknown format'})")
+    try:
+        part = 0
+        while inp.seek_subimage(part, 0):
+            spec = inp.spec()
+            if size is not None and (spec.width, spec.height) != tuple(size):
+                raise OSError(
+                    f"{path}: part {part} is {spec.width}×{spec.height}, expected {size[0]}×{size[1]}"
+                )
+            pixels = inp.read_image(part, 0, 0, spec.nchannels, oiio.FLOAT)
+            error = inp.geterror().strip()
+            if pixels is None or error:
+                raise OSError(f"{path}: part {part} cannot be decoded ({error or 'no pixels'})")
+            part += 1
+        inp.geterror()  # seeking past the last part leaves a message; nothing is wrong
+        if part == 0:
+            raise OSError(f"{path}: holds no image")
+    finally:
+        inp.close()
+        oiio.geterror()
+    if path.suffix.lower() in (".tga", ".tpic"):
+        with open(path, "rb") as handle:
+            handle.seek(max(0, path.stat().st_size - len(_TGA_FOOTER)))
+            if handle.read() != _TGA_FOOTER:
+                raise OSError(f"{path}: cut off (no TGA footer)")
+    return True
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -243,6 +413,169 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     write(path, text)
+
+
+# --------------------------------------------------------------------------- the job's fence
+#
+# A job owns a folder on the output storage, ``OUT/.batch-<job>``. Every write of a task (its
+# placeholder, each output) holds a permit: a file ``write.<random>`` in that folder, created
+# through a handle on the folder and refreshed every second while the write lasts. At its end the
+# job renames the folder (one atomic step), so no permit can be taken any more, waits for the
+# permits still held (live writers finish their rename), and removes it. A task still running
+# somewhere on a cluster after that (Dask cannot interrupt a render) can write nothing: no file
+# under the outputs changes once the job has returned.
+
+
+_PERMITS_BY_HANDLE = hasattr(os, "O_DIRECTORY") and all(
+    f in os.supports_dir_fd for f in (os.open, os.utime, os.unlink)
+)
+
+
+def _job_dir_closed(directory: str | os.PathLike) -> Path:
+    """Where a job's folder goes when the job ends."""
+    return Path(f"{os.fspath(directory)}.closed")
+
+
+@contextlib.contextmanager
+def write_permit(task: Task) -> Iterator[None]:
+    """Hold the job's permit to write for as long as the block runs (no-op without ``attempt_dir``).
+
+    Raises:
+        JobClosed: the job has ended (its folder is gone or was renamed): nothing may be written.
+    """
+    directory = task.attempt_dir
+    if not directory:
+        yield
+        return
+    closed = f"the job has ended; {task.stem} writes nothing"
+    # Through a handle on the folder where the system allows (POSIX): the permit then follows the
+    # folder when the job renames it, and the job sees it there.
+    dir_fd: int | None = None
+    try:
+        if _PERMITS_BY_HANDLE:
+            dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+            reference = os.fstat(dir_fd)
+        else:
+            reference = os.stat(directory)
+    except OSError:
+        raise JobClosed(closed) from None
+    where = {"dir_fd": dir_fd} if dir_fd is not None else {}
+    name = f"write.{uuid.uuid4().hex}"
+    if dir_fd is None:
+        name = os.path.join(directory, name)
+    stop = threading.Event()
+    beat: threading.Thread | None = None
+    created = False
+    try:
+        try:
+            fd = os.open(name, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644, **where)
+        except FileNotFoundError:
+            raise JobClosed(closed) from None
+        created = True
+        try:
+            os.write(fd, json.dumps({"host": socket.gethostname(), "pid": os.getpid()}).encode())
+        finally:
+            os.close(fd)
+        try:  # the folder may have been renamed between opening it and creating the permit
+            still_open = os.path.samestat(os.stat(directory), reference)
+        except OSError:
+            still_open = False
+        if not still_open:
+            raise JobClosed(closed)
+
+        def heartbeat() -> None:
+            while not stop.wait(1.0):
+                with contextlib.suppress(OSError):
+                    os.utime(name, **where)
+
+        beat = threading.Thread(target=heartbeat, name="batch-permit", daemon=True)
+        beat.start()
+        yield
+    finally:
+        stop.set()
+        if beat is not None:
+            beat.join()
+        if created:
+            with contextlib.suppress(OSError):
+                os.unlink(name, **where)
+        if dir_fd is not None:
+            os.close(dir_fd)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class _Permits:
+    """The permits in a closed job folder, watched for signs of life.
+
+    A permit is live while its holder refreshes it: its modification time changes (every second)
+    within ``PERMIT_STALE_S`` seconds of this process's clock — measured here, so a cluster node's
+    clock being off does not matter. A permit of a process on this host that is gone is dead at once.
+    """
+
+    def __init__(self) -> None:
+        self.seen: dict[str, tuple[int, float]] = {}
+
+    def live(self, permit: Path) -> bool:
+        try:
+            mtime = permit.stat().st_mtime_ns
+            holder = json.loads(permit.read_text() or "{}")
+        except FileNotFoundError:
+            return False
+        except (OSError, ValueError):
+            return True  # being written
+        if holder.get("host") == socket.gethostname() and isinstance(holder.get("pid"), int):
+            if not _pid_alive(holder["pid"]):
+                return False
+        now = time.monotonic()
+        previous = self.seen.get(permit.name)
+        if previous is None or previous[0] != mtime:
+            self.seen[permit.name] = (mtime, now)
+            return True
+        return now - previous[1] <= PERMIT_STALE_S
+
+
+def close_job(directory: str | os.PathLike, wait: float = CLOSE_WAIT_S) -> tuple[Path | None, list[str]]:
+    """End a job: no task of it can write from now on; wait (at most ``wait`` s) for writes under way.
+
+    Returns the renamed folder (its attempt markers are still there; None if the folder was gone)
+    and warnings about writers that did not finish within ``wait``.
+    """
+    closed = _job_dir_closed(directory)
+    try:
+        os.rename(directory, closed)
+    except FileNotFoundError:
+        return None, []
+    deadline = time.monotonic() + wait
+    permits = _Permits()
+    while True:
+        live = [p for p in closed.glob("write.*") if permits.live(p)]
+        if not live or time.monotonic() >= deadline:
+            break
+        time.sleep(0.05)
+    warnings = []
+    for permit in live:
+        with contextlib.suppress(OSError):
+            warnings.append(
+                f"a write was still under way when the job ended ({permit.read_text(errors='replace')}): "
+                "its temporary file may be left next to its output"
+            )
+    return closed, warnings
+
+
+def _remove_job_dir(closed: Path | None) -> None:
+    if closed is not None:
+        shutil.rmtree(closed, ignore_errors=True)
+        if closed.exists():  # a late marker write raced the removal
+            time.sleep(0.1)
+            shutil.rmtree(closed, ignore_errors=True)
 
 
 # --------------------------------------------------------------------------- one task
@@ -277,18 +610,42 @@ def _trim(text: Any) -> str:
     return str(text).strip()
 
 
-def _record_attempt(task: Task) -> None:
-    """Leave a marker ``<attempt_dir>/<key>.<host>.<pid>`` (shared storage): who started the task."""
+def _marker(task: Task) -> Path:
+    return Path(task.attempt_dir) / f"{task.key}.{socket.gethostname()}.{os.getpid()}"  # type: ignore[arg-type]
+
+
+def _record_attempt(task: Task) -> bool:
+    """Leave a marker ``<attempt_dir>/<key>.<host>.<pid>`` (shared storage): who started the task.
+
+    Returns False when the job has ended (its folder is gone): the task must not run. The folder is
+    made by the job, never here.
+    """
     if not task.attempt_dir:
-        return
-    marker = Path(task.attempt_dir) / f"{task.key}.{socket.gethostname()}.{os.getpid()}"
+        return True
+    if not Path(task.attempt_dir).is_dir():
+        return False
     try:
-        marker.parent.mkdir(parents=True, exist_ok=True)
-        marker.write_text(
+        _marker(task).write_text(
             json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "start": time.time()})
         )
+    except FileNotFoundError:
+        return False
     except OSError:
         pass  # the record is informative; never fail a render for it
+    return True
+
+
+def _finish_attempt(task: Task, result: dict[str, Any]) -> None:
+    """Complete this attempt's marker with its end and outcome (so a finished attempt is never 'lost')."""
+    if not task.attempt_dir:
+        return
+    marker = _marker(task)
+    try:
+        record = json.loads(marker.read_text())
+        record.update(end=time.time(), outcome="ok" if result["ok"] else "failed")
+        marker.write_text(json.dumps(record))
+    except (OSError, ValueError):
+        pass  # the job has ended (folder renamed) or the marker is unreadable: informative only
 
 
 def _watchdog(task: Task) -> threading.Timer | None:
@@ -325,6 +682,10 @@ def run_task(task: Task | dict) -> dict[str, Any]:
 
     The result holds ``ok``, ``error`` (trimmed text), ``written`` (every file written, absolute
     paths), ``outputs`` by role, ``seconds`` per stage, ``warnings``, ``pid`` and ``host``.
+
+    Every file is written through :func:`atomic_target` under the job's :func:`write_permit` and
+    read back whole (:func:`read_back`) before it replaces anything; a write that fails — also one
+    that Blender only logs, such as a full disk — fails the task and keeps the previous file.
     """
     if isinstance(task, dict):
         task = Task(**task)
@@ -341,14 +702,17 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         "pid": os.getpid(),
         "host": socket.gethostname(),
     }
-    _record_attempt(task)
+    if not _record_attempt(task):
+        result["error"] = f"JobClosed: the job has ended before {task.stem} started; nothing was rendered"
+        result["seconds"]["total"] = time.perf_counter() - started
+        return result
     timer = _watchdog(task)
     registered_here: list[Any] = []
     placeholder: Path | None = None
     try:
         import bpy
 
-        from . import compat, engine, properties
+        from . import compat, engine, mapping, properties
 
         if _engine_module() is None:
             for module in (properties, engine):
@@ -359,6 +723,11 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         scene.render.engine = engine.ENGINE_ID
         scene.blinn_phong.abort_on_error = False
         scene.frame_set(task.frame)
+        if scene.frame_current != task.frame:  # Blender clamps to its frame range
+            raise ValueError(
+                f"frame {task.frame}: Blender set the scene to frame {scene.frame_current} instead "
+                f"(its frame range is {MIN_FRAME}..{MAX_FRAME}); nothing was written"
+            )
         settings = scene.render.image_settings
         if task.file_format:
             compat.set_image_format(settings, task.file_format, task.color_depth)
@@ -366,13 +735,14 @@ def run_task(task: Task | dict) -> dict[str, Any]:
             settings.color_depth = task.color_depth
         output = Path(task.output)
         if task.placeholder and not output.exists():
-            output.parent.mkdir(parents=True, exist_ok=True)
-            try:
-                fd = os.open(output, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
-                os.close(fd)
-                placeholder = output
-            except FileExistsError:
-                pass
+            with write_permit(task):
+                output.parent.mkdir(parents=True, exist_ok=True)
+                try:  # an ordinary empty file: 0o666 minus the umask, as the frame itself gets
+                    fd = os.open(output, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+                    os.close(fd)
+                    placeholder = output
+                except FileExistsError:
+                    pass
         t = time.perf_counter()
         _engine_module().LAST_RENDER.clear()  # no status of an earlier task in this worker
         try:
@@ -382,12 +752,28 @@ def run_task(task: Task | dict) -> dict[str, Any]:
             raise RuntimeError(_trim(status.get("error") or error)) from None
         result["seconds"]["render"] = time.perf_counter() - t
         status = dict(_engine_module().LAST_RENDER)
-        result["render"] = {k: status.get(k) for k in ("ok", "error", "choices", "notes", "size")}
+        # stats: seconds per stage, and "compile" when the frame waited for kernels to compile
+        result["render"] = {k: status.get(k) for k in ("ok", "error", "choices", "notes", "size", "stats")}
         if not status.get("ok"):
             raise RuntimeError(_trim(status.get("error") or "the engine reported no successful render"))
+        render = scene.render
+        size = mapping.render_size(render.resolution_x, render.resolution_y, render.resolution_percentage)
         render_result = bpy.data.images["Render Result"]
-        with atomic_target(output) as tmp:
-            render_result.save_render(filepath=str(tmp), scene=scene)
+        t = time.perf_counter()
+        try:
+            with (
+                write_permit(task),
+                atomic_target(output, job=task.job, check=lambda tmp: read_back(tmp, size)) as tmp,
+            ):
+                render_result.save_render(filepath=str(tmp), scene=scene)
+        except OSError as error:
+            raise OSError(f"writing {output} failed, the previous file is kept: {error}") from None
+        result["seconds"]["write"] = time.perf_counter() - t
+        if not readable(output):
+            result["warnings"].append(
+                f"{output.suffix} files cannot be read back here (OpenImageIO has no reader for them): "
+                "written without the check that the write succeeded"
+            )
         placeholder = None
         result["outputs"]["render"] = str(output)
         result["written"].append(str(output))
@@ -412,16 +798,18 @@ def run_task(task: Task | dict) -> dict[str, Any]:
             timer.cancel()
         if placeholder is not None:
             try:
-                if placeholder.stat().st_size == 0:
-                    placeholder.unlink()
-            except OSError:
-                pass
+                with write_permit(task):
+                    if placeholder.stat().st_size == 0:
+                        placeholder.unlink()
+            except (OSError, JobClosed):
+                pass  # the job has ended: its own clean-up removes placeholders
         for module in reversed(registered_here):
             try:
                 module.unregister()
             except Exception as error:
                 result.setdefault("cleanup_errors", []).append(repr(error))
         result["seconds"]["total"] = time.perf_counter() - started
+        _finish_attempt(task, result)
     return result
 
 
@@ -471,12 +859,17 @@ def _composite_and_verify(task: Task, rendered: Any, film_transparent: bool, res
             f"{task.stem}: --background with --operator {task.operator} does not change the image"
         )
     exr_path, png_path = task.composite_paths()
-    with atomic_target(exr_path) as tmp:
-        write_image(tmp, composited)
-    result["written"].append(exr_path)
-    with atomic_target(png_path) as tmp:
-        write_image(tmp, composited, clip=True)
-    result["written"].append(png_path)
+    size = (rendered.shape[1], rendered.shape[0])
+    for path, clip in ((exr_path, False), (png_path, True)):
+        try:
+            with (
+                write_permit(task),
+                atomic_target(path, job=task.job, check=lambda tmp: read_back(tmp, size)) as tmp,
+            ):
+                write_image(tmp, composited, clip=clip)
+        except OSError as error:
+            raise OSError(f"writing {path} failed, the previous file is kept: {error}") from None
+        result["written"].append(path)
     result["outputs"]["composite"] = exr_path
     result["outputs"]["preview"] = png_path
     if task.verify:
@@ -716,6 +1109,8 @@ def run_tasks(
     retries: int = 2,
     on_result: Callable[[dict[str, Any]], None] | None = None,
     note: Callable[[str], None] = lambda text: None,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
+    info: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Run tasks in this process, in ``workers`` processes, or on a Dask cluster; results in task order.
 
@@ -725,9 +1120,15 @@ def run_tasks(
         scheduler: a Dask scheduler address (``tcp://host:port``).
         dask_local: start a Dask cluster of this many workers on loopback.
         timeout: seconds per task before its worker is ended and the task retried.
-        retries: how many times a task whose worker was lost is run again.
+        retries: how many times a task whose worker was lost is run again (with ``scheduler`` the
+            scheduler's own ``distributed.scheduler.allowed-failures`` decides instead).
         on_result: called with each result as it arrives.
         note: receives one-line messages (retries) for the user.
+        connect_timeout: seconds allowed to reach ``scheduler``.
+        info: receives facts about the executor for the report.
+
+    Raises:
+        SchedulerUnreachable: ``scheduler`` did not answer within ``connect_timeout``.
     """
     payload = [asdict(t) for t in tasks]
     results: list[dict[str, Any] | None] = [None] * len(tasks)
@@ -738,7 +1139,7 @@ def run_tasks(
             on_result(result)
 
     if scheduler or dask_local:
-        _run_dask(payload, scheduler, dask_local, retries, finished)
+        _run_dask(payload, scheduler, dask_local, retries, finished, connect_timeout, info)
     elif workers > 1 or timeout:
         _run_pool(payload, workers, timeout, retries, finished, note)
     else:
@@ -765,7 +1166,12 @@ def _failure(item: dict[str, Any], error: BaseException) -> dict[str, Any]:
 
 
 def _attempts_from_markers(item: dict[str, Any], result: dict[str, Any]) -> list[dict[str, Any]]:
-    """Every attempt of a Dask task, from the markers its runs left in the shared attempt directory."""
+    """Every attempt of a Dask task, from the markers its runs left in the shared attempt directory.
+
+    An attempt whose marker records an end is reported with its own outcome; only one without an
+    end — its process was lost mid-task — is "worker lost before the task finished". The attempt
+    that produced ``result`` gets the result's outcome even if its end was not recorded yet.
+    """
     directory = item.get("attempt_dir")
     task = Task(**item)
     markers = []
@@ -779,9 +1185,92 @@ def _attempts_from_markers(item: dict[str, Any], result: dict[str, Any]) -> list
     attempts = []
     for marker in markers:
         final = marker.get("pid") == result.get("pid") and marker.get("host") == result.get("host")
-        outcome = ("ok" if result["ok"] else "failed") if final else "worker lost before the task finished"
+        if final:
+            outcome = "ok" if result["ok"] else "failed"
+        else:
+            outcome = marker.get("outcome") or "worker lost before the task finished"
         attempts.append({"pid": marker.get("pid"), "host": marker.get("host"), "outcome": outcome})
     return attempts
+
+
+_ADDRESS = re.compile(
+    r"^(?:(?P<scheme>[a-z][a-z0-9+.-]*)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[^:/\[\]]+):(?P<port>[^:/]*)$"
+)
+#: Dask's communication schemes that run over TCP (``ucx``/``inproc`` are not probed).
+_TCP_SCHEMES = ("tcp", "tls", "ws", "wss")
+
+
+def parse_scheduler(address: str) -> tuple[str, str, int]:
+    """``(scheme, host, port)`` of a Dask scheduler address such as ``tcp://host:8786``.
+
+    Raises:
+        ValueError: the address is not ``[scheme://]host:port`` with a port in 1..65535.
+    """
+    match = _ADDRESS.match(address.strip())
+    if match is None:
+        raise ValueError(f"expected an address like tcp://host:8786, got {address!r}")
+    scheme = match["scheme"] or "tcp"
+    if scheme not in (*_TCP_SCHEMES, "ucx"):
+        raise ValueError(
+            f"expected the scheme tcp://, tls://, ws://, wss:// or ucx://, got {scheme!r} in {address!r}"
+        )
+    port = match["port"]
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"expected a port number in 1..65535 after the host, got {port!r} in {address!r}")
+    return scheme, match["host"].strip("[]"), int(port)
+
+
+def probe_scheduler(address: str, timeout: float) -> None:
+    """Reach the Dask scheduler at ``address`` within ``timeout`` seconds (TCP, then Dask's handshake).
+
+    Raises:
+        SchedulerUnreachable: naming the address, the time allowed and the reason.
+    """
+    scheme, host, port = parse_scheduler(address)
+    if scheme in _TCP_SCHEMES:
+        try:
+            with socket.create_connection((host, port), timeout=timeout):
+                pass
+        except OSError as error:
+            reason = "no answer" if isinstance(error, TimeoutError) else (error.strerror or str(error))
+            raise SchedulerUnreachable(
+                f"--scheduler: cannot connect to {address} within {timeout:g} s ({reason}); is "
+                "`dask scheduler` running there? (--connect-timeout sets the time allowed)"
+            ) from None
+    # Dask's own handshake, bounded here: Client() and comm.connect() wait forever on a server that
+    # accepts the connection and never answers.
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def handshake() -> None:
+        comm = await asyncio.wait_for(connect(address), timeout)
+        await comm.close()
+
+    try:
+        asyncio.run(handshake())
+    except (OSError, TimeoutError) as error:
+        reason = _trim(error).splitlines()[0] if str(error).strip() else "no Dask handshake"
+        raise SchedulerUnreachable(
+            f"--scheduler: {address} did not answer as a Dask scheduler within {timeout:g} s ({reason})"
+        ) from None
+
+
+def _connect(address: str, timeout: float) -> Any:
+    """A Dask client of the scheduler at ``address``.
+
+    Raises:
+        SchedulerUnreachable: no Dask scheduler answered within ``timeout`` seconds.
+    """
+    from distributed import Client
+
+    try:
+        return Client(address, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as error:
+        reason = _trim(error).splitlines()[0] if str(error).strip() else type(error).__name__
+        raise SchedulerUnreachable(
+            f"--scheduler: {address} did not answer as a Dask scheduler within {timeout:g} s ({reason})"
+        ) from None
 
 
 def _run_dask(
@@ -790,7 +1279,16 @@ def _run_dask(
     local_workers: int,
     retries: int,
     finished: Callable[[int, dict[str, Any]], None],
+    connect_timeout: float = CONNECT_TIMEOUT_S,
+    info: dict[str, Any] | None = None,
 ) -> None:
+    """Run the tasks on a Dask cluster; each result is released as soon as it has arrived.
+
+    A finished task's result (its file is written and read back by then) is released at once, so
+    the scheduler forgets it: a worker lost later cannot make it compute the frame again. Whatever
+    has not finished is cancelled before returning. ``info`` receives facts for the report
+    (the scheduler's ``allowed-failures``).
+    """
     import dask
     from distributed import Client, LocalCluster, as_completed
 
@@ -807,18 +1305,37 @@ def _run_dask(
                 dashboard_address=None,
             )
     try:
-        with Client(scheduler or cluster) as client:
+        client = _connect(scheduler, connect_timeout) if scheduler else Client(cluster)
+        with client:
+            if info is not None:
+
+                def allowed_failures(dask_scheduler: Any = None) -> int:  # runs on the scheduler
+                    return int(dask_scheduler.allowed_failures)
+
+                with contextlib.suppress(Exception):  # informative only
+                    info["allowed_failures"] = client.run_on_scheduler(allowed_failures)
             keys = [f"batch-{Task(**item).key}-{uuid.uuid4().hex[:6]}" for item in payload]
             futures = client.map(run_task, payload, key=keys, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
-            for future in as_completed(futures):
-                i = index[future.key]
-                try:
-                    result = future.result()
-                except Exception as error:
-                    result = _failure(payload[i], error)
-                result["attempts"] = _attempts_from_markers(payload[i], result)
-                finished(i, result)
+            live = {f.key: f for f in futures}
+            arriving = as_completed(futures, loop=client.loop)
+            del futures
+            try:
+                for future in arriving:
+                    i = index[future.key]
+                    try:
+                        result = future.result()
+                    except Exception as error:
+                        result = _failure(payload[i], error)
+                    # Release the result now: a finished frame is never computed again.
+                    live.pop(future.key, None)
+                    future.release()
+                    result["attempts"] = _attempts_from_markers(payload[i], result)
+                    finished(i, result)
+            finally:
+                if live:
+                    client.cancel(list(live.values()), force=True)
+                    live.clear()
     finally:
         if cluster is not None:
             cluster.close()
@@ -851,8 +1368,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--format",
         type=str.upper,
-        choices=sorted(FORMATS),
-        help="file format instead of the file's own (OPEN_EXR_MULTILAYER: every pass)",
+        metavar="FORMAT",
+        help=f"file format instead of the file's own: {', '.join(sorted(FORMATS))} "
+        "(OPEN_EXR_MULTILAYER: every pass)",
     )
     parser.add_argument("--color-depth", choices=("8", "16", "32"), help="colour depth instead of the file's")
     parser.add_argument("--background", help="composite over this image (render size) or colour 'r,g,b[,a]'")
@@ -883,9 +1401,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--timeout", type=float, help="seconds per task before its worker is ended and retried"
     )
     parser.add_argument(
-        "--retries", type=int, default=2, help="retries of a task whose worker was lost (default 2)"
+        "--retries",
+        type=int,
+        default=None,
+        help="retries of a task whose worker was lost (default 2), with --workers/--timeout and "
+        "--dask-local; refused with --scheduler, where the scheduler's own "
+        "distributed.scheduler.allowed-failures setting decides (set it where the scheduler starts)",
     )
     parser.add_argument("--scheduler", help="Dask distributed scheduler address, e.g. tcp://host:8786")
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=CONNECT_TIMEOUT_S,
+        metavar="S",
+        help=f"seconds allowed to reach --scheduler (default {CONNECT_TIMEOUT_S:g})",
+    )
     parser.add_argument(
         "--dask-local",
         type=int,
@@ -956,25 +1486,45 @@ def check_arguments(args: argparse.Namespace, blends: Sequence[str]) -> list[int
             problems.append(f"--frames: {str(error).removeprefix('frames: ')}")
     check(
         args.operator in ALL_OPERATORS,
-        f"--operator: expected one of {', '.join(ALL_OPERATORS)}; got {args.operator!r}",
+        f"--operator: expected one of {', '.join(ALL_OPERATORS)}; got {args.operator!r}"
+        + _did_you_mean(str(args.operator), ALL_OPERATORS),
     )
+    if args.format is not None and args.format not in FORMATS:
+        problems.append(
+            f"--format: expected one of {', '.join(sorted(FORMATS))}; got {args.format!r}"
+            + _did_you_mean(args.format, FORMATS)
+        )
+        args.format = None
     check(
         math.isfinite(args.tolerance) and args.tolerance >= 0,
         f"--tolerance: expected a finite number >= 0, got {args.tolerance!r}",
     )
     check(args.workers >= 1, f"--workers: expected an integer >= 1, got {args.workers}")
     check(args.dask_local >= 0, f"--dask-local: expected an integer >= 0, got {args.dask_local}")
-    check(args.retries >= 0, f"--retries: expected an integer >= 0, got {args.retries}")
+    check(
+        args.retries is None or args.retries >= 0, f"--retries: expected an integer >= 0, got {args.retries}"
+    )
+    check(
+        math.isfinite(args.connect_timeout) and args.connect_timeout > 0,
+        f"--connect-timeout: expected seconds > 0, got {args.connect_timeout!r}",
+    )
     check(
         args.timeout is None or (math.isfinite(args.timeout) and args.timeout > 0),
         f"--timeout: expected seconds > 0, got {args.timeout!r}",
     )
     check(not (args.scheduler and args.dask_local), "--scheduler and --dask-local: give one, not both")
     if args.scheduler:
-        check(
-            "://" in args.scheduler or ":" in args.scheduler,
-            f"--scheduler: expected an address like tcp://host:8786, got {args.scheduler!r}",
-        )
+        try:
+            parse_scheduler(args.scheduler)
+        except ValueError as error:
+            problems.append(f"--scheduler: {error}")
+        if args.retries is not None:
+            problems.append(
+                "--retries: not with --scheduler: there the scheduler decides how often a lost worker's "
+                "task runs again, by its distributed.scheduler.allowed-failures setting (e.g. "
+                "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=0 dask scheduler ...); --retries applies "
+                "to --workers, --timeout and --dask-local"
+            )
     if args.verify and not args.background:
         problems.append("--verify: needs --background (without a composite there is nothing to verify)")
     if args.format and args.color_depth:
@@ -1066,18 +1616,53 @@ class Plan:
     tasks: list[Task]
     skipped: list[dict[str, Any]]
     warnings: list[str]
+    job: str = ""
+    attempt_dir: str | None = None
+    outside_out: list[str] = field(default_factory=list)
+
+
+@contextlib.contextmanager
+def _engine_registered() -> Iterator[None]:
+    """The engine and its settings registered for the block (unless they already are).
+
+    Files saved with the Blinn-Phong engine name it in their scene; opening one without it makes
+    Blender log "Engine 'BLINN_PHONG' not available" and drop its settings. A RenderEngine left
+    registered at exit crashes bpy 4.2, so what is registered here is unregistered after.
+    """
+    from . import engine, properties
+
+    registered: list[Any] = []
+    try:
+        if _engine_module() is None:
+            for module in (properties, engine):
+                module.register()
+                registered.append(module)
+        yield
+    finally:
+        for module in reversed(registered):
+            with contextlib.suppress(Exception):
+                module.unregister()
 
 
 def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] | None) -> Plan:
     """Open every file once (``bpy``) and resolve each task's outputs; check what needs the file.
 
     Checks: the background's size against each file's render size; that no two tasks write the
-    same file; that each file's format accepts the colour depth. Warns when a requested composite
-    cannot change the image (Film → Transparent off with an operator an opaque source decides).
+    same file; that every output folder can be created and written; that each file's format
+    accepts the colour depth. With ``--skip-existing`` a frame counts as done only when each of its
+    outputs is a whole image of the render's size (:func:`read_back`). Warns when a requested
+    composite cannot change the image (Film → Transparent off with an operator an opaque source
+    decides) and when ``--output-pattern`` leads outside ``--out`` (such paths are listed in
+    ``Plan.outside_out``).
 
     Raises:
         UsageError: naming the flag or file.
     """
+    with _engine_registered():
+        return _plan_job(args, blends, frames)
+
+
+def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] | None) -> Plan:
     import bpy
     import numpy as np
 
@@ -1105,8 +1690,13 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
             check_alpha_range(read_image(args.background), "pixels")
         except (OSError, ValueError) as error:
             problems.append(f"--background: {args.background}: {error}")
-    # Each attempt leaves a marker here (shared storage on a cluster): who ran what, for the report.
-    attempt_dir = str(out_dir / f".batch-attempts-{uuid.uuid4().hex[:8]}")
+    # The job's folder (shared storage on a cluster): each attempt leaves a marker there, for the
+    # report, and every write needs it (write_permit); the job removes it when it ends.
+    job = uuid.uuid4().hex[:12]
+    attempt_dir = str(out_dir / f".batch-{job}")
+    outside_out: list[str] = []
+    checked_dirs: dict[Path, str | None] = {}
+    planned: list[tuple[Task, tuple[int, int] | None]] = []  # each task, and its size if it may be skipped
     # An opaque source decides the result of these operators: the composite equals the render.
     opaque = np.array([[[0.25, 0.5, 0.75, 1.0]]], np.float32)
     probe_bg = np.array([[[0.1, 0.7, 0.3, 0.6]]], np.float32)
@@ -1174,6 +1764,7 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
                 placeholder=placeholder,
                 timeout=args.timeout,
                 attempt_dir=attempt_dir,
+                job=job,
             )
             name = f"{blend} frame {frame}"
             for target in task.outputs():
@@ -1182,10 +1773,17 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
                 owners[target] = name
                 if Path(target).is_dir():
                     problems.append(f"{name}: its output {target} is a directory")
-            if skip and all(_complete(p) for p in task.outputs()):
-                skipped.append({"blend": str(path), "frame": frame, "outputs": task.outputs()})
-                continue
-            tasks.append(task)
+                folder = Path(target).parent
+                if folder not in checked_dirs:
+                    try:
+                        _check_writable_dir(folder, source)
+                        checked_dirs[folder] = None
+                    except UsageError as error:
+                        checked_dirs[folder] = str(error)
+                        problems.append(str(error))
+                if not Path(target).is_relative_to(out_dir):
+                    outside_out.append(target)
+            planned.append((task, size if skip else None))
     if any("both write" in p for p in problems):
         problems.append(
             "give each file its own output path (render.filepath in the file, or --output-pattern "
@@ -1193,25 +1791,70 @@ def plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int] 
         )
     if problems:
         raise UsageError("\n  ".join(problems))
+    # --skip-existing: decode the outputs that exist (in threads: OpenImageIO decodes without the GIL).
+    from concurrent.futures import ThreadPoolExecutor
+
+    checks = [(task.outputs(), size) for task, size in planned if size is not None]
+    with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
+        verdicts = iter(list(pool.map(lambda check: _incomplete(*check), checks)))
+    for task, size in planned:
+        if size is not None:
+            missing = next(verdicts)
+            if not missing:
+                skipped.append({"blend": task.blend, "frame": task.frame, "outputs": task.outputs()})
+                continue
+            for target, why in missing:
+                if why:  # a file is there but is not a whole image: rendered again
+                    warnings.append(
+                        f"{target} is not a whole image ({why}); rendering frame {task.frame} again"
+                    )
+        tasks.append(task)
+    if args.output_pattern is not None and outside_out:
+        warnings.append(
+            f"--output-pattern {args.output_pattern!r} writes {len(outside_out)} file(s) outside --out "
+            f"{out_dir} (e.g. {outside_out[0]}); the report lists them under 'outside_out'"
+        )
     bpy.ops.wm.read_homefile(use_empty=True)
-    return Plan(tasks, skipped, warnings)
+    return Plan(tasks, skipped, warnings, job, attempt_dir, outside_out)
 
 
-def _complete(path: str) -> bool:
-    """An output counts as done when it exists and is not an empty placeholder."""
-    try:
-        return Path(path).stat().st_size > 0
-    except OSError:
-        return False
+def _incomplete(paths: Iterable[str], size: tuple[int, int]) -> list[tuple[str, str]]:
+    """The outputs that are not done, each with why a file that is there is not whole ('' if absent).
+
+    An output is done when it decodes whole at the render's size (:func:`read_back`); an empty
+    placeholder, a cut-off file (a full disk, a killed writer of another program) or a file of
+    another size is not.
+    """
+    missing = []
+    for path in paths:
+        try:
+            if Path(path).stat().st_size == 0:
+                missing.append((path, ""))
+                continue
+        except OSError:
+            missing.append((path, ""))
+            continue
+        try:
+            read_back(path, size)
+        except OSError as error:
+            missing.append((path, _trim(error).removeprefix(f"{path}: ")))
+    return missing
 
 
 def _cleanup_temporaries(tasks: Iterable[Task]) -> None:
-    """Remove temporary files a killed attempt left next to the outputs (never the outputs)."""
+    """Remove the temporary files this job's killed attempts left next to the outputs.
+
+    Only names with the job's own prefix (``.<name>.<job>.*.part<ext>``, see :func:`atomic_target`)
+    are removed: never an output, never another job's file in progress.
+    """
     for task in tasks:
+        if not task.job:
+            continue
         for target in task.outputs():
             target_path = Path(target)
-            # atomic_target's temporaries: ``.<name>.<random>.part<ext>`` (compositing._atomic)
-            for stale in target_path.parent.glob(f".{target_path.name}.*.part{target_path.suffix}"):
+            prefix = temporary_prefix(target_path, task.job)
+            pattern = f"{glob.escape(prefix)}*.part{glob.escape(target_path.suffix)}"
+            for stale in target_path.parent.glob(pattern):
                 try:
                     stale.unlink()
                 except OSError:
@@ -1252,6 +1895,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         frames = check_arguments(args, blends)
         if frames is None and current_frame is not None and not args.blend:
             frames = [current_frame]
+    except UsageError as error:
+        parser.error(str(error))
+    retries = 2 if args.retries is None else args.retries
+    executor = (
+        "dask"
+        if (args.scheduler or args.dask_local)
+        else (f"{args.workers} process(es)" if args.workers > 1 or args.timeout else "this process")
+    )
+    started = time.perf_counter()
+    if args.scheduler:  # before opening any file: an unreachable cluster is known in seconds
+        try:
+            probe_scheduler(args.scheduler, args.connect_timeout)
+        except SchedulerUnreachable as error:
+            return _unreachable(args, error, executor, started)
+    try:
         plan = plan_job(args, blends, frames)
     except UsageError as error:
         parser.error(str(error))
@@ -1260,7 +1918,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"warning: {warning}", file=sys.stderr, flush=True)
     for item in plan.skipped:
         progress.note(f"{Path(item['blend']).name} frame {item['frame']}: skipped (outputs exist)")
-    started = time.perf_counter()
     arrived: list[dict[str, Any]] = []
 
     def on_result(result: dict[str, Any]) -> None:
@@ -1268,6 +1925,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         progress.update(result)
 
     interrupted = None
+    error_text = None
+    info: dict[str, Any] = {}
+    closing_warnings: list[str] = []
+    if plan.tasks and plan.attempt_dir:
+        Path(plan.attempt_dir).mkdir(parents=True, exist_ok=True)
     previous = _on_sigterm_raise()
     try:
         results = run_tasks(
@@ -1276,27 +1938,30 @@ def main(argv: Sequence[str] | None = None) -> int:
             scheduler=args.scheduler,
             dask_local=args.dask_local,
             timeout=args.timeout,
-            retries=args.retries,
+            retries=retries,
             on_result=on_result,
             note=progress.note,
+            connect_timeout=args.connect_timeout,
+            info=info,
         )
     except (KeyboardInterrupt, _Terminated) as stop:
         # Ctrl-C or a farm manager's SIGTERM: stop the workers, keep what finished, say so.
         interrupted = "SIGINT" if isinstance(stop, KeyboardInterrupt) else "SIGTERM"
         results = list(arrived)
+    except SchedulerUnreachable as error:
+        error_text = str(error)
+        results = list(arrived)
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
         progress.close()
+        # The job ends here: from now on no task of it can write (see write_permit), then what its
+        # lost attempts left behind is removed.
+        closed = None
+        if plan.attempt_dir:
+            closed, closing_warnings = close_job(plan.attempt_dir)
         _cleanup_temporaries(plan.tasks)
-        attempt_dir = plan.tasks[0].attempt_dir if plan.tasks else None
-        if attempt_dir and Path(attempt_dir).is_dir():
-            for marker in Path(attempt_dir).iterdir():
-                marker.unlink(missing_ok=True)
-            try:
-                Path(attempt_dir).rmdir()
-            except OSError:
-                pass
+        _remove_job_dir(closed)
     failed = [r for r in results if not r["ok"]]
     finished_ok = {r["task"]["output"] for r in results if r["ok"]}
     for task in plan.tasks:  # placeholders of tasks that failed, were killed or never finished
@@ -1311,17 +1976,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings = list(plan.warnings)
     for result in results:
         result["error"] = _trim(result["error"]) if result["error"] else None
-        for warning in result.get("warnings", []):
+        for warning in [*result.get("warnings", []), *closing_warnings]:
             if warning not in warnings:
                 warnings.append(warning)
                 print(f"warning: {warning}", file=sys.stderr, flush=True)
     written = [path for r in results for path in r.get("written", [])]
     retried = [r for r in results if len(r.get("attempts", [])) > 1]
     report = {
+        "job": plan.job,
         "tasks": results,
         "failed": len(failed),
         "total": len(results),
         "written": written,
+        "outside_out": plan.outside_out,
         "skipped": plan.skipped,
         "retried": [
             {"blend": r["task"]["blend"], "frame": r["task"]["frame"], "attempts": r["attempts"]}
@@ -1329,20 +1996,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         ],
         "warnings": warnings,
         "seconds": time.perf_counter() - started,
-        "executor": "dask"
-        if (args.scheduler or args.dask_local)
-        else (f"{args.workers} process(es)" if args.workers > 1 or args.timeout else "this process"),
+        "executor": executor,
+        **info,
     }
-    code = EXIT_OK if not failed and len(results) == len(plan.tasks) else EXIT_FAILED
+    code = EXIT_OK if not failed and len(results) == len(plan.tasks) and not error_text else EXIT_FAILED
     report["exit_code"] = code
     report["interrupted"] = interrupted
+    report["error"] = error_text
     if interrupted:
         print(
             f"interrupted ({interrupted}): {len(plan.tasks) - len(results)} task(s) not finished",
             file=sys.stderr,
         )
-    report_path = (args.report or args.out / "report.json").resolve()
-    write_text_atomic(report_path, json.dumps(report, indent=1, default=str))
+    if error_text:
+        print(f"error: {error_text}", file=sys.stderr)
+    report_path = _write_reports(args, report)
     if not args.quiet:
         for path in written:
             print(f"wrote {path}")
@@ -1352,6 +2020,46 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{len(retried)} retried in {report['seconds']:.1f} s; report: {report_path}"
     )
     return code
+
+
+def _write_reports(args: argparse.Namespace, report: dict[str, Any]) -> Path:
+    """Write the job's record ``OUT/reports/<time>-<job>.json``, then ``--report`` (``OUT/report.json``).
+
+    Jobs sharing an ``--out`` each keep their own record; ``report.json`` is the last job to end
+    (each file is written atomically, so it is always one whole report). Returns ``report.json``'s path.
+    """
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime())
+    own = (args.out / "reports" / f"{stamp}-{report['job'] or uuid.uuid4().hex[:12]}.json").resolve()
+    report["job_report"] = str(own)
+    text = json.dumps(report, indent=1, default=str)
+    write_text_atomic(own, text)
+    report_path = (args.report or args.out / "report.json").resolve()
+    write_text_atomic(report_path, text)
+    return report_path
+
+
+def _unreachable(args: argparse.Namespace, error: SchedulerUnreachable, executor: str, started: float) -> int:
+    """``--scheduler`` cannot be reached: say so in one line and in the report; nothing was rendered."""
+    print(f"error: {error}", file=sys.stderr)
+    report = {
+        "job": "",
+        "tasks": [],
+        "failed": 0,
+        "total": 0,
+        "written": [],
+        "outside_out": [],
+        "skipped": [],
+        "retried": [],
+        "warnings": [],
+        "seconds": time.perf_counter() - started,
+        "executor": executor,
+        "exit_code": EXIT_FAILED,
+        "interrupted": None,
+        "error": str(error),
+    }
+    report_path = _write_reports(args, report)
+    print(f"nothing rendered; report: {report_path}")
+    return EXIT_FAILED
 
 
 if __name__ == "__main__":

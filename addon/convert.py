@@ -502,6 +502,7 @@ def scene_from_depsgraph(
     shadow_objects = 0
     if geometry_cache is None:
         geometry_cache = {}
+    texture_cache: dict = {}  # one Texture per image and settings, however many objects use it
 
     for instance in depsgraph.object_instances:
         obj = instance.object
@@ -553,7 +554,7 @@ def scene_from_depsgraph(
             try:
                 material, extra, material_notes = material_from_blender(blender_material)
                 material, uv = textures.textured_material(
-                    material, blender_material, material_notes, uvs
+                    material, blender_material, material_notes, uvs, texture_cache
                 )  # image textures (addon/textures.py)
             except (ValueError, TypeError) as error:
                 failed = (

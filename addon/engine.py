@@ -37,6 +37,7 @@ import bpy
 import numpy as np
 
 from compositing import composite
+from compositing._kernel_cache import compile_clock
 
 from . import convert, mapping, options, pipeline
 
@@ -114,28 +115,33 @@ def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
 def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> pipeline.FrameResult:
     """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``).
 
-    The compiled kernels are loaded (compiled, or read from numba's cache) before the frame and
-    that time is reported separately as ``result.seconds["compile"]``.
+    The compiled kernels every frame needs are loaded (read from the disk cache, or compiled)
+    before the frame (:func:`pipeline.warm_kernels`); ``result.seconds["compile"]`` holds every
+    second numba spent compiling for this call — that warm-up, the kernels of the frame's own
+    effects (ray-traced shadows, …) and the background composite — and is absent when nothing
+    was compiled.
     """
     width, height = converted.region_size
-    compile_seconds = pipeline.warm_kernels(converted.options.engine)
-    result = pipeline.render_frame(
-        converted.scene,
-        width,
-        height,
-        converted.options,
-        light_radii=tuple(converted.light_radii),
-        casts_shadows=tuple(converted.casts_shadows),
-        progress=progress,
-    )
-    if compile_seconds:
-        result.seconds["compile"] = compile_seconds
-    result.choices["region"] = list(converted.region)
-    if converted.background is not None:
-        # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
-        world = np.array([*converted.background, 1.0], dtype=np.float32)
-        result.rgba = composite(result.rgba, np.broadcast_to(world, result.rgba.shape), "src_over")
-        result.choices["background"] = "world colour (Film → Transparent is off)"
+    with compile_clock() as compiling:
+        pipeline.warm_kernels(converted.options.engine)
+        result = pipeline.render_frame(
+            converted.scene,
+            width,
+            height,
+            converted.options,
+            light_radii=tuple(converted.light_radii),
+            casts_shadows=tuple(converted.casts_shadows),
+            progress=progress,
+        )
+        result.choices["region"] = list(converted.region)
+        if converted.background is not None:
+            # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
+            world = np.array([*converted.background, 1.0], dtype=np.float32)
+            result.rgba = composite(result.rgba, np.broadcast_to(world, result.rgba.shape), "src_over")
+            result.choices["background"] = "world colour (Film → Transparent is off)"
+    result.seconds.pop("compile", None)  # the frame's own count, included in this one
+    if compiling.seconds:
+        result.seconds["compile"] = compiling.seconds
     return result
 
 

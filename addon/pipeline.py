@@ -20,6 +20,7 @@ import numpy as np
 
 from blinn_phong import Fog, ShadowOptions, render
 from blinn_phong.scene import AmbientLight, Scene
+from compositing._kernel_cache import compile_clock
 
 from .options import SHADOW_SETTINGS, TRANSPARENCY_SETTINGS, RenderOptions
 
@@ -48,12 +49,14 @@ def embree_available() -> bool:
 
 
 def warm_kernels(requested: str = "AUTO") -> float:
-    """Load the compiled kernels once per process, so their compile time is not a frame's.
+    """Load the compiled kernels once per process, before the first frame.
 
     Renders a one-triangle 4×4 scene with the kernels :func:`kernel_engine` picks. numba compiles
-    on first use and caches the machine code on disk (``NUMBA_CACHE_DIR``; inside an installed
-    extension, the extension's user directory), so this takes seconds once per machine and
-    milliseconds afterwards.
+    on first use and caches the machine code on disk (once per user and machine,
+    ``compositing/_kernel_cache.py``; inside an installed extension, the extension's user
+    directory), so this takes seconds once per machine and milliseconds afterwards. It loads the
+    kernels every frame needs; an effect's own kernels load (or compile) inside its first frame —
+    :func:`render_frame` reports the compile seconds it waited for in ``seconds["compile"]``.
 
     Returns:
         Seconds spent, the first time in this process for the compiled kernels; 0.0 otherwise.
@@ -134,7 +137,8 @@ class FrameResult:
             premultiplied by coverage; ``shadow`` is the mean light visibility (coverage when
             nothing casts a shadow).
         choices: what was done for each concern and why (for the Render panel and reports).
-        seconds: wall time per stage.
+        seconds: wall time per stage; ``compile``: the seconds numba spent compiling kernels while
+            the frame waited (absent when every kernel was already loaded).
         triangles: input triangle count.
     """
 
@@ -217,20 +221,21 @@ def render_frame(
             end=options.fog_end,
         )
     kernels, warning = kernel_engine(options.engine)
-    result = render(
-        scene,
-        width,
-        height,
-        shading=options.core_shading,
-        samples=options.samples,
-        engine=kernels,
-        progress=progress,
-        transparency=TRANSPARENCY_SETTINGS[options.transparency],
-        peel_layers=options.peel_layers if options.transparency == "DEPTH_PEELING" else None,
-        shadows=shadows,
-        fog=fog,
-        tolerance=options.tolerance,
-    )
+    with compile_clock() as compiling:  # kernels compiled inside the frame (e.g. ray-traced shadows)
+        result = render(
+            scene,
+            width,
+            height,
+            shading=options.core_shading,
+            samples=options.samples,
+            engine=kernels,
+            progress=progress,
+            transparency=TRANSPARENCY_SETTINGS[options.transparency],
+            peel_layers=options.peel_layers if options.transparency == "DEPTH_PEELING" else None,
+            shadows=shadows,
+            fog=fog,
+            tolerance=options.tolerance,
+        )
     passes = dict(result.passes)
     passes.setdefault("shadow", result.rgba[..., 3:4].copy())
     followed = result.plan
@@ -246,6 +251,7 @@ def render_frame(
         "embree": embree_available(),
         "warnings": [warning] if warning else [],
     }
-    return FrameResult(
-        result.rgba, result.depth, passes, choices, dict(result.stats.seconds), result.stats.triangles
-    )
+    seconds = dict(result.stats.seconds)
+    if compiling.seconds:
+        seconds["compile"] = compiling.seconds
+    return FrameResult(result.rgba, result.depth, passes, choices, seconds, result.stats.triangles)

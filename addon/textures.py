@@ -11,11 +11,14 @@ Pixels (``Image.pixels``, rows bottom-up) become the project's row-0-at-top imag
 * byte images: the raw stored values (``Image.pixels`` gives them /255, not colour managed), with
   the image's colour space (``sRGB`` decoded exactly; ``Non-Color``/``Linear Rec.709`` as given;
   any other space: a note, used as given) and straight alpha (``alpha_mode == 'PREMUL'``:
-  premultiplied; ``'NONE'``/``'CHANNEL_PACKED'``: alpha ignored);
+  premultiplied; ``'NONE'``: alpha 1; ``'CHANNEL_PACKED'``: colour and alpha independent);
 * float images: Blender already converted them to scene-linear premultiplied on load.
 
-The texture modulates what it feeds: Base Color only → the texels' alpha is set to 1; Alpha only
-→ the texels' colour is set to white. With Base Color textured the Principled mapping is evaluated
+The texture gives what its linked outputs give in Cycles (:func:`texture_from_pixels`): Color and
+Alpha → the straight colour and the texel alpha; Color only (Base Color) → the associated
+(premultiplied) colour with the alpha ignored (``Texture(use_alpha=False)``: a transparent texel,
+and with Clip the outside of the image, is opaque black, as Cycles renders it); Alpha only → white
+with the texel alpha. With Base Color textured the Principled mapping is evaluated
 with a white base colour (diffuse and ambient scale linearly with it); a metallic surface's
 specular colour (F0 = base colour) is not textured, and emission is modulated as OpenGL's
 ``GL_MODULATE`` does (Blender does not): both are noted.
@@ -34,7 +37,14 @@ from blinn_phong.texture import Texture
 if TYPE_CHECKING:  # pragma: no cover
     import bpy
 
-__all__ = ["IMAGE_COLORSPACES", "find_image_texture", "mesh_uvs", "texture_from_node", "textured_material"]
+__all__ = [
+    "IMAGE_COLORSPACES",
+    "find_image_texture",
+    "mesh_uvs",
+    "texture_from_node",
+    "texture_from_pixels",
+    "textured_material",
+]
 
 #: Blender colour-space names → ``Texture.colorspace``.
 IMAGE_COLORSPACES = {
@@ -75,56 +85,113 @@ def find_image_texture(principled: bpy.types.Node) -> tuple[bpy.types.Node | Non
 def texture_from_node(node: bpy.types.Node, base: bool, alpha: bool, notes: list[str]) -> Texture:
     """The :class:`Texture` of an Image Texture node (module docstring for the conversions)."""
     image = node.image
-    width, height = int(image.size[0]), int(image.size[1])
-    pixels = np.empty(width * height * int(image.channels), np.float32)
+    width, height, channels = int(image.size[0]), int(image.size[1]), int(image.channels)
+    pixels = np.empty(width * height * channels, np.float32)
     image.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(height, width, int(image.channels))[::-1]
-    rgba = np.ones((height, width, 4), np.float64)
-    rgba[..., : min(4, pixels.shape[2])] = pixels[..., :4]
-    if pixels.shape[2] in (1, 2):  # grey (+ alpha)
-        rgba[..., :3] = pixels[..., :1]
-        rgba[..., 3] = pixels[..., 1] if pixels.shape[2] == 2 else 1.0
-    mode = str(getattr(image, "alpha_mode", "STRAIGHT"))
-    if image.is_float:
-        colorspace, premultiplied = "linear", True
+    return texture_from_pixels(
+        pixels.reshape(height, width, channels)[::-1],  # Blender's rows run bottom-up
+        is_float=bool(image.is_float),
+        colorspace=str(image.colorspace_settings.name),
+        alpha_mode=str(getattr(image, "alpha_mode", "STRAIGHT")),
+        interpolation=str(node.interpolation),
+        extension=str(node.extension),
+        base=base,
+        alpha=alpha,
+        notes=notes,
+        image_name=image.name,
+        node_name=node.name,
+    )
+
+
+def texture_from_pixels(
+    pixels: np.ndarray,
+    *,
+    is_float: bool,
+    colorspace: str,
+    alpha_mode: str,
+    interpolation: str,
+    extension: str,
+    base: bool,
+    alpha: bool,
+    notes: list[str],
+    image_name: str = "image",
+    node_name: str = "Image Texture",
+) -> Texture:
+    """The :class:`Texture` an Image Texture node gives its linked outputs (no ``bpy`` needed).
+
+    Args:
+        pixels: (H, W, C) ``Image.pixels`` values, C = 1 (grey), 2 (grey, alpha), 3 or 4,
+            **row 0 at the top**.
+        is_float: ``Image.is_float`` (a float buffer: scene-linear, alpha associated).
+        colorspace: ``Image.colorspace_settings.name`` (byte images).
+        alpha_mode: ``Image.alpha_mode``: ``STRAIGHT``, ``PREMUL``, ``CHANNEL_PACKED`` or ``NONE``.
+        interpolation: the node's ``interpolation`` (``Closest``, ``Linear``, ``Cubic``, ``Smart``).
+        extension: the node's ``extension`` (``REPEAT``, ``EXTEND``, ``CLIP``, ``MIRROR``).
+        base: the Color output feeds the Base Color.
+        alpha: the Alpha output feeds the Alpha.
+        notes: conversion notes, appended to.
+        image_name: the image's name, for the notes.
+        node_name: the node's name, for the notes.
+
+    What each output gives (Cycles: an image is stored with associated alpha — a byte image's
+    straight values multiplied by alpha before its colour space is decoded, a float buffer as
+    it is —, and the Color output is unassociated only when the Alpha output is linked):
+
+    * Color and Alpha linked: the straight colour and the alpha (``Texture`` with straight
+      alpha; the opacity is multiplied by the texel alpha).
+    * Color only: the **associated** colour, ``decode(c·a)`` for a straight byte image,
+      ``decode(c)`` otherwise, with the alpha ignored (``Texture(use_alpha=False)``): a
+      transparent texel is black and, with Clip, so is the outside of the image — opaque.
+    * Alpha only: white with the texel alpha.
+    """
+    height, width, channels = pixels.shape
+    rgba = np.empty((height, width, 4), np.float32)
+    rgba[..., :3] = pixels[..., :3] if channels >= 3 else pixels[..., :1]
+    rgba[..., 3] = pixels[..., 3] if channels == 4 else (pixels[..., 1] if channels == 2 else 1.0)
+    if is_float:
+        space, associated = "linear", True
     else:
-        name = image.colorspace_settings.name
-        colorspace = IMAGE_COLORSPACES.get(name, "linear")
-        if name not in IMAGE_COLORSPACES:
+        space = IMAGE_COLORSPACES.get(colorspace, "linear")
+        if colorspace not in IMAGE_COLORSPACES:
             notes.append(
-                f"{image.name}: colour space '{name}' is not supported; its values are used as linear"
+                f"{image_name}: colour space '{colorspace}' is not supported; its values are used as linear"
             )
-        premultiplied = mode == "PREMUL"
-    if mode in ("NONE", "CHANNEL_PACKED"):
+        associated = alpha_mode == "PREMUL"
+    if alpha_mode == "NONE":
         rgba[..., 3] = 1.0
-    if not premultiplied:
-        straight = rgba[..., :3]
-    else:
-        a = rgba[..., 3:4]
-        straight = np.where(a > 0, rgba[..., :3] / np.where(a > 0, a, 1.0), 0.0)
-    if colorspace == "sRGB":
-        straight = np.clip(straight, 0.0, 1.0)  # byte data /255: already in [0, 1]
-    if not alpha:
-        rgba[..., 3] = 1.0
+    if alpha_mode == "CHANNEL_PACKED":  # colour and alpha are independent channels
+        associated = False
+    colour = rgba[..., :3]
+    if base and (colour < 0.0).any():
+        notes.append(f"{image_name}: negative pixel values are rendered as 0 (a texture holds light, >= 0)")
+        np.maximum(colour, 0.0, out=colour)
     if not base:
-        straight = np.ones_like(straight)  # white encodes to white in every supported space
-    image_in = np.concatenate([straight, rgba[..., 3:4]], axis=-1)
-    interpolation = {"Closest": "closest", "Linear": "linear"}.get(node.interpolation)
-    if interpolation is None:
-        notes.append(f"{node.name}: {node.interpolation} interpolation is rendered as Linear")
-        interpolation = "linear"
-    extension = {"REPEAT": "repeat", "EXTEND": "extend", "CLIP": "clip"}.get(node.extension)
-    if extension is None:
-        notes.append(f"{node.name}: {node.extension} extension is rendered as Repeat")
-        extension = "repeat"
-    if (image_in < 0.0).any():
-        notes.append(f"{image.name}: negative pixel values are rendered as 0 (a texture holds light, >= 0)")
+        colour[...] = 1.0  # white encodes to white in every supported space
+    elif not alpha:
+        if not associated and alpha_mode == "STRAIGHT":
+            colour *= rgba[..., 3:4]  # Cycles associates a straight byte image's stored values
+        rgba[..., 3] = 1.0
+    elif associated:
+        a = rgba[..., 3:4]
+        np.divide(colour, a, out=colour, where=a > 0.0)
+        colour[np.broadcast_to(a <= 0.0, colour.shape)] = 0.0
+    if space == "sRGB":
+        np.clip(colour, 0.0, 1.0, out=colour)  # byte data /255: already in [0, 1]
+    texture_interpolation = {"Closest": "closest", "Linear": "linear"}.get(interpolation)
+    if texture_interpolation is None:
+        notes.append(f"{node_name}: {interpolation} interpolation is rendered as Linear")
+        texture_interpolation = "linear"
+    texture_extension = {"REPEAT": "repeat", "EXTEND": "extend", "CLIP": "clip"}.get(extension)
+    if texture_extension is None:
+        notes.append(f"{node_name}: {extension} extension is rendered as Repeat")
+        texture_extension = "repeat"
     return Texture(
-        np.clip(image_in, 0.0, None),
-        interpolation=interpolation,
-        extension=extension,
-        colorspace=colorspace,
+        rgba,
+        interpolation=texture_interpolation,
+        extension=texture_extension,
+        colorspace=space,
         alpha="straight",
+        use_alpha=alpha,
     )
 
 
@@ -145,6 +212,7 @@ def textured_material(
     blender_material: bpy.types.Material | None,
     notes: list[str],
     uvs: dict[str, np.ndarray],
+    cache: dict | None = None,
 ) -> tuple[Material, np.ndarray | None]:
     """``material`` with the Image Texture of ``blender_material``'s Principled BSDF, and the UVs.
 
@@ -153,6 +221,8 @@ def textured_material(
         blender_material: its Blender material.
         notes: conversion notes, appended to (and stale "linked" notes removed).
         uvs: :func:`mesh_uvs` of the mesh.
+        cache: textures converted so far in this conversion (filled here): an image used by
+            several objects with the same settings becomes one :class:`Texture`, not one each.
 
     Returns ``(material, uv)``: unchanged and None when no Image Texture feeds the Principled
     BSDF, or when the mesh lacks the UV layer (with a note).
@@ -172,7 +242,16 @@ def textured_material(
             f"{blender_material.name}: the mesh has no UV layer {layer or '(active)'!r}; texture ignored"
         )
         return material, None
-    texture = texture_from_node(node, base, alpha, notes)
+    key = (node.image.as_pointer(), node.interpolation, node.extension, base, alpha)
+    if cache is not None and key in cache:
+        texture, texture_notes = cache[key]
+        notes.extend(texture_notes)
+    else:
+        texture_notes = []
+        texture = texture_from_node(node, base, alpha, texture_notes)
+        notes.extend(texture_notes)
+        if cache is not None:
+            cache[key] = (texture, texture_notes)
     changes: dict[str, object] = {"base_color_texture": texture}
     settings = getattr(blender_material, "blinn_phong", None)
     if base and (settings is None or settings.source != "CUSTOM"):

@@ -33,6 +33,7 @@ CLI: ``python -m addon.verify --help``.
 from __future__ import annotations
 
 import argparse
+import difflib
 import json
 import os
 import shutil
@@ -82,6 +83,20 @@ the whole matrix to it."""
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
+def _closest(name: str, names: Sequence[str]) -> str:
+    """`` (did you mean 'x'?)`` for the closest valid name (difflib), or an empty string."""
+    close = difflib.get_close_matches(str(name), list(names), n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _parse_via(text: str) -> str:
+    if text not in _KINDS:
+        raise argparse.ArgumentTypeError(
+            f"expected one of {', '.join(_KINDS)}; got {text!r}{_closest(text, _KINDS)}"
+        )
+    return text
+
+
 @dataclass(frozen=True)
 class Case:
     """One operation to run through Blender's compositor.
@@ -99,7 +114,9 @@ class Case:
 
     def __post_init__(self) -> None:
         if self.kind not in _KINDS:
-            raise ValueError(f"kind: expected one of {_KINDS}, got {self.kind!r}")
+            raise ValueError(
+                f"kind: expected one of {', '.join(_KINDS)}; got {self.kind!r}{_closest(self.kind, _KINDS)}"
+            )
         allowed = {
             "node_group": tuple(ALL_OPERATORS),
             "alpha_over": ALPHA_OVER_OPERATORS,
@@ -107,7 +124,8 @@ class Case:
         }[self.kind]
         if self.operator not in allowed:
             raise ValueError(
-                f"operator: for kind {self.kind!r} expected one of {allowed}, got {self.operator!r}"
+                f"operator: for kind {self.kind!r} expected one of {', '.join(allowed)}; "
+                f"got {self.operator!r}{_closest(self.operator, allowed)}"
             )
         check_factor(self.factor, "factor", ())
         if self.straight_alpha and self.kind != "alpha_over":
@@ -510,7 +528,13 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"operator (one of {', '.join(ALL_OPERATORS)}; or premultiply/unpremultiply with "
         "--via alpha_convert)",
     )
-    parser.add_argument("--via", choices=_KINDS, default="node_group", help="what runs in Blender")
+    parser.add_argument(
+        "--via",
+        type=_parse_via,
+        default="node_group",
+        metavar="KIND",
+        help=f"what runs in Blender: {', '.join(_KINDS)} (default node_group)",
+    )
     parser.add_argument("--factor", type=_parse_factor, default=1.0, help="Factor in [0, 1] (default 1)")
     parser.add_argument("--straight-alpha", action="store_true", help="Alpha Over's Straight Alpha switch")
     parser.add_argument("--all", action="store_true", help="run the whole matrix (standard_cases)")
@@ -560,7 +584,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 cases = [Case(args.via, args.operator, args.factor, args.straight_alpha)]
             except ValueError as error:
-                raise ValueError(f"--operator/--via: {error}") from None
+                name, _, rest = str(error).partition(": ")
+                flag = {"operator": "--operator", "factor": "--factor", "straight_alpha": "--straight-alpha"}
+                raise ValueError(f"{flag.get(name, '--operator/--via')}: {rest or name}") from None
     except (OSError, ValueError, TypeError) as error:
         parser.error(str(error))
     try:

@@ -39,6 +39,8 @@ MODULES = (
     "shadows_mesa",
     "frame",
     "planning",
+    "deep",
+    "compile",
 )
 
 
@@ -85,6 +87,15 @@ def _module_runner(name: str, out: Path, repeat: int, quick: bool) -> Callable[[
         from benchmarks import bench_planning
 
         return lambda: bench_planning.run(out, repeat=repeat)
+    if name == "deep":
+        from benchmarks import bench_deep
+
+        return lambda: bench_deep.run(out, repeat=repeat, quick=quick)
+    if name == "compile":
+        from benchmarks import bench_compile
+
+        # every case in a fresh process with an empty kernel cache, then warm (about an hour)
+        return lambda: bench_compile.run(out)
     raise ValueError(f"unknown benchmark module {name!r}; expected one of {MODULES}")
 
 

@@ -23,7 +23,8 @@ Writes:
 * ``images/fence.png``, ``images/floor_checker.png``: the two 32×32 textures of ``textures.blend``
   (sRGB PNGs generated here, referenced by the .blend with relative paths ``//images/…``).
 
-Every scene is 320×180 pixels at 100 % and uses the engine ``BLINN_PHONG``.
+Every scene is 320×180 pixels at 100 % and uses the engine ``BLINN_PHONG``; its frames go to
+``//render/<scene>/####`` beside the .blend (e.g. ``render/showcase/0001.png``).
 """
 
 from __future__ import annotations
@@ -73,6 +74,9 @@ def _reset(name: str) -> bpy.types.Scene:
         100,
     )
     scene.render.film_transparent = True
+    # Frames go next to the file, one folder per scene ("//render/showcase/0001.png"): two sample
+    # files in one batch job never share an output, and nothing is written to Blender's /tmp/.
+    scene.render.filepath = f"//render/{name.lower()}/####"
     scene.view_settings.view_transform = "Standard"
     scene.blinn_phong.samples_per_axis = 2
     world = bpy.data.worlds.new("World")

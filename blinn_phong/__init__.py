@@ -40,6 +40,11 @@ from blinn_phong.scene import (
 )
 from blinn_phong.texture import Texture
 from blinn_phong.visibility import visible_fragments
+from compositing._kernel_cache import register_package
+
+# The compiled kernels are cached once per user and machine, shared by every checkout
+# (compositing/_kernel_cache.py); registered before any kernel module is imported.
+register_package(__path__[0])
 
 __all__ = [
     "AmbientLight",

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import difflib
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -186,7 +186,14 @@ def check_frame_size(width: object, height: object, samples: object, memory: int
         )
 
 
-def choice_error(name: str, value: object, allowed: Sequence[object], *, also: str = "") -> ValueError:
+def choice_error(
+    name: str,
+    value: object,
+    allowed: Sequence[object],
+    *,
+    also: str = "",
+    aliases: Mapping[str, str] | None = None,
+) -> ValueError:
     """The error for ``value`` not among ``allowed``, with a "did you mean" for a near miss.
 
     Args:
@@ -194,12 +201,16 @@ def choice_error(name: str, value: object, allowed: Sequence[object], *, also: s
         value: what was received.
         allowed: the valid values.
         also: other accepted values to name first, e.g. ``"None, 'auto' or "``.
+        aliases: other libraries' names for the valid values (``{"clamp_to_edge": "extend"}``):
+            a value found there (case ignored) is answered with its valid name.
 
     Returns:
         ``ValueError("{name}: expected {also}one of {allowed}, got {value!r}; did you mean 'x'?")``
         (the last clause only when a valid name is close to a string ``value``; case is ignored).
     """
     message = f"{name}: expected {also}one of {tuple(allowed)}, got {value!r}"
+    if isinstance(value, str) and aliases and value.lower() in aliases:
+        return ValueError(message + f"; did you mean {aliases[value.lower()]!r}?")
     if isinstance(value, str):
         by_folded = {str(a).lower(): a for a in allowed}
         close = difflib.get_close_matches(value.lower(), list(by_folded), n=1, cutoff=0.6)

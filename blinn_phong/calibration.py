@@ -78,6 +78,9 @@ __all__ = [
     "transparency_seconds",
 ]
 
+#: Real scalars accepted wherever a number is: Python and numpy numbers.
+_REAL = (int, float, np.integer, np.floating)
+
 #: The models shipped with the package (written by ``benchmarks/error_models.py``).
 CALIBRATION_PATH = Path(__file__).resolve().with_name("calibration.json")
 
@@ -102,14 +105,14 @@ def shipped_models() -> dict:
 
 def _check_tolerance(tolerance: float) -> float:
     if isinstance(tolerance, bool) or not (
-        isinstance(tolerance, int | float) and math.isfinite(tolerance) and tolerance > 0
+        isinstance(tolerance, _REAL) and math.isfinite(tolerance) and tolerance > 0
     ):
         raise ValueError(f"tolerance: expected a finite number of 8-bit steps > 0, got {tolerance!r}")
     return float(tolerance)
 
 
 def _check_positive(value: float, name: str) -> float:
-    if isinstance(value, bool) or not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+    if isinstance(value, bool) or not (isinstance(value, _REAL) and math.isfinite(value) and value > 0):
         raise ValueError(f"{name}: expected a finite number > 0, got {value!r}")
     return float(value)
 
@@ -285,10 +288,10 @@ def choose_depth_peeling(
         relative to the A-buffer.
     """
     tol = _check_tolerance(tolerance)
-    if isinstance(alpha_min, bool) or not (isinstance(alpha_min, int | float) and 0 < alpha_min <= 1):
+    if isinstance(alpha_min, bool) or not (isinstance(alpha_min, _REAL) and 0 < alpha_min <= 1):
         raise ValueError(f"alpha_min: expected a value in (0, 1], got {alpha_min!r}")
     if isinstance(brightest, bool) or not (
-        isinstance(brightest, int | float) and math.isfinite(brightest) and brightest >= 0
+        isinstance(brightest, _REAL) and math.isfinite(brightest) and brightest >= 0
     ):
         raise ValueError(f"brightest: expected a finite radiance >= 0, got {brightest!r}")
     for k in range(1, max_layers):

@@ -229,8 +229,13 @@ def everyday_scene(rng: np.random.Generator, aspect: float = 4 / 3) -> tuple[bp.
         elif shape == "box":
             half = rng.uniform(0.3, 1.0, 3) * size
             p, t, n = box(tuple(half))
-            y = float(half[1])
-            uv = _planar_uv(p, (0, 1), 1.0)
+            # standing 1 mm above the floor: a bottom face exactly on the floor would z-fight with
+            # it, and which of two coplanar surfaces wins a sample is left to rounding (the engines
+            # round differently), as in OpenGL
+            y = float(half[1]) + 1e-3
+            # each face unwrapped onto the whole image, as a default cube's UVs: a face never lies
+            # on the Clip extension's edge u or v = 0 or 1, only its border does
+            uv = np.tile([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], (6, 1))
         else:  # an upright pane (a sign, a window): a thin two-sided quad
             w, h = float(rng.uniform(0.5, 2.5)), float(rng.uniform(0.5, 2.0))
             p = np.array([[-w, 0, 0], [w, 0, 0], [w, 2 * h, 0], [-w, 2 * h, 0]], float) / 2

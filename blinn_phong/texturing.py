@@ -9,7 +9,9 @@ fragment of a material with a ``base_color_texture`` (:class:`blinn_phong.textur
 * ``uv`` is the mesh's per-vertex ``uv`` interpolated with the rasterizer's
   perspective-correct barycentrics (:func:`blinn_phong.raster.interpolate`; OpenGL 2.1 §3.5.1
   eq. 3.9), and ``T`` the filtered texel there (premultiplied), of straight colour ``t``
-  and alpha ``a``;
+  and alpha ``a`` (a texture with ``use_alpha=False`` is an RGB texture: ``a = 1`` and ``t``
+  the filtered premultiplied colour, so its texels never change the opacity — GL's
+  ``GL_MODULATE`` on an ``RGB`` texture, table 3.22: ``A = Af``);
 * the colour is OpenGL's ``GL_MODULATE`` (2.1 §3.8.13, table 3.22: ``C = Cf·Ct``,
   ``A = Af·At``) applied before the colour sum (§3.9), i.e. with
   ``GL_SEPARATE_SPECULAR_COLOR`` the specular term is added after texturing:
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import weakref
 
 import numpy as np
 
@@ -38,7 +41,7 @@ from blinn_phong.fast import numba_available
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.shading import FragmentShading
-from blinn_phong.texture import EXTENSIONS, INTERPOLATIONS, straight_colour
+from blinn_phong.texture import EXTENSIONS, INTERPOLATIONS, UV_LIMIT, straight_colour
 
 __all__ = ["texture_fragments", "vertex_uv"]
 
@@ -91,8 +94,9 @@ def texture_fragments(
         here = np.flatnonzero(side == s)
         texture = material.base_color_texture
         if texture is not None:
-            if uv is None:
+            if uv is None:  # ±UV_LIMIT: an interpolation overflowing to ±inf is its limit
                 uv = interpolate(fragments, prepared.triangles, vertex_uv(prepared))
+                np.clip(uv, -UV_LIMIT, UV_LIMIT, out=uv)
             texel = texture.sample(uv[here])
             colour = straight_colour(texel)
             a, d, sp = shaded.ambient[here], shaded.diffuse[here], shaded.specular[here]
@@ -121,26 +125,7 @@ def _texture_compiled(
     separate: bool,
 ) -> FragmentShading:
     """The compiled twin of the reference loop of :func:`texture_fragments`."""
-    textures: list = []
-    tex_of_side = np.full(len(materials), -1, np.int64)
-    clip_of_side = np.full(len(materials), -1.0)
-    kg_of_side = np.array([m.kay_greenberg is not None for m in materials], dtype=np.bool_)
-    for s, m in enumerate(materials):
-        if m.base_color_texture is not None:
-            if m.base_color_texture not in textures:
-                textures.append(m.base_color_texture)
-            tex_of_side[s] = textures.index(m.base_color_texture)
-        if m.alpha_clip is not None:
-            clip_of_side[s] = m.alpha_clip
-    sizes = [t.image.size for t in textures]
-    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-    pixels = np.concatenate([t.image.ravel() for t in textures]) if textures else np.zeros(4, np.float32)
-    shape = np.array([[t.width, t.height] for t in textures] or [[1, 1]], np.int64)
-    modes = np.array(
-        [[INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension)] for t in textures]
-        or [[0, 0]],
-        np.int64,
-    )
+    tex_of_side, clip_of_side, kg_of_side, pixels, offsets, shape, modes = _packed(prepared, materials)
     mode = 0 if not gl_compat else (1 if separate else 2)
     rgb, ambient, diffuse, alpha = _kernel()(
         fragments.triangle,
@@ -161,8 +146,57 @@ def _texture_compiled(
         np.ascontiguousarray(shaded.rgb, dtype=np.float64),
         np.asarray(shaded.alpha, dtype=np.float64),
         mode,
+        UV_LIMIT,
     )
     return dataclasses.replace(shaded, rgb=rgb, ambient=ambient, diffuse=diffuse, alpha=alpha)
+
+
+#: The textures of a prepared scene packed for the kernel, kept while the scene lives (the
+#: frame calls the texture stage once per band of rows: the packing is done once).
+_PACKED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _packed(prepared: PreparedScene, materials: list) -> tuple[np.ndarray, ...]:
+    """Per side: texture index, alpha clip, Kay–Greenberg flag; all texels, offsets, sizes, modes.
+
+    One texture's texels are its stored image itself (no copy); several are concatenated once
+    per prepared scene.
+    """
+    cached = _PACKED.get(prepared)
+    if cached is not None:
+        return cached
+    textures: list = []
+    tex_of_side = np.full(len(materials), -1, np.int64)
+    clip_of_side = np.full(len(materials), -1.0)
+    kg_of_side = np.array([m.kay_greenberg is not None for m in materials], dtype=np.bool_)
+    for s, m in enumerate(materials):
+        if m.base_color_texture is not None:
+            if m.base_color_texture not in textures:
+                textures.append(m.base_color_texture)
+            tex_of_side[s] = textures.index(m.base_color_texture)
+        if m.alpha_clip is not None:
+            clip_of_side[s] = m.alpha_clip
+    sizes = [t.image.size for t in textures]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    if len(textures) == 1:  # the stored (C-contiguous) image itself
+        pixels = textures[0].image.reshape(-1)
+    else:
+        pixels = np.concatenate([t.image.ravel() for t in textures]) if textures else np.zeros(4, np.float32)
+    shape = np.array([[t.width, t.height] for t in textures] or [[1, 1]], np.int64)
+    modes = np.array(
+        [
+            [INTERPOLATIONS.index(t.interpolation), EXTENSIONS.index(t.extension), int(t.use_alpha)]
+            for t in textures
+        ]
+        or [[0, 0, 1]],
+        np.int64,
+    )
+    packed = (tex_of_side, clip_of_side, kg_of_side, pixels, offsets, shape, modes)
+    _PACKED[prepared] = packed
+    return packed
+
+
+_fetch = None  # the compiled texel fetch, set by _kernel()
 
 
 @functools.lru_cache(maxsize=1)
@@ -181,6 +215,11 @@ def _kernel() -> object:  # a numba dispatcher
         base = offset + ((h - 1 - j) * w + i) * 4
         for c in range(4):
             out[c] += weight * np.float64(pixels[base + c])
+
+    # A module global, not a closure variable: numba's disk-cache key hashes closure variables,
+    # and a compiled function in one changes it in every process (the kernel was never cached).
+    global _fetch
+    _fetch = fetch
 
     @numba.njit(parallel=True, cache=True)
     def run(
@@ -202,6 +241,7 @@ def _kernel() -> object:  # a numba dispatcher
         rgb_in,
         alpha_in,
         mode,
+        uv_limit,
     ):  # pragma: no cover - compiled
         n = len(triangle)
         rgb = rgb_in.copy()
@@ -220,22 +260,33 @@ def _kernel() -> object:  # a numba dispatcher
                     v += bary[f, q] * uv[tris[t, q], 1]
                 w, h = shape[k, 0], shape[k, 1]
                 ext = modes[k, 1]
+                # Texture.texel_coordinates: bounded before the integer conversion.
+                u = min(max(u, -uv_limit), uv_limit)
+                v = min(max(v, -uv_limit), uv_limit)
+                if ext == 0:  # repeat: fmod(u, 1) = u − trunc(u), exact
+                    u = u - np.trunc(u)
+                    v = v - np.trunc(v)
+                else:  # extend, clip: a whole image outside is the edge or the border
+                    u = min(max(u, -1.0), 2.0)
+                    v = min(max(v, -1.0), 2.0)
                 x = u * w
                 y = v * h
                 texel = np.zeros(4)
                 if modes[k, 0] == 0:  # closest
-                    fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
+                    _fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
                 else:
                     x -= 0.5
                     y -= 0.5
                     fx, fy = np.floor(x), np.floor(y)
                     a, b = x - fx, y - fy
                     i0, j0 = int(fx), int(fy)
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
                     texel[3] = min(max(texel[3], 0.0), 1.0)
+                if modes[k, 2] == 0:  # use_alpha=False: an RGB texture, alpha 1
+                    texel[3] = 1.0
                 ta = texel[3]
                 for c in range(3):
                     colour = texel[c] / ta if ta > 0.0 else 0.0

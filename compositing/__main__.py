@@ -9,6 +9,14 @@
 ``python -m compositing list``
     the operators with their (Fa, Fb) factors.
 
+``python -m compositing deep-merge A B [C ...] -o OUT.exr [--tiled] [--compression C] [--half]``
+    the deep images merged (:func:`compositing.deep.merge`: union of the samples, made
+    tidy), written as a deep OpenEXR file.
+
+``python -m compositing deep-flatten A [B ...] -o OUT [--bits N] [--clip] [--flatten]``
+    the deep image (the merge of several) flattened (:func:`compositing.deep.flatten`)
+    and written as a flat image, as the other commands write theirs.
+
 Files are read and written with :mod:`compositing.io` (8/16-bit files are sRGB with
 straight alpha, EXR is linear premultiplied; JPEG and HDR need ``--flatten``). The
 operator is positional or given as ``--operator`` (alias ``--op``), the spelling the
@@ -22,6 +30,9 @@ valid names and the closest match).
 from __future__ import annotations
 
 import argparse
+import difflib
+import itertools
+import re
 import sys
 import warnings
 from pathlib import Path
@@ -57,7 +68,8 @@ def _composite_parser() -> argparse.ArgumentParser:
         "       python -m compositing blend SRC DST -o OUT --src-factor S --dst-factor D [options]\n"
         "       python -m compositing list",
         description="Composite SRC with DST by a Porter-Duff (or disjoint/conjoint) operator.",
-        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators). Exit status: 0 success, "
+        epilog="Other commands: 'blend' (OpenGL blend stage), 'list' (operators), 'deep-merge', "
+        "'deep-flatten' (deep OpenEXR images). Exit status: 0 success, "
         "1 a check on the data failed, 2 usage error. Operators: " + ", ".join(ALL_OPERATORS),
     )
     parser.add_argument(
@@ -94,6 +106,122 @@ def _blend_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Argument names in the library's messages and the command-line flags that set them.
+_FLAG_OF = {
+    "factor": "--factor",
+    "op": "OP (or --operator)",
+    "src_factor": "--src-factor",
+    "dst_factor": "--dst-factor",
+    "src_factor_alpha": "--src-factor-alpha",
+    "dst_factor_alpha": "--dst-factor-alpha",
+    "equation": "--equation",
+    "equation_alpha": "--equation-alpha",
+    "target": "--target",
+    "bits": "--bits",
+}
+
+
+def _cli_message(text: str, out: Path | None = None) -> str:
+    """A library message in the command line's words: flags (``--clip``) instead of keywords (``clip=True``).
+
+    The leading argument name (``factor: ...``) becomes its flag; ``clip:``/``flatten:``/``rgba:``
+    (about the result) become ``--out PATH:``; a misspelled GL name gets the closest valid one.
+    """
+    text = text.replace("pass clip=True", "give --clip").replace("pass flatten=True", "give --flatten")
+    name, sep, rest = text.partition(": ")
+    if sep and name in _FLAG_OF:
+        text = f"{_FLAG_OF[name]}: {rest}"
+        if name.startswith(("src_factor", "dst_factor", "equation")):
+            from .gl_blend import GL_BLEND_EQUATIONS, GL_BLEND_FACTORS
+
+            names = GL_BLEND_EQUATIONS if name.startswith("equation") else GL_BLEND_FACTORS
+            match = re.search(r"unknown blend (?:factor|equation) '([^']*)'", rest)
+            close = difflib.get_close_matches(match[1].upper(), list(names), n=1) if match else []
+            if close:
+                text += f" (did you mean {close[0]}?)"
+    elif sep and name in ("clip", "flatten", "rgba") and out is not None:
+        text = f"--out {out}: {rest}"
+    return text
+
+
+def _deep_parser(command: str) -> argparse.ArgumentParser:
+    merge = command == "deep-merge"
+    parser = argparse.ArgumentParser(
+        prog=f"python -m compositing {command}",
+        description=(
+            "Merge deep OpenEXR images (union of their samples, made tidy) into a deep OpenEXR file."
+            if merge
+            else "Flatten a deep OpenEXR image (the merge of several) into a flat image."
+        ),
+        epilog="Exit status: 0 success, 1 a check on the data failed, 2 usage error.",
+    )
+    parser.add_argument(
+        "images",
+        type=Path,
+        nargs="+",
+        metavar="DEEP",
+        help="deep OpenEXR inputs" + (" (two or more)" if merge else ""),
+    )
+    if merge:
+        parser.add_argument("-o", "--out", type=Path, required=True, help="output deep OpenEXR file (.exr)")
+        parser.add_argument("--tiled", action="store_true", help="write tiles instead of scanlines")
+        parser.add_argument("--tile-size", type=int, default=64, help="tile edge in pixels (default 64)")
+        parser.add_argument("--compression", default="zips", help="zips (default) or none")
+        parser.add_argument(
+            "--half", action="store_true", help="store RGBA as half floats (depth stays float)"
+        )
+    else:
+        _io_options(parser, images=False)
+    return parser
+
+
+def _progress(label: str):
+    """A callback printing ``label: N%`` to stderr every 25% (file I/O of deep images is slow)."""
+    state = {"next": 0.25}
+
+    def report(fraction: float) -> None:
+        if fraction >= state["next"] and fraction < 1.0:
+            print(f"{label}: {int(fraction * 100)}%", file=sys.stderr, flush=True)
+            while state["next"] <= fraction:
+                state["next"] += 0.25
+
+    return report
+
+
+def _deep(command: str, argv: list[str]) -> None:
+    from .deep import flatten, merge
+    from .deep_io import COMPRESSIONS, read_deep, write_deep
+
+    parser = _deep_parser(command)
+    args = parser.parse_args(argv)
+    if command == "deep-merge":
+        if len(args.images) < 2:
+            parser.error(f"expected two or more deep images to merge, got {len(args.images)}")
+        if args.compression not in COMPRESSIONS:
+            parser.error(
+                f"--compression: expected one of {', '.join(COMPRESSIONS)}, got {args.compression!r}"
+            )
+        if args.tile_size < 1:
+            parser.error(f"--tile-size: expected an integer >= 1, got {args.tile_size}")
+    images = [read_deep(path, progress=_progress(f"reading {path}")) for path in args.images]
+    result = images[0]
+    for other in images[1:]:
+        result = merge(result, other)
+    if command == "deep-merge":
+        write_deep(
+            args.out,
+            result,
+            tiled=args.tiled,
+            tile_size=args.tile_size,
+            compression=args.compression,
+            float_format="half" if args.half else "float",
+            progress=_progress(f"writing {args.out}"),
+        )
+        print(f"wrote {args.out}")
+    else:
+        _write(args, flatten(result))
+
+
 def _list() -> None:
     for name, spec in ALL_OPERATORS.items():
         print(f"{name:<18} Fa = {describe(spec.fa_expr)}")
@@ -123,7 +251,7 @@ def _blend(argv: list[str]) -> None:
         )
     except ValueError as exc:
         if "blend factor" in str(exc) or "equation" in str(exc) or "target" in str(exc):
-            parser.error(str(exc))
+            parser.error(_cli_message(str(exc)))
         raise
     _write(args, result)
 
@@ -148,7 +276,7 @@ def _composite(argv: list[str]) -> None:
     try:
         spec = resolve_operator(op)
     except ValueError as exc:
-        parser.error(str(exc))
+        parser.error(_cli_message(str(exc)))
     src, dst = (Path(p) for p in images)
     result = composite(read_image(src), read_image(dst), spec, factor=args.factor)
     _write(args, result)
@@ -164,11 +292,14 @@ def main(argv: list[str] | None = None) -> int:
                 _list()
             elif argv[:1] == ["blend"]:
                 _blend(argv[1:])
+            elif argv[:1] in (["deep-merge"], ["deep-flatten"]):
+                _deep(argv[0], argv[1:])
             else:
                 _composite(argv)
         except (ValueError, TypeError, OSError) as exc:
             status = 1
-            print(f"error: {exc}", file=sys.stderr)
+            out = next((Path(a) for flag, a in itertools.pairwise(argv) if flag in ("-o", "--out")), None)
+            print(f"error: {_cli_message(str(exc), out)}", file=sys.stderr)
         else:
             status = 0
         finally:

@@ -98,7 +98,17 @@ def _report(out: Path) -> dict:
 
 
 def _files(root: Path) -> list[str]:
-    return sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file())
+    """Every file under ``root`` except the per-job records in ``reports/`` (see test_addon_batch_faults)."""
+    return sorted(
+        str(p.relative_to(root))
+        for p in root.rglob("*")
+        if p.is_file() and p.relative_to(root).parts[0] != "reports"
+    )
+
+
+def _markers(out: Path) -> list[Path]:
+    """The attempt markers in the job's folder ``OUT/.batch-<job>/`` (not its write permits)."""
+    return sorted(p for p in out.glob(".batch-*/*") if not p.name.startswith("write."))
 
 
 def test_parse_frames() -> None:
@@ -139,17 +149,25 @@ def test_atomic_target_keeps_the_old_file_when_the_write_fails(tmp_path: Path) -
 def test_a_killed_attempts_temporary_is_cleaned_up_and_the_output_kept(tmp_path: Path) -> None:
     from addon.batch import Task, _cleanup_temporaries
 
-    task = Task(blend="scene.blend", frame=1, out_dir=str(tmp_path), output=str(tmp_path / "scene_0001.exr"))
-    Path(task.output).write_bytes(b"finished frame")
+    def task(job: str) -> Task:
+        output = str(tmp_path / "scene_0001.exr")
+        return Task(blend="scene.blend", frame=1, out_dir=str(tmp_path), output=output, job=job)
+
+    ours, theirs = task("job1"), task("job2")  # two jobs sharing --out render the same frame
+    Path(ours.output).write_bytes(b"finished frame")
     other = tmp_path / "other.exr"
     other.write_bytes(b"another output")
-    with pytest.raises(RuntimeError), atomic_target(task.output) as tmp:
+    with pytest.raises(RuntimeError), atomic_target(ours.output, job=ours.job) as tmp:
         left = tmp  # the temporary name the writer got
         raise RuntimeError("worker killed")
     left.write_bytes(b"half a frame")  # a killed worker (SIGKILL) leaves it behind
-    _cleanup_temporaries([task])
+    with atomic_target(theirs.output, job=theirs.job) as in_progress:
+        in_progress.write_bytes(b"the other job's frame, being written")
+        _cleanup_temporaries([ours])  # our job ends while the other job writes
+        assert in_progress.exists()  # only our own temporary is removed
+        assert _files(tmp_path) == sorted(["other.exr", "scene_0001.exr", in_progress.name])
     assert _files(tmp_path) == ["other.exr", "scene_0001.exr"]
-    assert Path(task.output).read_bytes() == b"finished frame"
+    assert Path(ours.output).read_bytes() == b"the other job's frame, being written"
 
 
 def test_atomic_target_refuses_a_writer_that_wrote_nothing(tmp_path: Path) -> None:
@@ -316,7 +334,7 @@ def test_a_killed_worker_costs_only_its_own_task(blend: Path, tmp_path: Path) ->
     victim = None
     deadline = time.monotonic() + 120
     while victim is None and time.monotonic() < deadline and job.poll() is None:
-        markers = sorted(out.glob(".batch-attempts-*/*"))
+        markers = _markers(out)
         if markers:
             victim = json.loads(markers[0].read_text())["pid"]
         time.sleep(0.05)
@@ -609,7 +627,7 @@ def test_sigterm_stops_the_workers_and_reports_what_finished(blend: Path, tmp_pa
     workers: set[int] = set()
     deadline = time.monotonic() + 120
     while not workers and time.monotonic() < deadline and job.poll() is None:
-        for marker in out.glob(".batch-attempts-*/*"):
+        for marker in _markers(out):
             workers.add(int(marker.name.rsplit(".", 1)[1]))
         time.sleep(0.05)
     assert workers, "no task started"

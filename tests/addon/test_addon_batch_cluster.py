@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -216,7 +217,7 @@ def test_a_worker_killed_mid_job_loses_nothing(
     victim = None
     deadline = time.monotonic() + 120
     while victim is None and time.monotonic() < deadline and job.poll() is None:
-        markers = sorted(out.glob(".batch-attempts-*/*"))
+        markers = sorted(p for p in out.glob(".batch-*/*") if not p.name.startswith("write."))
         if markers:
             try:
                 victim = json.loads(markers[0].read_text())["pid"]
@@ -232,7 +233,7 @@ def test_a_worker_killed_mid_job_loses_nothing(
     # Every frame written once, by exactly one successful attempt; the lost attempt is recorded.
     assert sorted(report["written"]) == sorted(str(out / f"ball_{f:04d}.exr") for f in FRAMES)
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        [*(f"ball_{f:04d}.exr" for f in FRAMES), "report.json"]
+        [*(f"ball_{f:04d}.exr" for f in FRAMES), "report.json", "reports"]
     )
     lost = [a for r in report["retried"] for a in r["attempts"] if a["pid"] == victim]
     assert len(lost) == 1 and lost[0]["outcome"] == "worker lost before the task finished", report["retried"]
@@ -240,3 +241,136 @@ def test_a_worker_killed_mid_job_loses_nothing(
     pixels = _pixels(out)
     for frame in FRAMES:
         np.testing.assert_array_equal(pixels[frame], reference[frame], err_msg=f"frame {frame}")
+
+
+def _attempt_markers(out: Path) -> list[dict]:
+    """The attempt markers of the running job (``OUT/.batch-<job>/<task>.<host>.<pid>``), as written."""
+    markers = []
+    for path in sorted(out.glob(".batch-*/*")):
+        if path.name.startswith("write.") or path.parent.name.endswith(".closed"):
+            continue
+        try:
+            markers.append({"task": path.name.split(".")[0], **json.loads(path.read_text())})
+        except (OSError, ValueError):  # being written or just removed
+            continue
+    return markers
+
+
+def _snapshot(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file and folder under ``root`` with its size and modification time."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*")}
+
+
+def _wait(condition, seconds: float, what: str, job: subprocess.Popen):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        assert job.poll() is None, f"the job ended while waiting for {what}: " + "".join(job.communicate())
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.mark.timeout(600)
+def test_a_lost_worker_never_renders_a_finished_frame_again(
+    blend: Path, cluster: str, reference: dict[int, np.ndarray], tmp_path: Path
+) -> None:
+    from distributed import Client
+
+    out = tmp_path / "lost_after_finishing"
+    job = _batch(str(blend), "--frames", "1-6", "--out", str(out), "--scheduler", cluster)
+    runs: dict[str, set[int]] = {}  # every process that started each task, seen while the job runs
+
+    def watch() -> None:
+        while job.poll() is None:
+            for marker in _attempt_markers(out):
+                runs.setdefault(marker["task"], set()).add(marker["pid"])
+            time.sleep(0.01)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    held = None
+    try:
+        # Hold one worker in the middle of its task (SIGSTOP), so that the job stays open.
+        first = _wait(lambda: _attempt_markers(out), 120, "a task to start", job)
+        held = first[0]["pid"]
+        os.kill(held, signal.SIGSTOP)
+
+        # The other worker renders every other frame it gets; wait until it is idle with its results
+        # delivered (no new finished frame for a second).
+        def idle_with_results() -> list[dict] | None:
+            frames = {m["task"].split("-")[0]: m for m in _attempt_markers(out) if m["pid"] != held}
+            written = {name: out / f"{name}.exr" for name in frames if (out / f"{name}.exr").exists()}
+            if len(written) >= 2 and time.time() - max(p.stat().st_mtime for p in written.values()) > 1.0:
+                return [frames[name] for name in written]
+            return None
+
+        finished = _wait(idle_with_results, 120, "the other worker to finish frames", job)
+        other = finished[0]["pid"]
+        snapshot = {m["task"] for m in finished}
+        # The worker holding those finished results dies; its nanny starts a new one.
+        with Client(cluster, timeout=30) as client:
+            before = set(client.scheduler_info()["workers"])
+            os.kill(other, signal.SIGKILL)
+
+            def replaced() -> bool:  # the dead worker is gone and a fresh one has joined
+                now = set(client.scheduler_info()["workers"])
+                return len(now) == 2 and now != before
+
+            _wait(replaced, 90, "the lost worker to be replaced", job)
+        # Time for the scheduler to hand a recomputation of the lost results to the new worker.
+        rerun = lambda: any(len(runs.get(m["task"], ())) > 1 for m in finished)  # noqa: E731
+        deadline = time.monotonic() + 5.0
+        while not rerun() and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        if held is not None:
+            os.kill(held, signal.SIGCONT)
+    stdout, stderr = job.communicate(timeout=300)
+    after = _snapshot(out)
+    watcher.join()
+    assert not rerun(), f"finished frames were rendered again: {runs}"
+    assert job.returncode == 0, stdout + stderr
+    time.sleep(3.0)
+    assert _snapshot(out) == after, "files changed under --out after the job returned"
+    report = json.loads((out / "report.json").read_text())
+    assert report["failed"] == 0 and report["total"] == 6
+    # Each frame ran once: the finished ones were not computed again when their worker died.
+    attempts = {t["task"]["frame"]: t["attempts"] for t in report["tasks"]}
+    assert all(len(a) == 1 and a[0]["outcome"] == "ok" for a in attempts.values()), attempts
+    assert report["retried"] == [] and len(snapshot) >= 2
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [*(f"ball_{f:04d}.exr" for f in FRAMES), "report.json", "reports"]
+    )
+    pixels = _pixels(out)
+    for frame in FRAMES:
+        np.testing.assert_array_equal(pixels[frame], reference[frame], err_msg=f"frame {frame}")
+
+
+@pytest.mark.timeout(600)
+def test_nothing_changes_under_out_after_an_interrupted_job_returns(
+    blend: Path, cluster: str, tmp_path: Path
+):
+    out = tmp_path / "interrupted"
+    job = _batch(str(blend), "--frames", "1-6", "--out", str(out), "--scheduler", cluster)
+    held = None
+    try:
+        # A worker is in the middle of a task when the job is stopped: Dask cannot interrupt a
+        # render, so the task runs on after the job has gone, and must write nothing.
+        first = _wait(lambda: _attempt_markers(out), 120, "a task to start", job)
+        held = first[0]["pid"]
+        os.kill(held, signal.SIGSTOP)
+        job.send_signal(signal.SIGTERM)  # a farm manager stops the job
+        stdout, stderr = job.communicate(timeout=120)
+        after = _snapshot(out)
+    finally:
+        if held is not None:
+            os.kill(held, signal.SIGCONT)
+    assert job.returncode == 1 and "interrupted (SIGTERM)" in stderr, stdout + stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["interrupted"] == "SIGTERM"
+    time.sleep(4.0)  # the held task finishes its render (about a second) and tries to write
+    assert _snapshot(out) == after, "files changed under --out after the job returned"
+    names = {p.name for p in out.iterdir()}
+    assert names == {"report.json", "reports", *(Path(p).name for p in report["written"])}, names

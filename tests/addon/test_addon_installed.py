@@ -97,11 +97,12 @@ for i in range(2):
     scene.render.filepath = os.path.join(out, f"installed_{{i}}.exr")
     bpy.ops.render.render(write_still=True)
     renders.append(dict(engine.LAST_RENDER))
-cache = bpy.utils.extension_path_user({PACKAGE!r}, path="numba_cache")
+cache = bpy.utils.extension_path_user({PACKAGE!r}, path="kernels")
 found = {{
     "before": before, "after": after, "refused": refused, "result": result, "origins": origins,
     "user_dir": bpy.utils.extension_path_user({PACKAGE!r}),
-    "numba_cache_dir": numba.config.CACHE_DIR, "cache": cache,
+    "kernel_cache_dir": os.environ.get("BLINN_PHONG_KERNEL_CACHE"), "cache": cache,
+    "numba_cache_dir": numba.config.CACHE_DIR,
     "renders": [{{k: r.get(k) for k in ("ok", "error", "choices", "stats", "status", "seconds", "notes")}}
                 for r in renders],
 }}
@@ -357,12 +358,14 @@ def test_installed_verify_operator_runs_without_openimageio(installed: dict) -> 
 
 def test_kernels_compile_once_into_the_extension_user_directory(installed: dict) -> None:
     first, second = installed["runs"]
-    assert first["numba_cache_dir"] == first["cache"]
+    assert first["kernel_cache_dir"] == first["cache"]
+    assert not first["numba_cache_dir"]  # numba's own setting, followed by other add-ons, untouched
     assert Path(first["cache"]).is_relative_to(Path(first["user_dir"]))
     assert any(name.endswith(".nbi") for name in installed["stamps"])  # numba's cache index files
-    # The compile time is reported apart from the frame, once per process.
+    # The seconds each frame spent compiling (numba's compile events): the first frame after the
+    # install compiles, the second frame and a new Blender process load every kernel.
     assert first["renders"][0]["stats"]["compile"] > 0 and "compile" not in first["renders"][1]["stats"]
-    assert second["renders"][0]["stats"]["compile"] > 0
+    assert "compile" not in second["renders"][0]["stats"], second["renders"][0]["status"]
     # A new Blender process loads the cached kernels: every compiled kernel (.nbc) the first
     # process wrote is still there, unchanged (a recompile rewrites it). A call with argument
     # types the first process never used may add a specialization (a new .nbc, its index .nbi
@@ -389,10 +392,10 @@ def test_installed_image_equals_the_repository_render(installed: dict) -> None:
     assert repo[0]["choices"]["shadows"] == installed["runs"][0]["renders"][0]["choices"]["shadows"]
     print(
         "\ninstalled warm render {:.3f} s, repository warm render {:.3f} s; compile after install {:.2f} s, "
-        "in a new process {:.2f} s".format(
+        "first frame of a new process {:.2f} s".format(
             installed["runs"][0]["renders"][1]["seconds"],
             repo[1]["seconds"],
             installed["runs"][0]["renders"][0]["stats"]["compile"],
-            installed["runs"][1]["renders"][0]["stats"]["compile"],
+            installed["runs"][1]["renders"][0]["seconds"],
         )
     )

@@ -50,6 +50,11 @@ for options in (
 opaque = bp.Scene(meshes=[bp.Mesh(plane, ptri, pnrm), ball], lights=lights, camera=camera)
 for options in ({"shadows": "ray_traced", "shading": "flat"}, {"shadows": "none", "shading": "gouraud"}):
     bp.render(opaque, 48, 48, **options)  # culled shadow rays; flat and Gouraud on the fused pass
+texture = bp.Texture(np.full((2, 2, 4), 0.5), interpolation="closest", extension="clip")
+floor = bp.Mesh(
+    plane, ptri, pnrm, material=bp.Material(base_color_texture=texture), uv=plane[:, :2] / 6 + 0.5
+)
+bp.render(bp.Scene(meshes=[floor, ball], lights=lights, camera=camera), 48, 48, shadows="none")  # textured
 compositing.composite(result.rgba, result.rgba, "src_over", engine="numba")
 missed = sorted(
     f"{o.py_func.__module__}.{o.py_func.__qualname__}"

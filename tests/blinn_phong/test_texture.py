@@ -94,12 +94,28 @@ def test_straight_and_srgb_inputs_become_linear_premultiplied() -> None:
         ({"image": np.full((1, 1, 4), 2.0)}, ValueError, "alpha in"),
         ({"image": np.full((1, 1, 4), np.nan)}, ValueError, "finite"),
         ({"image": np.full((1, 1, 3), 1.5), "colorspace": "sRGB"}, ValueError, "sRGB"),
+        ({"use_alpha": "no"}, TypeError, "Texture.use_alpha"),
     ],
 )
 def test_bad_texture_arguments_are_named(kwargs: dict, error: type, match: str) -> None:
     args = {"image": IMAGE, **kwargs}
     with pytest.raises(error, match=match):
         Texture(**args)
+
+
+def test_accepted_texel_dtypes_are_the_ones_the_message_names() -> None:
+    # float16 (half-float EXR data) is accepted and converted exactly (every float16 is a float32).
+    half = IMAGE.astype(np.float16)
+    np.testing.assert_array_equal(Texture(half).image, half.astype(np.float32))
+    with pytest.raises(TypeError) as refused:
+        Texture(np.zeros((2, 2, 4), np.uint8))
+    named = str(refused.value)
+    for dtype in (np.float16, np.float32, np.float64):
+        assert np.dtype(dtype).name in named, named  # the message lists every accepted dtype
+        Texture(IMAGE.astype(dtype))
+    if np.dtype(np.longdouble) != np.float64:  # extended precision: a float dtype not accepted
+        with pytest.raises(TypeError, match=r"float16, float32 or float64 .*got dtype float128"):
+            Texture(IMAGE.astype(np.longdouble))
 
 
 def test_material_and_mesh_validation() -> None:
@@ -255,7 +271,7 @@ def test_compiled_texture_stage_equals_the_reference(gl_compat: bool, separate: 
             specular=(0.4, 0.4, 0.4),
             shininess=10.0,
             emission=(0.3, 0.1, 0.0),
-            base_color_texture=Texture(img, interpolation=interp, extension=ext),
+            base_color_texture=Texture(img, interpolation=interp, extension=ext, use_alpha=k % 3 != 2),
             alpha_clip=0.3 if k % 2 else None,
         )
         shift = np.eye(4)

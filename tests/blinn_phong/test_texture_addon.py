@@ -109,3 +109,42 @@ def test_image_texture_node_becomes_a_core_texture(tmp_path) -> None:
     np.testing.assert_allclose(got["diffuse"], [1.0, 1.0, 1.0])
     assert got["opacity"] == 1.0
     assert not any("is linked" in note for note in got["notes"]), got["notes"]
+
+
+SHARED = """
+import bpy
+import numpy as np
+from addon import convert
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+scene = bpy.context.scene
+image = bpy.data.images.new("tex", 4, 4, alpha=True)
+image.pixels.foreach_set(np.linspace(0.0, 1.0, 64, dtype=np.float32))
+material = bpy.data.materials.new("textured")
+material.use_nodes = True
+nodes, links = material.node_tree.nodes, material.node_tree.links
+principled = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+tex = nodes.new("ShaderNodeTexImage")
+tex.image = image
+links.new(tex.outputs["Color"], principled.inputs["Base Color"])
+for k in range(3):
+    mesh = bpy.data.meshes.new(f"quad{k}")
+    mesh.from_pydata([(k, 0, 0), (k + 1, 0, 0), (k + 1, 1, 0), (k, 1, 0)], [], [(0, 1, 2, 3)])
+    mesh.uv_layers.new(name="UVMap")
+    mesh.materials.append(material)
+    scene.collection.objects.link(bpy.data.objects.new(f"quad{k}", mesh))
+cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+cam.location = (1.5, 0.5, 4)
+scene.collection.objects.link(cam)
+scene.camera = cam
+converted = convert.scene_from_depsgraph(bpy.context.evaluated_depsgraph_get())
+textures = [m.material.base_color_texture for m in converted.scene.meshes]
+emit({"meshes": len(textures), "distinct": len({id(t) for t in textures}), "none": textures.count(None)})
+"""
+
+
+def test_an_image_shared_by_objects_becomes_one_texture(tmp_path) -> None:
+    """Three objects with one textured material: one Texture (16 bytes per texel), not three."""
+    pytest.importorskip("bpy")
+    got = _run_bpy()(SHARED, tmp_path)
+    assert got == {"meshes": 3, "distinct": 1, "none": 0}

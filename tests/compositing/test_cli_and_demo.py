@@ -63,8 +63,26 @@ def test_cli_unknown_operator_exits_2_with_closest_match():
 
 def test_cli_bad_data_exits_1(tmp_path, capsys):
     a_path, b_path = sample_paths()
-    assert main(["plus", str(a_path), str(b_path), "-o", str(tmp_path / "p.png")]) == 1
-    assert "pass clip=True" in capsys.readouterr().err
+    out = tmp_path / "p.png"
+    assert main(["plus", str(a_path), str(b_path), "-o", str(out)]) == 1
+    err = capsys.readouterr().err  # the command line's flags, not the library's keywords
+    assert f"error: --out {out}: " in err and "give --clip" in err and "clip=True" not in err, err
+    assert main(["src_over", str(a_path), str(b_path), "-o", str(tmp_path / "p.jpg")]) == 1
+    err = capsys.readouterr().err
+    assert "JPEG has no alpha; give --flatten" in err and "flatten=True" not in err, err
+    assert main(["src_over", str(a_path), str(b_path), "-o", str(out), "--factor", "2"]) == 1
+    assert "error: --factor: expected a number in [0, 1]" in capsys.readouterr().err
+
+
+def test_cli_misspelled_gl_names_get_the_closest_valid_one(tmp_path, capsys):
+    pytest.importorskip("compositing.gl_blend")
+    a_path, b_path = sample_paths()
+    args = ["blend", str(a_path), str(b_path), "-o", str(tmp_path / "x.exr"), "--src-factor", "ONE"]
+    with pytest.raises(SystemExit) as exit_info:
+        main([*args, "--dst-factor", "one_minus_src_alhpa"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2
+    assert "error: --dst-factor: unknown blend factor" in err and "(did you mean ONE_MINUS_SRC_ALPHA?)" in err
 
 
 def test_demo_writes_every_operator(tmp_path):

@@ -87,6 +87,15 @@ def test_render_options_store_their_declared_types() -> None:
         (lambda: bp.Fog(mode="expo"), "did you mean 'exp'"),
         (lambda: bp.Material(opacity=0.5, transparency_model="absorbtion"), "did you mean 'absorption'"),
         (lambda: RenderOptions(transparency="ABUFFER"), "did you mean 'A_BUFFER'"),
+        (
+            lambda: bp.Texture(np.ones((2, 2, 4), np.float32), extension="clamp_to_edge"),
+            "did you mean 'extend'",
+        ),
+        (lambda: bp.Texture(np.ones((2, 2, 4), np.float32), extension="repaet"), "did you mean 'repeat'"),
+        (
+            lambda: bp.Texture(np.ones((2, 2, 4), np.float32), interpolation="nearest"),
+            "did you mean 'closest'",
+        ),
         (lambda: RenderOptions(shadows="hard"), "did you mean 'HARD'"),
         (
             lambda: shadow_volume_visibility(
@@ -123,3 +132,13 @@ def test_shadow_volume_visibility_names_the_bad_array(points, normals, name: str
     tris = np.array([[[-1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [0.0, 1.0, 1.0]]])
     with pytest.raises(ValueError, match=rf"^{name}: "):
         shadow_volume_visibility(bp.PointLight((0.0, 3.0, 0.0)), tris, points, normals)
+
+
+def test_cost_model_helpers_accept_numpy_scalars() -> None:
+    """The calibrated choosers take the numpy numbers a caller computes them from."""
+    from blinn_phong import calibration as cal
+
+    models = cal.shipped_models()
+    expected = cal.choose_depth_peeling(models, 4.0, 0.5, 1.0, 4)
+    for tolerance in (np.float32(4.0), np.int64(4)):
+        assert cal.choose_depth_peeling(models, tolerance, np.float32(0.5), np.float64(1.0), 4) == expected
