@@ -148,7 +148,7 @@ def read_background(image: bpy.types.Image, workdir: Path, scene: bpy.types.Scen
     image is decoded by Blender with the data-block's own colour space and alpha mode: saved with
     ``save_render`` as a float EXR (scene-linear, premultiplied) and read back.
     """
-    path = bpy.path.abspath(image.filepath) if image.filepath else ""
+    path = bpy.path.abspath(image.filepath, library=image.library) if image.filepath else ""
     if path.lower().endswith(".exr") and image.packed_file is None:
         if not Path(path).is_file():
             raise ValueError(f"background: image {image.name!r} reads {path}, which does not exist")
