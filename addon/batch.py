@@ -1976,10 +1976,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings = list(plan.warnings)
     for result in results:
         result["error"] = _trim(result["error"]) if result["error"] else None
-        for warning in [*result.get("warnings", []), *closing_warnings]:
-            if warning not in warnings:
-                warnings.append(warning)
-                print(f"warning: {warning}", file=sys.stderr, flush=True)
+    for warning in [*(w for r in results for w in r.get("warnings", [])), *closing_warnings]:
+        if warning not in warnings:
+            warnings.append(warning)
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
     written = [path for r in results for path in r.get("written", [])]
     retried = [r for r in results if len(r.get("attempts", [])) > 1]
     report = {
