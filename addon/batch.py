@@ -570,6 +570,21 @@ def close_job(directory: str | os.PathLike, wait: float = CLOSE_WAIT_S) -> tuple
     return closed, warnings
 
 
+def _late_writes(tasks: list[Task], reported: set[str], since_ns: int) -> list[str]:
+    """Outputs of ``tasks`` not in ``reported`` that are non-empty files modified since ``since_ns``
+    (wall clock, ns; 50 ms of slack: file-system timestamps come from a coarser clock)."""
+    late = []
+    for task in tasks:
+        for path in task.outputs():
+            if path in reported:
+                continue
+            with contextlib.suppress(OSError):
+                stat = os.stat(path)
+                if stat.st_size > 0 and stat.st_mtime_ns >= since_ns - 50_000_000:
+                    late.append(path)
+    return late
+
+
 def _remove_job_dir(closed: Path | None) -> None:
     if closed is not None:
         shutil.rmtree(closed, ignore_errors=True)
@@ -1904,6 +1919,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else (f"{args.workers} process(es)" if args.workers > 1 or args.timeout else "this process")
     )
     started = time.perf_counter()
+    started_wall_ns = time.time_ns()
     if args.scheduler:  # before opening any file: an unreachable cluster is known in seconds
         try:
             probe_scheduler(args.scheduler, args.connect_timeout)
@@ -1981,6 +1997,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.append(warning)
             print(f"warning: {warning}", file=sys.stderr, flush=True)
     written = [path for r in results for path in r.get("written", [])]
+    # A task whose result never arrived (the job was stopped) may still have finished its write
+    # while the job waited for writes under way: list those files too, so that the report names
+    # every file the job wrote.
+    arrived_outputs = {r["task"]["output"] for r in results}
+    unanswered = [task for task in plan.tasks if task.output not in arrived_outputs]
+    for path in _late_writes(unanswered, set(written), started_wall_ns):
+        written.append(path)
+        warning = f"{path} was written by a task that finished while the job was ending"
+        warnings.append(warning)
+        print(f"warning: {warning}", file=sys.stderr, flush=True)
     retried = [r for r in results if len(r.get("attempts", [])) > 1]
     report = {
         "job": plan.job,
