@@ -30,8 +30,8 @@ from collections.abc import Callable
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the name OpenImageIO documents)
 
-from ._atomic import atomic_path
 from .deep import DeepImage
+from .io import write_atomic
 
 __all__ = ["COMPRESSIONS", "from_deepdata", "read_deep", "to_deepdata", "write_deep"]
 
@@ -230,19 +230,7 @@ def write_deep(
     spec.attribute("compression", compression)
     if tiled:
         spec.tile_width = spec.tile_height = tile_size
-    with atomic_path(path) as tmp:
-        out = oiio.ImageOutput.create(tmp)
-        if out is None:
-            raise OSError(f"path: cannot create {path!r}: {oiio.geterror()}")
-        try:
-            if not out.open(tmp, spec):
-                raise OSError(f"path: cannot open {path!r} for writing: {out.geterror()}")
-            if not out.write_deep_image(dd):
-                raise OSError(f"path: cannot write {path!r}: {out.geterror()}")
-        finally:
-            closed = out.close()
-        if not closed:
-            raise OSError(f"path: cannot finish writing {path!r}: {out.geterror()}")
+    write_atomic(path, spec, lambda out: out.write_deep_image(dd))
 
 
 def read_deep(path: str | os.PathLike, *, progress: Callable[[float], None] | None = None) -> DeepImage:

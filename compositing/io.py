@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,7 @@ __all__ = [
     "ChannelMap",
     "image_channels",
     "read_image",
+    "write_atomic",
     "write_image",
 ]
 
@@ -326,6 +328,13 @@ def _write(path: str, pixels: np.ndarray, names: tuple[str, ...], fmt, *, unasso
     spec.alpha_channel = 3 if c == 4 else -1
     if unassociated:
         spec.attribute("oiio:UnassociatedAlpha", 1)
+    write_atomic(path, spec, lambda out: out.write_image(pixels))
+
+
+def write_atomic(path: str | os.PathLike, spec: object, write: Callable[[object], bool]) -> None:
+    """Open an OpenImageIO output with ``spec`` on a temporary file, ``write(output)``, close it and
+    rename it over ``path``; any failure raises ``OSError`` naming ``path`` and leaves ``path`` as
+    it was (:func:`compositing._atomic.atomic_path`)."""
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None:
@@ -333,7 +342,7 @@ def _write(path: str, pixels: np.ndarray, names: tuple[str, ...], fmt, *, unasso
         try:
             if not out.open(tmp, spec):
                 raise OSError(f"path: cannot open {path!r} for writing: {out.geterror()}")
-            if not out.write_image(pixels):
+            if not write(out):
                 raise OSError(f"path: cannot write {path!r}: {out.geterror()}")
         finally:
             closed = out.close()

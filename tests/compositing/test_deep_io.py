@@ -15,7 +15,7 @@ import OpenImageIO as oiio  # noqa: N813
 import pytest
 from deep_testdata import from_imagebuf, random_deep, to_imagebuf
 
-import compositing.deep_io as deep_io
+import compositing.io as compositing_io
 from compositing.__main__ import main
 from compositing.deep import DeepImage, flatten, merge
 from compositing.deep_io import read_deep, write_deep
@@ -120,7 +120,7 @@ def test_failed_write_leaves_the_existing_file_intact(tmp_path, image, monkeypat
         def __getattr__(self, name):
             return Failing if name == "ImageOutput" else getattr(oiio, name)
 
-    monkeypatch.setattr(deep_io, "oiio", Shim())
+    monkeypatch.setattr(compositing_io, "oiio", Shim())  # the one atomic writer of compositing.io
     with pytest.raises(OSError, match="disk full"):
         write_deep(path, random_deep(np.random.default_rng(1), (3, 3)))
     assert path.read_bytes() == before
