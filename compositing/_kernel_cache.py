@@ -395,6 +395,11 @@ def _locator_class() -> type:
                     return None
                 root = cache_directory()
                 subpath, stamp = place
+                # The module's import name too: a vendored copy (the Blender extension's
+                # ``bl_ext.….blinn_phong.fast``) may have the same sources as ``blinn_phong.fast``,
+                # but its cached kernels refer to its own modules by name.
+                module = str(getattr(py_func, "__module__", "") or "")
+                subpath += "-" + hashlib.sha256(module.encode()).hexdigest()[:8]
                 directory = os.path.join(root, environment_key(), *subpath.split("/"))
                 locator = cls(py_func, py_file, directory, stamp)
                 locator.ensure_cache_path()

@@ -11,6 +11,7 @@ about a second to compile) so the default run stays quick.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -227,7 +228,12 @@ def test_an_index_is_saved_under_the_entry_lock(tmp_path: Path) -> None:
         cache
         / kc.environment_key()
         / "blinn_phong"
-        / ("_mesh_kernels-" + kc.source_stamp(ROOT / "blinn_phong" / "_mesh_kernels.py")[:16])
+        / (
+            "_mesh_kernels-"
+            + kc.source_stamp(ROOT / "blinn_phong" / "_mesh_kernels.py")[:16]
+            + "-"
+            + hashlib.sha256(b"blinn_phong._mesh_kernels").hexdigest()[:8]  # the module's name
+        )
     )
     entry.mkdir(parents=True)
     fd = os.open(entry / ".lock", os.O_RDWR | os.O_CREAT, 0o666)
