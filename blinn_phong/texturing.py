@@ -165,9 +165,17 @@ def _texture_compiled(
     return dataclasses.replace(shaded, rgb=rgb, ambient=ambient, diffuse=diffuse, alpha=alpha)
 
 
+#: The texel fetch, inlined into the kernel: a module global, not a closure variable (numba's
+#: disk-cache key hashes closure variables, and a compiled function in one changes it in every
+#: process, so the kernel was compiled again by every process).
+_fetch: object = None
+
+
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
     import numba
+
+    global _fetch
 
     @numba.njit(inline="always", cache=True)
     def fetch(pixels, offset, w, h, ext, i, j, out, weight):  # pragma: no cover - compiled
@@ -181,6 +189,8 @@ def _kernel() -> object:  # a numba dispatcher
         base = offset + ((h - 1 - j) * w + i) * 4
         for c in range(4):
             out[c] += weight * np.float64(pixels[base + c])
+
+    _fetch = fetch
 
     @numba.njit(parallel=True, cache=True)
     def run(
@@ -224,17 +234,17 @@ def _kernel() -> object:  # a numba dispatcher
                 y = v * h
                 texel = np.zeros(4)
                 if modes[k, 0] == 0:  # closest
-                    fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
+                    _fetch(pixels, offsets[k], w, h, ext, int(np.floor(x)), int(np.floor(y)), texel, 1.0)
                 else:
                     x -= 0.5
                     y -= 0.5
                     fx, fy = np.floor(x), np.floor(y)
                     a, b = x - fx, y - fy
                     i0, j0 = int(fx), int(fy)
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
-                    fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
-                    fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0, texel, (1 - a) * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0, texel, a * (1 - b))
+                    _fetch(pixels, offsets[k], w, h, ext, i0, j0 + 1, texel, (1 - a) * b)
+                    _fetch(pixels, offsets[k], w, h, ext, i0 + 1, j0 + 1, texel, a * b)
                     texel[3] = min(max(texel[3], 0.0), 1.0)
                 ta = texel[3]
                 for c in range(3):

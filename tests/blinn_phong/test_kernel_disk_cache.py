@@ -55,6 +55,11 @@ for options in (
 opaque = bp.Scene(meshes=[bp.Mesh(plane, ptri, pnrm), ball], lights=lights, camera=camera)
 for options in ({"shadows": "ray_traced", "shading": "flat"}, {"shadows": "none", "shading": "gouraud"}):
     bp.render(opaque, 48, 48, **options)  # culled shadow rays; flat and Gouraud on the fused pass
+checker = ((np.indices((16, 16)).sum(axis=0) // 4) % 2).astype(np.float32)
+texture = bp.Texture(np.stack([checker, checker, checker, np.ones_like(checker)], axis=-1))
+tiles = bp.Material(base_color_texture=texture)
+textured = bp.Mesh(plane, ptri, pnrm, uv=plane[:, :2] / 6.0 + 0.5, material=tiles)
+bp.render(bp.Scene(meshes=[textured, ball], lights=lights, camera=camera), 48, 48, shadows="none")
 compositing.composite(result.rgba, result.rgba, "src_over", engine="numba")
 missed = sorted(
     f"{o.py_func.__module__}.{o.py_func.__qualname__}"
