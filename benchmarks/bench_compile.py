@@ -205,7 +205,8 @@ def _measure(command: list[str], env: dict[str, str], cwd: Path, watch: Path | N
 
     def watch_files() -> None:
         while not done.wait(0.05):
-            if any(p.is_file() and p.stat().st_size > 0 and p.suffix != ".json" for p in watch.rglob("*")):
+            # the outputs (frame_####.*), renamed into place once whole; not the workers' markers
+            if any(p.is_file() and p.stat().st_size > 0 for p in watch.glob("frame_*")):
                 first_file.append(time.time())
                 return
 
@@ -354,24 +355,28 @@ def table(data: dict) -> str:
 
 
 def draw(data: dict, charts: Path) -> Path:
-    """Horizontal bars: cold compile seconds per module (stacked) and the first image, per case."""
+    """Horizontal bars per case: cold compile CPU seconds per module (stacked); the cold first image."""
     from benchmarks.charts import DPI, plt
 
     names = list(data["cases"])
-    modules = sorted({m for row in data["cases"].values() for m in row["cold"]["by_module"]})
-    totals = {m: sum(row["cold"]["by_module"].get(m, 0.0) for row in data["cases"].values()) for m in modules}
+
+    def by(row: dict) -> dict[str, float]:
+        return row["cold"].get("cpu_by_module") or row["cold"]["by_module"]
+
+    modules = sorted({m for row in data["cases"].values() for m in by(row)})
+    totals = {m: sum(by(row).get(m, 0.0) for row in data["cases"].values()) for m in modules}
     modules.sort(key=lambda m: -totals[m])
     shown = modules[:9]
     fig, ax = plt.subplots(figsize=(9, 0.35 * len(names) + 1.8))
     left = [0.0] * len(names)
     colours = plt.get_cmap("tab10")
     for k, module in enumerate([*shown, "other"]):
-        widths = []
-        for row in data["cases"].values():
-            by = row["cold"]["by_module"]
-            widths.append(
-                sum(v for m, v in by.items() if m not in shown) if module == "other" else by.get(module, 0.0)
-            )
+        widths = [
+            sum(v for m, v in by(row).items() if m not in shown)
+            if module == "other"
+            else by(row).get(module, 0.0)
+            for row in data["cases"].values()
+        ]
         ax.barh(names, widths, left=left, color=colours(k % 10), label=module)
         left = [a + b for a, b in zip(left, widths, strict=True)]
     ax.scatter(
@@ -380,11 +385,15 @@ def draw(data: dict, charts: Path) -> Path:
         color="black",
         marker="|",
         s=200,
-        label="first image (cold)",
+        label="first image, wall seconds",
         zorder=3,
     )
     ax.invert_yaxis()
-    ax.set_xlabel("seconds, fresh process with an empty kernel cache (bars: compile time per module)")
+    ax.set_xlabel(
+        "seconds; fresh process, empty kernel cache. Bars: compile CPU seconds per module "
+        f"(2-core VM, load {data['machine'].get('load_average_1min')})",
+        fontsize=8,
+    )
     ax.set_title("Compile cost before the first image")
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
