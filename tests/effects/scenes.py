@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from blinn_phong.oit import transparency_pass
-from blinn_phong.primitives import uv_sphere
+from blinn_phong.primitives import box, uv_sphere
 from blinn_phong.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.render import prepare_scene, shade_fragments
 from blinn_phong.scene import Camera, LightModel, Material, Mesh, Scene, look_at
@@ -48,25 +48,13 @@ def sphere(centre, radius, colour=(1.0, 1.0, 1.0), opacity=1.0, segments=24, rin
 
 
 def flat_cube(centre, half, colour=(0.8, 0.6, 0.4), transform=None) -> Mesh:
-    """A cube with 4 vertices per face and per-face normals (planar faces)."""
-    pos, tris, nrm = [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            u = np.zeros(3)
-            u[(axis + 1) % 3] = 1.0
-            v = np.cross(n, u)
-            base = len(pos)
-            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                pos.append(np.asarray(centre) + half * (n + a * u + b * v))
-                nrm.append(n)
-            tris += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    """A cube with 4 vertices per face and per-face normals (planar faces): ``primitives.box``."""
+    pos, tris, nrm = box((half, half, half))
     mat = Material(ambient=colour, diffuse=colour, specular=(0.5, 0.5, 0.5), shininess=30.0)
     return Mesh(
-        np.array(pos),
-        np.array(tris),
-        normals=np.array(nrm),
+        np.asarray(centre, dtype=np.float64) + pos,
+        tris,
+        normals=nrm,
         material=mat,
         transform=np.eye(4) if transform is None else transform,
     )
