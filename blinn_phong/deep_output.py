@@ -32,7 +32,7 @@ from blinn_phong.frame import Fog, frame_plan, scene_with_planned_shading
 from blinn_phong.pipeline import light_visibilities
 from blinn_phong.prepared import prepare_scene
 from blinn_phong.raster import interpolate
-from blinn_phong.resolve import FogParameters, fragment_colours, side_tables
+from blinn_phong.resolve import FogParameters, fragment_colours, opaque_test
 from blinn_phong.scene import Scene, prepare_render_inputs
 from blinn_phong.shading import shade_fragments
 from blinn_phong.texturing import texture_fragments
@@ -111,14 +111,7 @@ def render_deep(
     prepared = prepare_scene(scene)
     stage_engine = "numba" if use_compiled(engine) else "numpy"
     method = the_plan.transparency.method
-    opaque = None
-    if method != "zbuffer":
-        _, side_opaque = side_tables(scene)
-        two_sided = scene.light_model.two_sided
-
-        def opaque(triangle: np.ndarray, front_facing: np.ndarray) -> np.ndarray:
-            back = ~front_facing if two_sided else False
-            return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
+    opaque = None if method == "zbuffer" else opaque_test(prepared)
 
     visible = frame_fragments(
         prepared.clip,

@@ -49,6 +49,7 @@ from blinn_phong.resolve import (
     FogParameters,
     FrameImage,
     fragment_colours,
+    opaque_test,
     resolve_frame,
     shadow_pass_values,
     side_tables,
@@ -715,14 +716,7 @@ def render_frame(
     stage_engine = "numba" if compiled else "numpy"
     scene: Scene = prepared.scene
     method = the_plan.transparency.method
-    opaque = None
-    if method != "zbuffer":
-        _, side_opaque = side_tables(scene)
-        two_sided = scene.light_model.two_sided
-
-        def opaque(triangle: np.ndarray, front_facing: np.ndarray) -> np.ndarray:
-            back = ~front_facing if two_sided else False
-            return side_opaque[2 * prepared.triangle_mesh[triangle] + back]
+    opaque = None if method == "zbuffer" else opaque_test(prepared)
 
     fog_parameters = FogParameters.of(fog)
     fog_args = None if fog_parameters is None else fog_parameters.compiled_args()

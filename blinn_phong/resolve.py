@@ -19,6 +19,7 @@ Each has a numpy reference (readable, built on :mod:`blinn_phong.oit` and
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,6 +189,17 @@ def fragment_side(prepared: PreparedScene, triangle: np.ndarray, front_facing: n
     """Material side ``2·mesh + back`` of fragments (back = back-facing under two-sided lighting)."""
     back = ~np.asarray(front_facing, bool) if prepared.scene.light_model.two_sided else False
     return 2 * prepared.triangle_mesh[triangle] + back
+
+
+def opaque_test(prepared: PreparedScene) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """``opaque(triangle, front_facing)``: per fragment, whether its material side
+    (:func:`fragment_side`) is opaque — the visibility stage's split of opaque and transparent."""
+    _, side_opaque = side_tables(prepared.scene)
+
+    def opaque(triangle: np.ndarray, front_facing: np.ndarray) -> np.ndarray:
+        return side_opaque[fragment_side(prepared, triangle, front_facing)]
+
+    return opaque
 
 
 @dataclass(frozen=True)
