@@ -334,6 +334,7 @@ def atomic_target(
                     f"the written file does not read back whole ({detail}); the disk may be full"
                 ) from None
         _fsync(str(tmp))
+        _permit_still_open()  # a writer paused past the job's end must not replace anything now
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -490,8 +491,10 @@ def write_permit(task: Task) -> Iterator[None]:
 
         beat = threading.Thread(target=heartbeat, name="batch-permit", daemon=True)
         beat.start()
+        _HELD[threading.get_ident()] = (directory, reference, closed)
         yield
     finally:
+        _HELD.pop(threading.get_ident(), None)
         stop.set()
         if beat is not None:
             beat.join()
@@ -500,6 +503,29 @@ def write_permit(task: Task) -> Iterator[None]:
                 os.unlink(name, **where)
         if dir_fd is not None:
             os.close(dir_fd)
+
+
+#: The permit each thread holds: ``(job folder, its stat when the permit was taken, message)``
+#: (a plain dict, which cloudpickle can send to cluster workers with this module's functions).
+_HELD: dict[int, tuple[str, os.stat_result, str]] = {}
+
+
+def _same_folder(directory: str, reference: os.stat_result, message: str) -> None:
+    try:
+        still_open = os.path.samestat(os.stat(directory), reference)
+    except OSError:
+        still_open = False
+    if not still_open:
+        raise JobClosed(message)
+
+
+def _permit_still_open() -> None:
+    """Raise :class:`JobClosed` when this thread's write permit belongs to a job that has ended
+    (checked again right before a file replaces its target: a writer paused while its job ended,
+    and was judged lost, writes nothing when it resumes)."""
+    held = _HELD.get(threading.get_ident())
+    if held is not None:
+        _same_folder(*held)
 
 
 def _pid_alive(pid: int) -> bool:
