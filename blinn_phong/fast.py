@@ -1038,6 +1038,7 @@ def resolve_frame_compiled(
 
 #: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
 _point_terms: object = None
+_plain_row: object = None
 
 
 @functools.lru_cache(maxsize=1)
@@ -1077,9 +1078,9 @@ def _plain_kernel() -> object:  # a numba dispatcher
     global _lerp
     _lerp = lerp
 
-    @numba.njit(parallel=True, cache=True)
-    def plain(
-        width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
+    @numba.njit(cache=True)
+    def plain_row(
+        row, width, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
         maps, world, n_opaque, offsets, max_layers, max_list,
@@ -1096,8 +1097,9 @@ def _plain_kernel() -> object:  # a numba dispatcher
         # ``n_opaque + offsets[pixel] ...`` in draw order), resolve_frame_compiled's A-buffer:
         # sorted by depth (stable), the nearest ``max_layers`` composited front to back, over
         # the opaque colour; the passes, normal and depth of the nearest. Then resolve's float32
-        # writes, with the same operations in the same order. Tuples are unpacked once, outside
-        # the parallel loop.
+        # writes, with the same operations in the same order. One row per call: the parallel loop
+        # of ``plain`` stays a few lines (numba's parallel transformation of a large loop body
+        # is what made this kernel slow to compile: docs/compile.md).
         triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
@@ -1113,254 +1115,271 @@ def _plain_kernel() -> object:  # a numba dispatcher
         no_faces = np.zeros(0, np.int8)
         scratch = width if has_maps else 0
         lists = offsets.shape[0] > 0
-        covered = np.zeros(height, np.int64)
-        covered[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
-        for i_row in numba.prange(height):
-            row = row_order[i_row]  # rows interleaved over the threads (balanced work)
-            order = np.empty(max(max_list, 1), np.int64)  # scratch of the row's thread
-            r_bary = np.empty((scratch, 4))  # maps: the row's winners (depth, b0, b1, b2) ...
-            r_pts = np.empty((scratch, 3))  # ... world points and visibilities
-            r_vis = np.empty((scratch, max(n_lit, 1)))
-            r_vis3 = r_vis.reshape((scratch, max(n_lit, 1), 1))
-            s_qx = np.empty(scratch)
-            s_qy = np.empty(scratch)
-            s_qz = np.empty(scratch)
-            s_cw = np.empty(scratch)
-            s_face = np.zeros(scratch, np.int64)
-            j_cov = 0  # the next covered pixel of the row (maps)
-            if has_maps:
-                # The row's covered pixels first: each winner's depth and barycentrics (read back
-                # below), its world point (as winner_surface) and its visibility per light, in
-                # runs over the row (shadow_kernels.nearest_run: tight loops of divisions), or
-                # per point (stacked_visibility: the PCF kernels).
-                n_cov = 0
-                for col in range(width):
-                    o = index[row * width + col]
-                    if o < 0:
-                        continue
-                    depth, b0, b1, b2 = _winner_point(
-                        o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
-                    )
-                    r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
-                    src = source[o]
-                    v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
-                    for k in range(3):
-                        r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
-                    n_cov += 1
-                for i_light in range(n_lit):
-                    f0 = m_first[i_light]
-                    if f0 < 0:
-                        for j in range(n_cov):
-                            r_vis[j, i_light] = 1.0
-                        continue
-                    cube = 1 if m_faces[i_light] == 6 else 0
-                    if m_kernel[i_light] == 0:
-                        _nearest_run(
-                            r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
-                            r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
-                        )  # fmt: skip
-                        continue
-                    for j in range(n_cov):
-                        r_vis[j, i_light] = _stacked_visibility(
-                            r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
-                            m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
-                            m_rects, m_miss,
-                        )  # fmt: skip
-            n_row = 0
-            cy = row + 0.5
+        row_stamp = np.zeros(0, np.int64)
+        row_stamp[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
+        order = np.empty(max(max_list, 1), np.int64)  # scratch of the row's thread
+        r_bary = np.empty((scratch, 4))  # maps: the row's winners (depth, b0, b1, b2) ...
+        r_pts = np.empty((scratch, 3))  # ... world points and visibilities
+        r_vis = np.empty((scratch, max(n_lit, 1)))
+        r_vis3 = r_vis.reshape((scratch, max(n_lit, 1), 1))
+        s_qx = np.empty(scratch)
+        s_qy = np.empty(scratch)
+        s_qz = np.empty(scratch)
+        s_cw = np.empty(scratch)
+        s_face = np.zeros(scratch, np.int64)
+        j_cov = 0  # the next covered pixel of the row (maps)
+        if has_maps:
+            # The row's covered pixels first: each winner's depth and barycentrics (read back
+            # below), its world point (as winner_surface) and its visibility per light, in
+            # runs over the row (shadow_kernels.nearest_run: tight loops of divisions), or
+            # per point (stacked_visibility: the PCF kernels).
+            n_cov = 0
             for col in range(width):
-                key = row * width + col
-                o = index[key]
-                count = 0
-                first = 0
-                if lists:
-                    first = n_opaque + offsets[key]
-                    count = offsets[key + 1] - offsets[key]
-                if o < 0 and count == 0:
-                    for ch in range(4):
-                        o_rgba[row, col, ch] = 0.0
-                    for ch in range(3):
-                        o_amb[row, col, ch] = 0.0
-                        o_dif[row, col, ch] = 0.0
-                        o_spe[row, col, ch] = 0.0
-                        o_nrm[row, col, ch] = 0.0
-                    o_depth[row, col] = np.float32(1.0)
-                    if has_vis:
-                        o_shadow[row, col, 0] = 0.0
+                o = index[row * width + col]
+                if o < 0:
                     continue
-                n_row += 1
-                # The pixel's fragments, front to back: the nearest ``max_layers`` transparent ones
-                # sorted by depth (stable in draw order), then the opaque one; each composited
-                # under the ones before it (resolve's "B over A": acc = c·(1 − acc_α) + acc, and
-                # the opaque one as src-over's acc + c·(1 − acc_α), the same sum). The first gives
-                # the passes, normal and depth.
-                for j in range(count):  # insertion sort by depth, stable in draw order
-                    f = first + j
-                    p = j
-                    while p > 0 and frag_depth[order[p - 1]] > frag_depth[f]:
-                        order[p] = order[p - 1]
-                        p -= 1
-                    order[p] = f
-                layers = min(count, max_layers)
-                acc0 = acc1 = acc2 = acc3 = 0.0
-                n_a = n_ar = n_ag = n_ab = n_dr = n_dg = n_db = n_sr = n_sg = n_sb = 0.0
-                n_wx = n_wy = n_wz = n_depth = 0.0
-                n_v = 0
-                for step in range(layers + (1 if o >= 0 else 0)):
-                    if step < layers:
-                        f = order[step]
-                        v = f
-                        b0, b1, b2 = bary[f, 0], bary[f, 1], bary[f, 2]
-                        depth = frag_depth[f]
-                        src = tri[f]
-                        front = frag_front[f]
-                    elif from_winners and has_maps:  # found above, with the row's visibilities
-                        v = j_cov
-                        depth, b0, b1, b2 = r_bary[v, 0], r_bary[v, 1], r_bary[v, 2], r_bary[v, 3]
-                        j_cov += 1
-                        src = source[o]
-                        front = sub_front[o]
-                    elif from_winners:
-                        v = vis_index[key] if has_vis else o
-                        depth, b0, b1, b2 = _winner_point(
-                            o, col + 0.5, cy, xe, ye, area, ea, eb, ec, z, w, weights
-                        )
-                        src = source[o]
-                        front = sub_front[o]
+                depth, b0, b1, b2 = _winner_point(
+                    o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
+                )
+                r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
+                src = source[o]
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                for k in range(3):
+                    r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
+                n_cov += 1
+            for i_light in range(n_lit):
+                f0 = m_first[i_light]
+                if f0 < 0:
+                    for j in range(n_cov):
+                        r_vis[j, i_light] = 1.0
+                    continue
+                cube = 1 if m_faces[i_light] == 6 else 0
+                if m_kernel[i_light] == 0:
+                    _nearest_run(
+                        r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
+                        r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
+                    )  # fmt: skip
+                    continue
+                for j in range(n_cov):
+                    r_vis[j, i_light] = _stacked_visibility(
+                        r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
+                        m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
+                        m_rects, m_miss,
+                    )  # fmt: skip
+        n_row = 0
+        cy = row + 0.5
+        for col in range(width):
+            key = row * width + col
+            o = index[key]
+            count = 0
+            first = 0
+            if lists:
+                first = n_opaque + offsets[key]
+                count = offsets[key + 1] - offsets[key]
+            if o < 0 and count == 0:
+                for ch in range(4):
+                    o_rgba[row, col, ch] = 0.0
+                for ch in range(3):
+                    o_amb[row, col, ch] = 0.0
+                    o_dif[row, col, ch] = 0.0
+                    o_spe[row, col, ch] = 0.0
+                    o_nrm[row, col, ch] = 0.0
+                o_depth[row, col] = np.float32(1.0)
+                if has_vis:
+                    o_shadow[row, col, 0] = 0.0
+                continue
+            n_row += 1
+            # The pixel's fragments, front to back: the nearest ``max_layers`` transparent ones
+            # sorted by depth (stable in draw order), then the opaque one; each composited
+            # under the ones before it (resolve's "B over A": acc = c·(1 − acc_α) + acc, and
+            # the opaque one as src-over's acc + c·(1 − acc_α), the same sum). The first gives
+            # the passes, normal and depth.
+            for j in range(count):  # insertion sort by depth, stable in draw order
+                f = first + j
+                p = j
+                while p > 0 and frag_depth[order[p - 1]] > frag_depth[f]:
+                    order[p] = order[p - 1]
+                    p -= 1
+                order[p] = f
+            layers = min(count, max_layers)
+            acc0 = acc1 = acc2 = acc3 = 0.0
+            n_a = n_ar = n_ag = n_ab = n_dr = n_dg = n_db = n_sr = n_sg = n_sb = 0.0
+            n_wx = n_wy = n_wz = n_depth = 0.0
+            n_v = 0
+            for step in range(layers + (1 if o >= 0 else 0)):
+                if step < layers:
+                    f = order[step]
+                    v = f
+                    b0, b1, b2 = bary[f, 0], bary[f, 1], bary[f, 2]
+                    depth = frag_depth[f]
+                    src = tri[f]
+                    front = frag_front[f]
+                elif from_winners and has_maps:  # found above, with the row's visibilities
+                    v = j_cov
+                    depth, b0, b1, b2 = r_bary[v, 0], r_bary[v, 1], r_bary[v, 2], r_bary[v, 3]
+                    j_cov += 1
+                    src = source[o]
+                    front = sub_front[o]
+                elif from_winners:
+                    v = vis_index[key] if has_vis else o
+                    depth, b0, b1, b2 = _winner_point(
+                        o, col + 0.5, cy, xe, ye, area, ea, eb, ec, z, w, weights
+                    )
+                    src = source[o]
+                    front = sub_front[o]
+                else:
+                    v = o
+                    b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
+                    depth = frag_depth[o]
+                    src = tri[o]
+                    front = frag_front[o]
+                back = 1 if two_sided and not front else 0
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
+                py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
+                pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
+                mesh = triangle_mesh[src]
+                mid = 2 * mesh + back
+                mode = mode_of[mesh]
+                # fog is a function of the fragment's own point; a flat face is lit at its centroid
+                fx, fy, fz = px, py, pz
+                nx = ny = nz = 0.0
+                if mode == 1:  # flat: lit at the face's eye-space centroid with its face normal
+                    px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
+                    py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
+                    pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
+                    nx, ny, nz = _unit_face_normal(eye_pos, v0, v1, v2)
+                    nx, ny, nz = nx * winding[mesh], ny * winding[mesh], nz * winding[mesh]
+                    # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
+                    wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
+                    wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
+                    wz = view_t[2, 0] * nx + view_t[2, 1] * ny + view_t[2, 2] * nz
+                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                    scale = 1.0 / length if length > 0 else 0.0
+                    wx, wy, wz = wx * scale, wy * scale, wz * scale
+                    if back:
+                        nx, ny, nz = -nx, -ny, -nz
+                else:
+                    wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
+                    wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
+                    wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
+                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                    scale = 1.0 / length if length > 0 else 0.0
+                    wx, wy, wz = wx * scale, wy * scale, wz * scale
+                if mode == 0:  # phong: the interpolated eye-space normal, renormalised
+                    nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
+                    ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
+                    nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
+                    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
+                    nx, ny, nz = nx * scale, ny * scale, nz * scale
+                if mode == 2:  # gouraud: the vertices' terms interpolated (raster.interpolate's sums)
+                    ar = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 0)
+                    ag = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 1)
+                    ab = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 2)
+                    dr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 3)
+                    dg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 4)
+                    db = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 5)
+                    sr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 6)
+                    sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
+                    sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
+                else:  # one call site of the (inlined) lighting equation for flat and phong
+                    ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
+                        v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
+                        pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
+                        has_vis, r_vis3 if has_maps else vis,
+                    )  # fmt: skip
+                r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
+                if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
+                    if separate:
+                        r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
+                        g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
+                        b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
                     else:
-                        v = o
-                        b0, b1, b2 = bary[o, 0], bary[o, 1], bary[o, 2]
-                        depth = frag_depth[o]
-                        src = tri[o]
-                        front = frag_front[o]
-                    back = 1 if two_sided and not front else 0
-                    v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
-                    px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
-                    py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
-                    pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                    mesh = triangle_mesh[src]
-                    mid = 2 * mesh + back
-                    mode = mode_of[mesh]
-                    if mode == 1:  # flat: lit at the face's eye-space centroid with its face normal
-                        px = ((eye_pos[v0, 0] + eye_pos[v1, 0]) + eye_pos[v2, 0]) / 3.0
-                        py = ((eye_pos[v0, 1] + eye_pos[v1, 1]) + eye_pos[v2, 1]) / 3.0
-                        pz = ((eye_pos[v0, 2] + eye_pos[v1, 2]) + eye_pos[v2, 2]) / 3.0
-                        nx, ny, nz = _unit_face_normal(eye_pos, v0, v1, v2)
-                        nx, ny, nz = nx * winding[mesh], ny * winding[mesh], nz * winding[mesh]
-                        # the world normal: the view's normal matrix undone (n_world ∝ Vᵀ n_eye)
-                        wx = view_t[0, 0] * nx + view_t[0, 1] * ny + view_t[0, 2] * nz
-                        wy = view_t[1, 0] * nx + view_t[1, 1] * ny + view_t[1, 2] * nz
-                        wz = view_t[2, 0] * nx + view_t[2, 1] * ny + view_t[2, 2] * nz
-                        length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                        scale = 1.0 / length if length > 0 else 0.0
-                        wx, wy, wz = wx * scale, wy * scale, wz * scale
-                        if back:
-                            nx, ny, nz = -nx, -ny, -nz
-                        ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                            v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-                            pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                            has_vis, r_vis3 if has_maps else vis,
-                        )  # fmt: skip
-                        # fog is a function of the fragment's own point
-                        px = b0 * eye_pos[v0, 0] + b1 * eye_pos[v1, 0] + b2 * eye_pos[v2, 0]
-                        py = b0 * eye_pos[v0, 1] + b1 * eye_pos[v1, 1] + b2 * eye_pos[v2, 1]
-                        pz = b0 * eye_pos[v0, 2] + b1 * eye_pos[v1, 2] + b2 * eye_pos[v2, 2]
-                    else:
-                        wx = b0 * world_n[v0, 0] + b1 * world_n[v1, 0] + b2 * world_n[v2, 0]
-                        wy = b0 * world_n[v0, 1] + b1 * world_n[v1, 1] + b2 * world_n[v2, 1]
-                        wz = b0 * world_n[v0, 2] + b1 * world_n[v1, 2] + b2 * world_n[v2, 2]
-                        length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                        scale = 1.0 / length if length > 0 else 0.0
-                        wx, wy, wz = wx * scale, wy * scale, wz * scale
-                    if mode == 2:  # gouraud: the vertices' terms interpolated (raster.interpolate's sums)
-                        ar = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 0)
-                        ag = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 1)
-                        ab = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 2)
-                        dr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 3)
-                        dg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 4)
-                        db = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 5)
-                        sr = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 6)
-                        sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
-                        sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
-                    elif mode == 0:
-                        nx = b0 * eye_n[v0, 0] + b1 * eye_n[v1, 0] + b2 * eye_n[v2, 0]
-                        ny = b0 * eye_n[v0, 1] + b1 * eye_n[v1, 1] + b2 * eye_n[v2, 1]
-                        nz = b0 * eye_n[v0, 2] + b1 * eye_n[v1, 2] + b2 * eye_n[v2, 2]
-                        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-                        scale = (1.0 / length if length > 0 else 0.0) * (-1.0 if back else 1.0)
-                        nx, ny, nz = nx * scale, ny * scale, nz * scale
-                        ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
-                            v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
-                            pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                            has_vis, r_vis3 if has_maps else vis,
-                        )  # fmt: skip
-                    r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
-                    if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
-                        if separate:
-                            r = min(max(min(max(ar + dr, 0.0), 1.0) + min(max(sr, 0.0), 1.0), 0.0), 1.0)
-                            g = min(max(min(max(ag + dg, 0.0), 1.0) + min(max(sg, 0.0), 1.0), 0.0), 1.0)
-                            b = min(max(min(max(ab + db, 0.0), 1.0) + min(max(sb, 0.0), 1.0), 0.0), 1.0)
-                        else:
-                            r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                            g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                            b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
-                    a = opacity[mid]
-                    pr, pg, pb = a * r, a * g, a * b  # premultiplied (α·c, α): fragment_colours' order
-                    if fog_mode >= 0:
-                        pr, pg, pb = _fogged(
-                            fog_mode, fog_radial, density, start, end, cr, cg, cb, px, py, pz, pr, pg, pb, a
-                        )
-                    cover = 1.0 - acc3
-                    acc0 = pr * cover + acc0
-                    acc1 = pg * cover + acc1
-                    acc2 = pb * cover + acc2
-                    acc3 = a * cover + acc3
-                    if step == 0:  # the nearest fragment: passes, normal, depth, shadow
-                        n_a = a
-                        n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb = (
-                            ar,
-                            ag,
-                            ab,
-                            dr,
-                            dg,
-                            db,
-                            sr,
-                            sg,
-                            sb,
-                        )
-                        n_wx, n_wy, n_wz = wx, wy, wz
-                        n_depth = depth
-                        n_v = v
-                pr, pg, pb, a_over, a = acc0, acc1, acc2, acc3, n_a
-                ar, ag, ab, dr, dg, db, sr, sg, sb = n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb
-                wx, wy, wz, depth, v = n_wx, n_wy, n_wz, n_depth, n_v
-                # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve does.
-                o_rgba[row, col, 0] = 0.0 + np.float32(pr)
-                o_rgba[row, col, 1] = 0.0 + np.float32(pg)
-                o_rgba[row, col, 2] = 0.0 + np.float32(pb)
-                o_rgba[row, col, 3] = 0.0 + np.float32(a_over)
-                o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
-                o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
-                o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
-                o_dif[row, col, 0] = 0.0 + np.float32(dr * a)
-                o_dif[row, col, 1] = 0.0 + np.float32(dg * a)
-                o_dif[row, col, 2] = 0.0 + np.float32(db * a)
-                o_spe[row, col, 0] = 0.0 + np.float32(sr * a)
-                o_spe[row, col, 1] = 0.0 + np.float32(sg * a)
-                o_spe[row, col, 2] = 0.0 + np.float32(sb * a)
-                o_nrm[row, col, 0] = 0.0 + np.float32(wx)
-                o_nrm[row, col, 1] = 0.0 + np.float32(wy)
-                o_nrm[row, col, 2] = 0.0 + np.float32(wz)
-                o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
-                if has_maps:  # resolve.shadow_pass_values: summed in light order, then divided
-                    mean = r_vis[v, 0]
-                    for i_light in range(1, n_lit):
-                        mean += r_vis[v, i_light]
-                    mean /= n_lit
-                    o_shadow[row, col, 0] = 0.0 + np.float32(mean * a)
-                elif has_vis:
-                    o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[v] * a)
-            covered[row] = n_row
+                        r = min(max(min(max(r, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        g = min(max(min(max(g, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                        b = min(max(min(max(b, 0.0), 1.0) + 0.0, 0.0), 1.0)
+                a = opacity[mid]
+                pr, pg, pb = a * r, a * g, a * b  # premultiplied (α·c, α): fragment_colours' order
+                if fog_mode >= 0:
+                    pr, pg, pb = _fogged(
+                        fog_mode, fog_radial, density, start, end, cr, cg, cb, fx, fy, fz, pr, pg, pb, a
+                    )
+                cover = 1.0 - acc3
+                acc0 = pr * cover + acc0
+                acc1 = pg * cover + acc1
+                acc2 = pb * cover + acc2
+                acc3 = a * cover + acc3
+                if step == 0:  # the nearest fragment: passes, normal, depth, shadow
+                    n_a = a
+                    n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb = (
+                        ar,
+                        ag,
+                        ab,
+                        dr,
+                        dg,
+                        db,
+                        sr,
+                        sg,
+                        sb,
+                    )
+                    n_wx, n_wy, n_wz = wx, wy, wz
+                    n_depth = depth
+                    n_v = v
+            pr, pg, pb, a_over, a = acc0, acc1, acc2, acc3, n_a
+            ar, ag, ab, dr, dg, db, sr, sg, sb = n_ar, n_ag, n_ab, n_dr, n_dg, n_db, n_sr, n_sg, n_sb
+            wx, wy, wz, depth, v = n_wx, n_wy, n_wz, n_depth, n_v
+            # ``0.0 + x`` keeps numpy's sign of zero (a sum of one term), as resolve does.
+            o_rgba[row, col, 0] = 0.0 + np.float32(pr)
+            o_rgba[row, col, 1] = 0.0 + np.float32(pg)
+            o_rgba[row, col, 2] = 0.0 + np.float32(pb)
+            o_rgba[row, col, 3] = 0.0 + np.float32(a_over)
+            o_amb[row, col, 0] = 0.0 + np.float32(ar * a)
+            o_amb[row, col, 1] = 0.0 + np.float32(ag * a)
+            o_amb[row, col, 2] = 0.0 + np.float32(ab * a)
+            o_dif[row, col, 0] = 0.0 + np.float32(dr * a)
+            o_dif[row, col, 1] = 0.0 + np.float32(dg * a)
+            o_dif[row, col, 2] = 0.0 + np.float32(db * a)
+            o_spe[row, col, 0] = 0.0 + np.float32(sr * a)
+            o_spe[row, col, 1] = 0.0 + np.float32(sg * a)
+            o_spe[row, col, 2] = 0.0 + np.float32(sb * a)
+            o_nrm[row, col, 0] = 0.0 + np.float32(wx)
+            o_nrm[row, col, 1] = 0.0 + np.float32(wy)
+            o_nrm[row, col, 2] = 0.0 + np.float32(wz)
+            o_depth[row, col] = min(np.float32(1.0), np.float32(depth))
+            if has_maps:  # resolve.shadow_pass_values: summed in light order, then divided
+                mean = r_vis[v, 0]
+                for i_light in range(1, n_lit):
+                    mean += r_vis[v, i_light]
+                mean /= n_lit
+                o_shadow[row, col, 0] = 0.0 + np.float32(mean * a)
+            elif has_vis:
+                o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[v] * a)
+        return n_row
+
+    # a module global, not a closure variable (as _point_terms: the disk cache's key)
+    global _plain_row
+    _plain_row = plain_row
+
+    @numba.njit(parallel=True, cache=True)
+    def plain(
+        width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
+        source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
+        geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
+        maps, world, n_opaque, offsets, max_layers, max_list,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        # The frame's rows in parallel, interleaved over the threads (``row_order``: balanced
+        # work); each row is written by one call of plain_row, so there are no write races.
+        covered = np.zeros(height, np.int64)
+        for i_row in numba.prange(height):
+            covered[row_order[i_row]] = _plain_row(
+                row_order[i_row], width, from_winners, index, tri, bary, frag_depth, frag_front,
+                source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
+                geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
+                maps, world, n_opaque, offsets, max_layers, max_list,
+                o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+            )  # fmt: skip
         return covered.sum()
 
     return plain
