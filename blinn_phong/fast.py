@@ -13,8 +13,9 @@ and :mod:`blinn_phong.resolve` hold the numpy references.
   one sample per pixel, no transparency resolve, per-pixel shading: each pixel's nearest
   fragment interpolated, lit by :func:`blinn_phong.lighting.point_terms` (the lighting kernel's
   own compiled equation), fogged by the colour stage's compiled fog (:func:`_fog_function`) and
-  written into the float32 frame buffers in one parallel pass, with
-  the operations of the separate stages in their order (the same images, no (N, 3) arrays).
+  written into the float32 frame buffers in one pass over the rows (shares of rows on threads,
+  :mod:`compositing._threads`), with the operations of the separate stages in their order (the
+  same images, no (N, 3) arrays).
 * :func:`fragment_colours_compiled`: transparency models, Kay–Greenberg, wash-out and fog per
   fragment (twin of :func:`blinn_phong.resolve.fragment_colours`).
 * :func:`resolve_frame_compiled`: per pixel, each sample's transparent list sorted and
@@ -1078,7 +1079,10 @@ def _plain_kernel() -> object:  # a numba dispatcher
     global _lerp
     _lerp = lerp
 
-    @numba.njit(cache=True)
+    # numpy's error model (a division by zero gives inf or nan, as in numpy and in a parallel
+    # loop's body, where numba uses it too): Python's would test every division and keep LLVM
+    # from optimising the row's loops (measured: 2× the time per frame).
+    @numba.njit(cache=True, error_model="numpy")
     def plain_row(
         row, width, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
@@ -1361,7 +1365,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
     global _plain_row
     _plain_row = plain_row
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True)
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
@@ -1369,33 +1373,44 @@ def _plain_kernel() -> object:  # a numba dispatcher
         maps, world, n_opaque, offsets, max_layers, max_list,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
     ):  # fmt: skip  # pragma: no cover - compiled
-        # The frame's rows in parallel, interleaved over the threads (``row_order``: balanced
-        # work); each row is written by one call of plain_row, so there are no write races.
-        covered = np.zeros(height, np.int64)
-        for i_row in numba.prange(height):
-            covered[row_order[i_row]] = _plain_row(
+        # The rows ``row_order`` (a share of the frame's: compositing._threads runs the shares on
+        # threads, the GIL released); each row is written by one call of plain_row, so there are
+        # no write races. Returns the number of covered pixels.
+        covered = 0
+        for i_row in range(row_order.shape[0]):
+            covered += _plain_row(
                 row_order[i_row], width, from_winners, index, tri, bary, frag_depth, frag_front,
                 source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
                 geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
                 maps, world, n_opaque, offsets, max_layers, max_list,
                 o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
             )  # fmt: skip
-        return covered.sum()
+        return covered
 
     return plain
 
 
 def _run_plain(*args: object) -> int:
-    """Run the fused kernel. Its first compilation (once per machine: the kernel is disk-cached)
-    makes numba's own pedantic SSA check warn about variables of the inlined lighting helpers
-    that it expects in scope (``NumbaIRAssumptionWarning``, "please report"); the compiled
-    code is unaffected (the fused frame equals the numpy engine's, tested), so that warning is
-    not passed on to the user."""
+    """Run the fused kernel: the frame's rows in shares on threads
+    (:func:`compositing._threads.run_shares`; the kernel releases the GIL).
+
+    Its first compilation (once per machine: the kernel is disk-cached) makes numba's own
+    pedantic SSA check warn about variables of the inlined lighting helpers that it expects in
+    scope (``NumbaIRAssumptionWarning``, "please report"); the compiled code is unaffected (the
+    fused frame equals the numpy engine's, tested), so that warning is not passed on to the user.
+    """
     from numba.core.errors import NumbaIRAssumptionWarning
 
+    from compositing._threads import run_shares
+
+    kernel = _plain_kernel()
+    width, height, row_order, *rest = args
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
-        return _plain_kernel()(*args)  # type: ignore[operator]
+        # compiled (or loaded) on this thread first: the shares' threads then only run it
+        kernel(width, height, row_order[:0], *rest)  # type: ignore[operator]
+        shares = run_shares(lambda rows: kernel(width, height, rows, *rest), row_order)  # type: ignore[operator]
+    return int(sum(shares))
 
 
 _NO_SETUP = (

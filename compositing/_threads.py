@@ -1,0 +1,79 @@
+"""Run a compiled kernel's work in shares on threads.
+
+numba's ``parallel=True`` turns a loop into a multi-threaded one, but its transformation of a
+large loop body is slow to compile (seconds to minutes, and gigabytes, for the fused frame kernel:
+``docs/compile.md``). A kernel compiled with ``nogil=True`` runs without Python's global
+interpreter lock, so plain Python threads run shares of its work at once; the kernel itself
+compiles as ordinary serial code.
+"""
+
+from __future__ import annotations
+
+import atexit
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+import numpy as np
+
+_Result = TypeVar("_Result")
+
+#: Shares per thread: more than one, so a thread that finishes its share early takes another.
+SHARES_PER_THREAD = 4
+
+_pool: ThreadPoolExecutor | None = None
+_pool_threads = 0
+_lock = threading.Lock()
+
+
+def thread_count() -> int:
+    """The number of threads kernels run on: numba's (``NUMBA_NUM_THREADS``, or
+    ``numba.set_num_threads``), at least 1."""
+    try:
+        import numba
+
+        return max(1, int(numba.get_num_threads()))
+    except ImportError:  # pragma: no cover - numba is a dependency of the compiled engine
+        return 1
+
+
+def _executor(threads: int) -> ThreadPoolExecutor:
+    global _pool, _pool_threads
+    with _lock:
+        if _pool is None or _pool_threads != threads:
+            if _pool is not None:
+                _pool.shutdown(wait=False)
+            _pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="kernel")
+            _pool_threads = threads
+        return _pool
+
+
+@atexit.register
+def _shutdown() -> None:  # pragma: no cover - at exit
+    if _pool is not None:
+        _pool.shutdown(wait=True)
+
+
+def run_shares(work: Callable[[np.ndarray], _Result], items: np.ndarray) -> Sequence[_Result]:
+    """``work(share)`` for contiguous shares of ``items`` (1-D), on :func:`thread_count` threads.
+
+    ``work`` must release the GIL (a ``nogil=True`` kernel) and write disjoint outputs per
+    share. With one thread, or fewer items than two shares, it runs once on the caller's thread
+    with all of ``items``. Results come back in share order; an exception in any share is
+    raised here, after every share has finished.
+    """
+    items = np.asarray(items)
+    if items.ndim != 1:
+        raise ValueError(f"items: expected a 1-D array, got shape {items.shape}")
+    threads = thread_count()
+    n_shares = min(threads * SHARES_PER_THREAD, len(items))
+    if threads == 1 or n_shares < 2:
+        return [work(items)]
+    shares = np.array_split(items, n_shares)
+    futures = [_executor(threads).submit(work, share) for share in shares]
+    errors = [f.exception() for f in futures]
+    for error in errors:
+        if error is not None:
+            raise error
+    return [f.result() for f in futures]

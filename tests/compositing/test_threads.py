@@ -1,0 +1,57 @@
+"""compositing._threads.run_shares: shares cover the items once, in order; errors surface."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from compositing import _threads
+
+
+@numba.njit(nogil=True)
+def _square_sum(values, out):  # pragma: no cover - compiled
+    total = 0.0
+    for i in range(values.shape[0]):
+        out[int(values[i])] = values[i] * values[i]
+        total += values[i] * values[i]
+    return total
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 1000])
+def test_shares_cover_every_item_once(n: int) -> None:
+    items = np.arange(n, dtype=np.float64)
+    out = np.full(n, -1.0)
+    totals = _threads.run_shares(lambda share: _square_sum(share, out), items)
+    # every item written by exactly one share: the closed form of the squares, and their sum
+    np.testing.assert_array_equal(out, items * items)
+    assert sum(totals) == pytest.approx(n * (n - 1) * (2 * n - 1) / 6, rel=1e-12)
+
+
+def test_shares_are_contiguous_and_in_order() -> None:
+    items = np.arange(103)
+    shares = _threads.run_shares(lambda share: share.copy(), items)
+    np.testing.assert_array_equal(np.concatenate(shares), items)
+    if _threads.thread_count() > 1:
+        assert len(shares) == min(_threads.thread_count() * _threads.SHARES_PER_THREAD, 103)
+
+
+def test_an_error_in_a_share_is_raised() -> None:
+    def work(share: np.ndarray) -> int:
+        if 50 in share:
+            raise ZeroDivisionError("share with 50")
+        return len(share)
+
+    with pytest.raises(ZeroDivisionError, match="share with 50"):
+        _threads.run_shares(work, np.arange(100))
+
+
+def test_one_thread_runs_once_on_the_caller(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_threads, "thread_count", lambda: 1)
+    calls = _threads.run_shares(lambda share: len(share), np.arange(100))
+    assert calls == [100]
+
+
+def test_items_must_be_one_dimensional() -> None:
+    with pytest.raises(ValueError, match=r"items: expected a 1-D array, got shape \(2, 2\)"):
+        _threads.run_shares(len, np.zeros((2, 2)))
