@@ -34,6 +34,7 @@ import numpy as np
 
 from blinn_phong._feedback import start_feedback
 from blinn_phong.frame import Fog, frame_plan, scene_with_planned_shading
+from blinn_phong.id_passes import Cryptomatte
 from blinn_phong.pipeline import render_frame
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene, prepare_scene
@@ -135,6 +136,7 @@ def render(
     tolerance: float = 0.0,
     layers: int | None = None,
     deep: bool = False,
+    cryptomatte: Cryptomatte | None = None,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
 
@@ -182,6 +184,12 @@ def render(
         deep: also return the frame's fragments as a deep image (``result.deep``, made by a
             second pass of the stages, :func:`blinn_phong.deep_output.render_deep`); the plan's
             transparency method must be ``a_buffer``, ``depth_peeling`` or ``zbuffer``.
+        cryptomatte: a :class:`blinn_phong.id_passes.Cryptomatte` request (one name per entry of
+            ``scene.meshes`` in each layer) or None (default: no work). Its passes
+            (``CryptoObject00`` … as Cycles names them, (H, W, 4) float32 rank/coverage pairs,
+            :mod:`compositing.cryptomatte`) are added to ``result.passes``, counted from the
+            frame's own samples (:mod:`blinn_phong.id_passes`); the header entries (manifests)
+            are ``cryptomatte.metadata(view_layer)``.
 
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
@@ -202,6 +210,18 @@ def render(
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    if cryptomatte is not None:
+        if not isinstance(cryptomatte, Cryptomatte):
+            raise TypeError(
+                "cryptomatte: expected a blinn_phong.Cryptomatte or None, "
+                f"got {type(cryptomatte).__name__}"
+            )
+        if cryptomatte.mesh_count != len(scene.meshes):
+            raise ValueError(
+                f"cryptomatte: expected one name per mesh ({len(scene.meshes)} meshes), "
+                f"got {cryptomatte.mesh_count} names per layer"
+            )
+        cryptomatte = cryptomatte.subset([len(m.triangles) > 0 for m in scene.meshes])
     # Size/memory, gl_compat light model, meshes without triangles dropped (blinn_phong/scene.py).
     scene = prepare_render_inputs(scene, width, height, samples, gl_compat)
     progress = start_feedback(engine, progress)  # compile notice, progress lines (blinn_phong/_feedback.py)
@@ -254,6 +274,7 @@ def render(
         engine=engine,
         seconds=seconds,
         report=report,
+        cryptomatte=cryptomatte,
     )
     report("done", 1.0)
     stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
