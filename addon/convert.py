@@ -73,6 +73,9 @@ class ConvertedScene:
             without a render border.
         options: render settings.
         mesh_names: ``"<object>/<material>"`` for each mesh in ``scene.meshes``.
+        light_group_names: the light group (``Object.lightgroup``, "" for none) of each entry of
+            ``scene.lights``, of each mesh's object (its emission), and of the world
+            (``World.lightgroup``): keys ``"lights"``, ``"meshes"``, ``"world"``.
         cryptomatte_names: per Cryptomatte layer (``"object"``, ``"material"``, ``"asset"``), the
             name Cycles hashes for each mesh in ``scene.meshes`` (:func:`cryptomatte_names`).
         extras: per mesh, the material settings the core ``Material`` does not hold (the
@@ -99,6 +102,7 @@ class ConvertedScene:
     background: tuple[float, float, float] | None = None
     casts_shadows: list[bool] = field(default_factory=list)
     cryptomatte_names: dict[str, list[str]] = field(default_factory=dict)
+    light_group_names: dict[str, object] = field(default_factory=dict)
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -515,6 +519,7 @@ def scene_from_depsgraph(
     meshes: list[Mesh] = []
     names: list[str] = []
     crypto: dict[str, list[str]] = {"object": [], "material": [], "asset": []}
+    groups: dict[str, object] = {"lights": [], "meshes": [], "world": ""}
     extras: list[dict[str, object]] = []
     notes: list[str] = []
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
@@ -531,6 +536,7 @@ def scene_from_depsgraph(
         matrix = np.array(instance.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
+            groups["lights"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
             light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
             # Light > Cast Shadow off, or Object > Visibility > Ray Visibility > Shadow off on the lamp
             casts_shadows.append(bool(getattr(obj.data, "use_shadow", True)))
@@ -610,12 +616,14 @@ def scene_from_depsgraph(
             extras.append(extra)
             for layer, value in zip(("object", "material", "asset"), ids, strict=True):
                 crypto[layer].append(value)
+            groups["meshes"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
 
     if no_shadow_objects and shadow_objects == 0:
         # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow,
         # so no light needs shadow work (a subset is left out per mesh: Mesh.casts_shadows).
         casts_shadows = [False] * len(casts_shadows)
     ambient = world_ambient(bl_scene.world)
+    groups["world"] = str(getattr(bl_scene.world, "lightgroup", "")) if bl_scene.world is not None else ""
     light_model = LightModel(
         specular="phong" if options.specular_model == "PHONG" else "blinn",
         local_viewer=camera.kind == "perspective",
@@ -627,5 +635,5 @@ def scene_from_depsgraph(
     background = None if render.film_transparent else ambient
     return ConvertedScene(
         scene, width, height, region, options, names, extras, notes, light_radii, background, casts_shadows,
-        crypto,
+        crypto, groups,
     )  # fmt: skip

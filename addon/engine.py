@@ -11,6 +11,10 @@ the passes into Blender's render result:
   transparency and fog they sum to Combined's RGB); Shadow: mean light visibility (1 lit, 0 in
   shadow) times coverage. All are registered in ``update_render_passes`` so they appear on the
   Render Layers node.
+* Light groups (View Layer › Passes › Light Groups; ``Object.lightgroup`` on lights and emissive
+  objects, ``World.lightgroup``): one pass ``Combined_<group>`` (RGB) per group of the view
+  layer's list, as Cycles names them: the frame lit by that group's emitters alone
+  (``blinn_phong.light_groups``); the passes sum to Combined when every emitter has a group.
 * Cryptomatte (View Layer › Passes › Cryptomatte: Object, Material, Asset, Levels): the passes
   ``CryptoObject00`` … as Cycles names and registers them (RGBA, two rank/coverage pairs each),
   counted from the engine's own samples (``blinn_phong.id_passes``), with the layer's header
@@ -42,7 +46,7 @@ from typing import Any
 import bpy
 import numpy as np
 
-from blinn_phong import Cryptomatte
+from blinn_phong import Cryptomatte, LightGroups
 from compositing import composite
 from compositing._kernel_cache import compile_clock
 from compositing.cryptomatte import pass_names
@@ -63,6 +67,8 @@ __all__ = [
     "cryptomatte_layers",
     "cryptomatte_request",
     "error_pattern",
+    "light_group_names",
+    "light_groups_request",
     "register",
     "render_converted",
     "unregister",
@@ -149,8 +155,35 @@ def cryptomatte_request(view_layer: Any, converted: convert.ConvertedScene) -> C
     return Cryptomatte(names, levels)
 
 
+def light_group_names(view_layer: Any) -> list[str]:
+    """The names of ``view_layer``'s light groups (``ViewLayer.lightgroups``), in list order."""
+    return [group.name for group in getattr(view_layer, "lightgroups", ())] if view_layer is not None else []
+
+
+def light_groups_request(view_layer: Any, converted: convert.ConvertedScene) -> LightGroups | None:
+    """The :class:`blinn_phong.LightGroups` of ``view_layer``'s list for the converted scene (an
+    emitter whose group is not in the list belongs to none, as in Cycles); None without groups."""
+    names = light_group_names(view_layer)
+    if not names:
+        return None
+    members = converted.light_group_names
+
+    def member(group: object) -> str | None:
+        return str(group) if group in names else None
+
+    return LightGroups(
+        tuple(names),
+        tuple(member(g) for g in members.get("lights", [])),  # type: ignore[union-attr]
+        tuple(member(g) for g in members.get("meshes", [])),  # type: ignore[union-attr]
+        member(members.get("world", "")),
+    )
+
+
 def render_converted(
-    converted: convert.ConvertedScene, progress: Any = None, cryptomatte: Cryptomatte | None = None
+    converted: convert.ConvertedScene,
+    progress: Any = None,
+    cryptomatte: Cryptomatte | None = None,
+    light_groups: LightGroups | None = None,
 ) -> pipeline.FrameResult:
     """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``).
 
@@ -172,6 +205,7 @@ def render_converted(
             casts_shadows=tuple(converted.casts_shadows),
             progress=progress,
             cryptomatte=cryptomatte,
+            light_groups=light_groups,
         )
         result.choices["region"] = list(converted.region)
         if converted.background is not None:
@@ -269,6 +303,8 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         for name, _key in LIGHT_PASSES:
             self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
         self.register_pass(scene, renderlayer, "Shadow", 1, "X", "VALUE")
+        for group in light_group_names(renderlayer):
+            self.register_pass(scene, renderlayer, LightGroups.pass_name(group), 3, "RGB", "COLOR")
         layers, levels = cryptomatte_layers(renderlayer)
         for layer in layers:
             for name in pass_names(layer, levels):
@@ -301,8 +337,9 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                     raise RenderCancelled
 
             request = cryptomatte_request(depsgraph.view_layer, converted)
-            result = render_converted(converted, progress, request)
-            self._write(converted, result, layer, cryptomatte=request)
+            groups = light_groups_request(depsgraph.view_layer, converted)
+            result = render_converted(converted, progress, request, groups)
+            self._write(converted, result, layer, cryptomatte=request, light_groups=groups)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
             # Blender crashes saving a still (write_still) after a render that produced no result,
@@ -430,14 +467,18 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         layer: str,
         combined_only: bool = False,
         cryptomatte: Cryptomatte | None = None,
+        light_groups: LightGroups | None = None,
     ) -> None:
         x0, y0, x1, y1 = converted.region
         width, height = x1 - x0, y1 - y0
+        group_passes = [] if light_groups is None else [LightGroups.pass_name(g) for g in light_groups.groups]
         if not combined_only:  # previews show Combined only: no extra passes to fill
             self.add_pass("Depth", 1, "Z")
             for name, _key in LIGHT_PASSES:
                 self.add_pass(name, 3, "RGB")
             self.add_pass("Shadow", 1, "X")
+            for name in group_passes:
+                self.add_pass(name, 3, "RGB")
             for name in [] if cryptomatte is None else cryptomatte.pass_names():
                 self.add_pass(name, 4, "rgba")  # lowercase: data, as Cycles registers them
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
@@ -456,6 +497,8 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 for name, key in LIGHT_PASSES:
                     buffers[name] = result.passes[key]
                 buffers["Shadow"] = result.passes["shadow"]
+                for name in group_passes:
+                    buffers[name] = result.passes[name]
                 if cryptomatte is not None:
                     for name in cryptomatte.pass_names():
                         buffers[name] = result.passes[name]

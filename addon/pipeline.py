@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blinn_phong import Cryptomatte, Fog, ShadowOptions, render
+from blinn_phong import Cryptomatte, Fog, LightGroups, ShadowOptions, render
 from blinn_phong.scene import AmbientLight, Scene
 from compositing._kernel_cache import compile_clock
 
@@ -192,6 +192,7 @@ def render_frame(
     casts_shadows: tuple[bool, ...] = (),
     progress: Callable[[str, float], None] | None = None,
     cryptomatte: Cryptomatte | None = None,
+    light_groups: LightGroups | None = None,
 ) -> FrameResult:
     """Render ``scene`` (``width × height``) with the settings in ``options``.
 
@@ -207,6 +208,8 @@ def render_frame(
         progress: optional ``callback(stage, fraction_done)``.
         cryptomatte: a :class:`blinn_phong.Cryptomatte` request, or None: its passes
             (``CryptoObject00`` …) are added to ``passes``.
+        light_groups: a :class:`blinn_phong.LightGroups`, or None: its ``Combined_<group>``
+            passes are added to ``passes``.
 
     Returns:
         :class:`FrameResult`; ``choices["reasons"]`` holds one line per decision of the plan that
@@ -240,6 +243,7 @@ def render_frame(
             fog=fog,
             tolerance=options.tolerance,
             cryptomatte=cryptomatte,
+            light_groups=light_groups,
         )
     passes = dict(result.passes)
     passes.setdefault("shadow", result.rgba[..., 3:4].copy())
