@@ -31,11 +31,10 @@ import numpy as np
 from compositing.cryptomatte import (
     DEFAULT_LEVELS,
     LAYER_TYPES,
+    coverage_passes,
     layer_metadata,
     name_id,
     pass_names,
-    rank_coverage,
-    split_passes,
 )
 
 __all__ = ["Cryptomatte", "passes_from_fragments", "passes_from_winners"]
@@ -117,8 +116,8 @@ def _passes(
 ) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for layer in request.names:
-        ranked = rank_coverage(pixel, request.ids(layer)[mesh], weight, (height, width), request.levels)
-        out.update(zip(pass_names(layer, request.levels), split_passes(ranked), strict=True))
+        passes = coverage_passes(pixel, request.ids(layer)[mesh], weight, (height, width), request.levels)
+        out.update(zip(pass_names(layer, request.levels), passes, strict=True))
     return out
 
 

@@ -48,6 +48,7 @@ __all__ = [
     "DEFAULT_LEVELS",
     "LAYER_TYPES",
     "MAX_LEVELS",
+    "coverage_passes",
     "hash_to_float",
     "layer_key",
     "layer_metadata",
@@ -212,6 +213,29 @@ def pass_names(layer_type: str, levels: int = DEFAULT_LEVELS) -> list[str]:
     return [f"{stem}{i:02d}" for i in range(math.ceil(_check_levels(levels) / 2))]
 
 
+def _checked_entries(
+    pixel: np.ndarray, ids: np.ndarray, weight: np.ndarray, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if len(shape) != 2 or min(int(shape[0]), int(shape[1])) < 0:
+        raise ValueError(f"shape: expected (height, width), got {shape!r}")
+    height, width = int(shape[0]), int(shape[1])
+    pixel = np.asarray(pixel)
+    ids = np.asarray(ids)
+    weight = np.asarray(weight)
+    if pixel.ndim != 1 or ids.shape != pixel.shape or weight.shape != pixel.shape:
+        raise ValueError(
+            "pixel, ids, weight: expected three (E,) arrays, "
+            f"got shapes {pixel.shape}, {ids.shape}, {weight.shape}"
+        )
+    if pixel.size and (pixel.dtype.kind not in "iu" or pixel.min() < 0 or pixel.max() >= height * width):
+        raise ValueError(f"pixel: expected integer indices in [0, {height * width}), got dtype {pixel.dtype}")
+    if ids.dtype != np.float32:
+        raise TypeError(f"ids: expected float32 IDs (name_id), got dtype {ids.dtype}")
+    if weight.size and not (np.isfinite(weight).all() and weight.min() >= 0.0):
+        raise ValueError("weight: expected finite values >= 0")
+    return pixel, ids, weight
+
+
 def rank_coverage(
     pixel: np.ndarray,
     ids: np.ndarray,
@@ -237,33 +261,44 @@ def rank_coverage(
         fewer IDs. Entries of zero weight are dropped.
     """
     levels = _check_levels(levels)
-    if len(shape) != 2 or min(int(shape[0]), int(shape[1])) < 0:
-        raise ValueError(f"shape: expected (height, width), got {shape!r}")
+    pixel, ids, weight = _checked_entries(pixel, ids, weight, shape)
     height, width = int(shape[0]), int(shape[1])
-    pixel = np.asarray(pixel)
-    ids = np.asarray(ids)
-    weight = np.asarray(weight)
-    if pixel.ndim != 1 or ids.shape != pixel.shape or weight.shape != pixel.shape:
-        raise ValueError(
-            "pixel, ids, weight: expected three (E,) arrays, "
-            f"got shapes {pixel.shape}, {ids.shape}, {weight.shape}"
-        )
-    if pixel.size and (pixel.dtype.kind not in "iu" or pixel.min() < 0 or pixel.max() >= height * width):
-        raise ValueError(f"pixel: expected integer indices in [0, {height * width}), got dtype {pixel.dtype}")
-    if ids.dtype != np.float32:
-        raise TypeError(f"ids: expected float32 IDs (name_id), got dtype {ids.dtype}")
-    if weight.size and not (np.isfinite(weight).all() and weight.min() >= 0.0):
-        raise ValueError("weight: expected finite values >= 0")
-    out = np.zeros((height * width, levels, 2), np.float32)
+    store = _rank(pixel, ids, weight, height * width, levels)
+    ranked = store.transpose(1, 0, 2, 3).reshape(height * width, -1, 2)[:, :levels]
+    return np.ascontiguousarray(ranked).reshape(height, width, levels, 2)
+
+
+def coverage_passes(
+    pixel: np.ndarray,
+    ids: np.ndarray,
+    weight: np.ndarray,
+    shape: tuple[int, int],
+    levels: int = DEFAULT_LEVELS,
+) -> list[np.ndarray]:
+    """:func:`split_passes` of :func:`rank_coverage`, computed straight into the passes' layout.
+
+    The same arguments and values as ``split_passes(rank_coverage(...))``, without the
+    intermediate array: ``ceil(levels / 2)`` contiguous (H, W, 4) float32 passes.
+    """
+    levels = _check_levels(levels)
+    pixel, ids, weight = _checked_entries(pixel, ids, weight, shape)
+    height, width = int(shape[0]), int(shape[1])
+    store = _rank(pixel, ids, weight, height * width, levels)
+    return [store[i].reshape(height, width, 4) for i in range(len(store))]
+
+
+def _rank(pixel: np.ndarray, ids: np.ndarray, weight: np.ndarray, n_pixels: int, levels: int) -> np.ndarray:
+    """(ceil(levels/2), P, 2, 2) float32: rank ``r`` of pixel ``p`` at ``[r // 2, p, r % 2]``."""
+    store = np.zeros(((levels + 1) // 2, n_pixels, 2, 2), np.float32)
     keep = weight > 0
     if not keep.all():
         pixel, ids, weight = pixel[keep], ids[keep], weight[keep]
     if pixel.size == 0:
-        return out.reshape(height, width, levels, 2)
+        return store
     if pixel.size < 2 or bool(np.all(pixel[1:] > pixel[:-1])):  # one entry per pixel (opaque, one sample)
-        out[pixel, 0, 0] = ids
-        out[pixel, 0, 1] = weight
-        return out.reshape(height, width, levels, 2)
+        store[0, pixel, 0, 0] = ids
+        store[0, pixel, 0, 1] = weight
+        return store
     bits = ids.view(np.uint32).astype(np.int64)
     pixel = pixel.astype(np.int64)
     # group equal (pixel, id) and sum their weights (float64: exact sums of sample shares)
@@ -282,9 +317,9 @@ def rank_coverage(
     rank = np.arange(len(first)) - first_index
     kept = rank < levels
     out_pix, out_rank = run_pixel[kept], rank[kept]
-    out[out_pix, out_rank, 0] = run_bits[kept].astype(np.uint32).view(np.float32)
-    out[out_pix, out_rank, 1] = sums[kept]
-    return out.reshape(height, width, levels, 2)
+    store[out_rank // 2, out_pix, out_rank % 2, 0] = run_bits[kept].astype(np.uint32).view(np.float32)
+    store[out_rank // 2, out_pix, out_rank % 2, 1] = sums[kept]
+    return store
 
 
 def split_passes(ranked: np.ndarray) -> list[np.ndarray]:

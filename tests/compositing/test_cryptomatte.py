@@ -150,3 +150,18 @@ def test_bad_inputs_name_the_argument() -> None:
         cm.name_hash(b"bytes")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="hash_value"):
         cm.hash_to_float(-1)
+
+
+@pytest.mark.parametrize("levels", [1, 4, 5])
+def test_coverage_passes_equal_split_rank_coverage(levels: int) -> None:
+    rng = np.random.default_rng(3)
+    names = [cm.name_id(f"n{i}") for i in range(7)]
+    pixel = np.sort(rng.integers(0, 12, 200))
+    ids = np.array(names, np.float32)[rng.integers(0, 7, 200)]
+    weight = rng.integers(0, 5, 200) / 16.0
+    direct = cm.coverage_passes(pixel, ids, weight, (3, 4), levels)
+    split = cm.split_passes(cm.rank_coverage(pixel, ids, weight, (3, 4), levels))
+    assert len(direct) == len(split) == math.ceil(levels / 2)
+    for a, b in zip(direct, split, strict=True):
+        assert a.flags.c_contiguous
+        np.testing.assert_array_equal(a.view(np.uint32), b.view(np.uint32))
