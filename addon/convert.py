@@ -42,11 +42,13 @@ from . import compat, mapping, textures
 from .options import RenderOptions
 
 __all__ = [
+    "DEFAULT_SURFACE",
     "ConvertedScene",
     "RenderOptions",
     "camera_from_object",
     "camera_parameters",
     "clamp_to_socket_range",
+    "cryptomatte_names",
     "derived_light_values",
     "light_from_object",
     "light_radius",
@@ -71,6 +73,11 @@ class ConvertedScene:
             without a render border.
         options: render settings.
         mesh_names: ``"<object>/<material>"`` for each mesh in ``scene.meshes``.
+        light_group_names: the light group (``Object.lightgroup``, "" for none) of each entry of
+            ``scene.lights``, of each mesh's object (its emission), and of the world
+            (``World.lightgroup``): keys ``"lights"``, ``"meshes"``, ``"world"``.
+        cryptomatte_names: per Cryptomatte layer (``"object"``, ``"material"``, ``"asset"``), the
+            name Cycles hashes for each mesh in ``scene.meshes`` (:func:`cryptomatte_names`).
         extras: per mesh, the material settings the core ``Material`` does not hold (the
             shading override, already applied to ``Mesh.shading``).
         light_radii: per entry of ``scene.lights``, the light's radius (``light_radius``; 0 for suns),
@@ -94,6 +101,8 @@ class ConvertedScene:
     light_radii: list[float] = field(default_factory=list)
     background: tuple[float, float, float] | None = None
     casts_shadows: list[bool] = field(default_factory=list)
+    cryptomatte_names: dict[str, list[str]] = field(default_factory=dict)
+    light_group_names: dict[str, object] = field(default_factory=dict)
 
     @property
     def region_size(self) -> tuple[int, int]:
@@ -437,6 +446,22 @@ def viewport_camera(
 # --------------------------------------------------------------------------- scene
 
 
+#: The material name Cycles gives a surface without a material (its default surface shader).
+DEFAULT_SURFACE = "default_surface"
+
+
+def cryptomatte_names(obj: bpy.types.Object, material: bpy.types.Material | None) -> tuple[str, str, str]:
+    """``(object, material, asset)``: the names Cycles hashes for a surface's Cryptomatte IDs.
+
+    The object's name; the material's (:data:`DEFAULT_SURFACE` without one); the asset is the
+    object's top-most parent (Blender's ``BKE_cryptomatte_asset_hash``), or the object itself.
+    """
+    asset = obj
+    while asset.parent is not None:
+        asset = asset.parent
+    return obj.name, DEFAULT_SURFACE if material is None else material.name, asset.name
+
+
 def render_options(settings: object | None) -> RenderOptions:
     """Render options from ``Scene.blinn_phong`` (defaults when the property group is missing)."""
     return RenderOptions.from_settings(settings)
@@ -493,6 +518,8 @@ def scene_from_depsgraph(
 
     meshes: list[Mesh] = []
     names: list[str] = []
+    crypto: dict[str, list[str]] = {"object": [], "material": [], "asset": []}
+    groups: dict[str, object] = {"lights": [], "meshes": [], "world": ""}
     extras: list[dict[str, object]] = []
     notes: list[str] = []
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
@@ -509,6 +536,7 @@ def scene_from_depsgraph(
         matrix = np.array(instance.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
+            groups["lights"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
             light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
             # Light > Cast Shadow off, or Object > Visibility > Ray Visibility > Shadow off on the lamp
             casts_shadows.append(bool(getattr(obj.data, "use_shadow", True)))
@@ -546,7 +574,7 @@ def scene_from_depsgraph(
             # A mirroring transform (negative scale) turns counter-clockwise faces clockwise on
             # screen; Blender keeps them front-facing, so the winding is reversed here.
             triangles = triangles[:, ::-1]
-        object_meshes: list[tuple[Mesh, str, dict[str, object]]] = []
+        object_meshes: list[tuple[Mesh, str, dict[str, object], tuple[str, str, str]]] = []
         failed = None
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
@@ -573,7 +601,8 @@ def scene_from_depsgraph(
                 uv=uv,
                 casts_shadows=bool(getattr(obj, "visible_shadow", True)),  # Ray Visibility > Shadow
             )
-            object_meshes.append((mesh, f"{obj.name}/{material_name}", extra))
+            ids = cryptomatte_names(obj, blender_material)
+            object_meshes.append((mesh, f"{obj.name}/{material_name}", extra, ids))
         if failed is not None:
             notes.append(failed)
             continue
@@ -581,16 +610,20 @@ def scene_from_depsgraph(
             shadow_objects += 1
         else:
             no_shadow_objects.append(obj.name)
-        for mesh, name, extra in object_meshes:
+        for mesh, name, extra, ids in object_meshes:
             meshes.append(mesh)
             names.append(name)
             extras.append(extra)
+            for layer, value in zip(("object", "material", "asset"), ids, strict=True):
+                crypto[layer].append(value)
+            groups["meshes"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
 
     if no_shadow_objects and shadow_objects == 0:
         # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow,
         # so no light needs shadow work (a subset is left out per mesh: Mesh.casts_shadows).
         casts_shadows = [False] * len(casts_shadows)
     ambient = world_ambient(bl_scene.world)
+    groups["world"] = str(getattr(bl_scene.world, "lightgroup", "")) if bl_scene.world is not None else ""
     light_model = LightModel(
         specular="phong" if options.specular_model == "PHONG" else "blinn",
         local_viewer=camera.kind == "perspective",
@@ -601,5 +634,6 @@ def scene_from_depsgraph(
     )
     background = None if render.film_transparent else ambient
     return ConvertedScene(
-        scene, width, height, region, options, names, extras, notes, light_radii, background, casts_shadows
-    )
+        scene, width, height, region, options, names, extras, notes, light_radii, background, casts_shadows,
+        crypto, groups,
+    )  # fmt: skip

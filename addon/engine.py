@@ -11,6 +11,16 @@ the passes into Blender's render result:
   transparency and fog they sum to Combined's RGB); Shadow: mean light visibility (1 lit, 0 in
   shadow) times coverage. All are registered in ``update_render_passes`` so they appear on the
   Render Layers node.
+* Light groups (View Layer › Passes › Light Groups; ``Object.lightgroup`` on lights and emissive
+  objects, ``World.lightgroup``): one pass ``Combined_<group>`` (RGB) per group of the view
+  layer's list, as Cycles names them: the frame lit by that group's emitters alone
+  (``blinn_phong.light_groups``); the passes sum to Combined when every emitter has a group.
+* Cryptomatte (View Layer › Passes › Cryptomatte: Object, Material, Asset, Levels): the passes
+  ``CryptoObject00`` … as Cycles names and registers them (RGBA, two rank/coverage pairs each),
+  counted from the engine's own samples (``blinn_phong.id_passes``), with the layer's header
+  entries (``cryptomatte/<key>/name``, ``hash``, ``conversion``, ``manifest``) stored in the
+  render result's metadata, so Blender's Cryptomatte node reads them and a multilayer EXR carries
+  them (``compositing.cryptomatte``).
 
 Pixels go in with ``foreach_set`` on flat float32 arrays, bottom row first (Blender's order).
 ``bl_use_postprocess`` lets Blender's compositor run on the result.
@@ -36,12 +46,15 @@ from typing import Any
 import bpy
 import numpy as np
 
+from blinn_phong import Cryptomatte, LightGroups
 from compositing import composite
 from compositing._kernel_cache import compile_clock
+from compositing.cryptomatte import pass_names
 
 from . import convert, mapping, options, pipeline
 
 __all__ = [
+    "CRYPTOMATTE_LAYERS",
     "ENGINE_ID",
     "LAST_PREVIEW",
     "LAST_RENDER",
@@ -51,7 +64,11 @@ __all__ = [
     "RenderCancelled",
     "ViewportState",
     "classes",
+    "cryptomatte_layers",
+    "cryptomatte_request",
     "error_pattern",
+    "light_group_names",
+    "light_groups_request",
     "register",
     "render_converted",
     "unregister",
@@ -112,7 +129,62 @@ def error_pattern(height: int, width: int, cell: int = 8) -> np.ndarray:
     return out
 
 
-def render_converted(converted: convert.ConvertedScene, progress: Any = None) -> pipeline.FrameResult:
+CRYPTOMATTE_LAYERS: tuple[tuple[str, str], ...] = (
+    ("object", "use_pass_cryptomatte_object"),
+    ("material", "use_pass_cryptomatte_material"),
+    ("asset", "use_pass_cryptomatte_asset"),
+)
+"""Cryptomatte layer type and the ``ViewLayer`` switch that asks for it."""
+
+
+def cryptomatte_layers(view_layer: Any) -> tuple[list[str], int]:
+    """The Cryptomatte layer types ``view_layer`` asks for (in Cycles' pass order) and its levels."""
+    if view_layer is None:
+        return [], 0
+    layers = [layer for layer, flag in CRYPTOMATTE_LAYERS if getattr(view_layer, flag, False)]
+    return layers, min(16, int(getattr(view_layer, "pass_cryptomatte_depth", 6)))
+
+
+def cryptomatte_request(view_layer: Any, converted: convert.ConvertedScene) -> Cryptomatte | None:
+    """The :class:`blinn_phong.Cryptomatte` request of ``view_layer``'s switches for the converted
+    scene's meshes (None when no layer is asked for)."""
+    layers, levels = cryptomatte_layers(view_layer)
+    if not layers:
+        return None
+    names = {layer: converted.cryptomatte_names.get(layer, []) for layer in layers}
+    return Cryptomatte(names, levels)
+
+
+def light_group_names(view_layer: Any) -> list[str]:
+    """The names of ``view_layer``'s light groups (``ViewLayer.lightgroups``), in list order."""
+    return [group.name for group in getattr(view_layer, "lightgroups", ())] if view_layer is not None else []
+
+
+def light_groups_request(view_layer: Any, converted: convert.ConvertedScene) -> LightGroups | None:
+    """The :class:`blinn_phong.LightGroups` of ``view_layer``'s list for the converted scene (an
+    emitter whose group is not in the list belongs to none, as in Cycles); None without groups."""
+    names = light_group_names(view_layer)
+    if not names:
+        return None
+    members = converted.light_group_names
+
+    def member(group: object) -> str | None:
+        return str(group) if group in names else None
+
+    return LightGroups(
+        tuple(names),
+        tuple(member(g) for g in members.get("lights", [])),  # type: ignore[union-attr]
+        tuple(member(g) for g in members.get("meshes", [])),  # type: ignore[union-attr]
+        member(members.get("world", "")),
+    )
+
+
+def render_converted(
+    converted: convert.ConvertedScene,
+    progress: Any = None,
+    cryptomatte: Cryptomatte | None = None,
+    light_groups: LightGroups | None = None,
+) -> pipeline.FrameResult:
     """Render a converted scene over its region with the settings it carries (``addon/pipeline.py``).
 
     The compiled kernels every frame needs are loaded (read from the disk cache, or compiled)
@@ -132,6 +204,8 @@ def render_converted(converted: convert.ConvertedScene, progress: Any = None) ->
             light_radii=tuple(converted.light_radii),
             casts_shadows=tuple(converted.casts_shadows),
             progress=progress,
+            cryptomatte=cryptomatte,
+            light_groups=light_groups,
         )
         result.choices["region"] = list(converted.region)
         if converted.background is not None:
@@ -229,6 +303,12 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         for name, _key in LIGHT_PASSES:
             self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
         self.register_pass(scene, renderlayer, "Shadow", 1, "X", "VALUE")
+        for group in light_group_names(renderlayer):
+            self.register_pass(scene, renderlayer, LightGroups.pass_name(group), 3, "RGB", "COLOR")
+        layers, levels = cryptomatte_layers(renderlayer)
+        for layer in layers:
+            for name in pass_names(layer, levels):
+                self.register_pass(scene, renderlayer, name, 4, "rgba", "COLOR")
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """Render one view layer of ``depsgraph`` into a render result (or a material preview)."""
@@ -256,8 +336,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 if user_cancelled(self):
                     raise RenderCancelled
 
-            result = render_converted(converted, progress)
-            self._write(converted, result, layer)
+            request = cryptomatte_request(depsgraph.view_layer, converted)
+            groups = light_groups_request(depsgraph.view_layer, converted)
+            result = render_converted(converted, progress, request, groups)
+            self._write(converted, result, layer, cryptomatte=request, light_groups=groups)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
             # Blender crashes saving a still (write_still) after a render that produced no result,
@@ -379,15 +461,26 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
     # ----------------------------------------------------------------- result
 
     def _write(
-        self, converted: convert.ConvertedScene, result: Any, layer: str, combined_only: bool = False
+        self,
+        converted: convert.ConvertedScene,
+        result: Any,
+        layer: str,
+        combined_only: bool = False,
+        cryptomatte: Cryptomatte | None = None,
+        light_groups: LightGroups | None = None,
     ) -> None:
         x0, y0, x1, y1 = converted.region
         width, height = x1 - x0, y1 - y0
+        group_passes = [] if light_groups is None else [LightGroups.pass_name(g) for g in light_groups.groups]
         if not combined_only:  # previews show Combined only: no extra passes to fill
             self.add_pass("Depth", 1, "Z")
             for name, _key in LIGHT_PASSES:
                 self.add_pass(name, 3, "RGB")
             self.add_pass("Shadow", 1, "X")
+            for name in group_passes:
+                self.add_pass(name, 3, "RGB")
+            for name in [] if cryptomatte is None else cryptomatte.pass_names():
+                self.add_pass(name, 4, "rgba")  # lowercase: data, as Cycles registers them
         # begin_result takes the full frame; with a border Blender clips it to the border itself.
         render_result = self.begin_result(0, 0, converted.width, converted.height, layer=layer)
         try:
@@ -404,6 +497,11 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 for name, key in LIGHT_PASSES:
                     buffers[name] = result.passes[key]
                 buffers["Shadow"] = result.passes["shadow"]
+                for name in group_passes:
+                    buffers[name] = result.passes[name]
+                if cryptomatte is not None:
+                    for name in cryptomatte.pass_names():
+                        buffers[name] = result.passes[name]
             for name, image in buffers.items():
                 render_pass = result_layer.passes.get(name)
                 if render_pass is None:
@@ -414,6 +512,10 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             self.end_result(render_result, cancel=True)
             raise
         self.end_result(render_result)
+        if cryptomatte is not None:  # the whole result's metadata (EXR header), as Cycles stores it
+            whole = self.get_result()
+            for key, value in cryptomatte.metadata(layer).items():
+                whole.stamp_data_add_field(key, value)
 
     def _write_error_pattern(self, width: int, height: int, layer: str) -> None:
         """Fill Combined with :func:`error_pattern` (the result Blender shows and saves)."""

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from blinn_phong import Fog, ShadowOptions, render
+from blinn_phong import Cryptomatte, Fog, LightGroups, ShadowOptions, render
 from blinn_phong.scene import AmbientLight, Scene
 from compositing._kernel_cache import compile_clock
 
@@ -135,7 +135,8 @@ class FrameResult:
         depth: (H, W) float32 window depth of the nearest surface (1 = empty).
         passes: ``ambient``, ``diffuse``, ``specular`` (H, W, 3) and ``shadow`` (H, W, 1) float32,
             premultiplied by coverage; ``shadow`` is the mean light visibility (coverage when
-            nothing casts a shadow).
+            nothing casts a shadow); with a Cryptomatte request also its RGBA rank/coverage passes
+            ``CryptoObject00`` … (H, W, 4).
         choices: what was done for each concern and why (for the Render panel and reports).
         seconds: wall time per stage; ``compile``: the seconds numba spent compiling kernels while
             the frame waited (absent when every kernel was already loaded).
@@ -190,6 +191,8 @@ def render_frame(
     light_radii: tuple[float, ...] = (),
     casts_shadows: tuple[bool, ...] = (),
     progress: Callable[[str, float], None] | None = None,
+    cryptomatte: Cryptomatte | None = None,
+    light_groups: LightGroups | None = None,
 ) -> FrameResult:
     """Render ``scene`` (``width × height``) with the settings in ``options``.
 
@@ -203,6 +206,10 @@ def render_frame(
         casts_shadows: per entry of ``scene.lights``, False when the light casts no shadow
             (Blender's Light › Cast Shadow off): that light gets the method ``"none"``.
         progress: optional ``callback(stage, fraction_done)``.
+        cryptomatte: a :class:`blinn_phong.Cryptomatte` request, or None: its passes
+            (``CryptoObject00`` …) are added to ``passes``.
+        light_groups: a :class:`blinn_phong.LightGroups`, or None: its ``Combined_<group>``
+            passes are added to ``passes``.
 
     Returns:
         :class:`FrameResult`; ``choices["reasons"]`` holds one line per decision of the plan that
@@ -235,6 +242,8 @@ def render_frame(
             shadows=shadows,
             fog=fog,
             tolerance=options.tolerance,
+            cryptomatte=cryptomatte,
+            light_groups=light_groups,
         )
     passes = dict(result.passes)
     passes.setdefault("shadow", result.rgba[..., 3:4].copy())

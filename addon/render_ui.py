@@ -54,6 +54,9 @@ SHARED_PANELS = (
     "WORLD_PT_viewport_display",
     "EEVEE_MATERIAL_PT_surface",
     "EEVEE_WORLD_PT_surface",
+    "VIEWLAYER_PT_layer_passes",  # View Layer › Passes (a header for the two below)
+    "VIEWLAYER_PT_layer_passes_cryptomatte",  # Object, Material, Asset, Levels
+    "VIEWLAYER_PT_layer_passes_lightgroups",  # the view layer's light groups
 )
 
 

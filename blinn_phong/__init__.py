@@ -11,6 +11,8 @@ image conventions: float32 premultiplied linear RGBA, row 0 at the top.
 
 from blinn_phong._scratch import release_scratch
 from blinn_phong.frame import Fog, ShadowOptions
+from blinn_phong.id_passes import Cryptomatte
+from blinn_phong.light_groups import LightGroups
 from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
 from blinn_phong.planner import Choice, Plan, plan
 from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
@@ -50,11 +52,13 @@ __all__ = [
     "AmbientLight",
     "Camera",
     "Choice",
+    "Cryptomatte",
     "DirectionalLight",
     "EyeLights",
     "Fog",
     "FragmentShading",
     "Fragments",
+    "LightGroups",
     "LightModel",
     "Material",
     "Mesh",

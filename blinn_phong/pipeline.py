@@ -41,6 +41,7 @@ from blinn_phong.fast import (
     shade_plain_winners_compiled,
     winner_surfaces_compiled,
 )
+from blinn_phong.id_passes import Cryptomatte, passes_from_fragments, passes_from_winners
 from blinn_phong.normals import face_normals
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene, prepare_scene
@@ -455,6 +456,19 @@ def _targets(image: FrameImage) -> tuple[np.ndarray, ...]:
     return (image.rgba, p["ambient"], p["diffuse"], p["specular"], image.normal, image.depth, shadow)
 
 
+def _id_passes(
+    request: Cryptomatte | None, seconds: dict[str, float], make: Callable[..., dict], *args: object
+) -> dict[str, np.ndarray]:
+    """The Cryptomatte passes of ``request`` by ``make(request, *args)``, timed as ``cryptomatte``;
+    nothing (and no work) without a request."""
+    if request is None:
+        return {}
+    t = time.perf_counter()
+    out = make(request, *args)
+    seconds["cryptomatte"] = seconds.get("cryptomatte", 0.0) + time.perf_counter() - t
+    return out
+
+
 #: Shadow-mapped opaque frames look their pixels up inside the fused shading kernel
 #: (:func:`_frame_map_stack`); False takes the general path (world points, then each light's
 #: visibility) — the tests compare the two.
@@ -505,6 +519,7 @@ def _opaque_from_winners(
     fog: tuple | None,
     seconds: dict[str, float],
     say: Callable[[str, float], None],
+    cryptomatte: Cryptomatte | None = None,
 ) -> FrameResult:
     """The opaque z-buffer frame (no transparency, one sample, per-pixel shading, fog or not,
     shadows or not) by the compiled engine: the z-buffer, then (with shadows: ``lit`` from
@@ -521,6 +536,9 @@ def _opaque_from_winners(
     winner = nearest_winners_compiled(setup)
     seconds["visibility"] = time.perf_counter() - t
     say("visibility", 0.4)
+    ids = _id_passes(
+        cryptomatte, seconds, passes_from_winners, winner, setup.source, prepared.triangle_mesh, height, width
+    )
     with contextlib.ExitStack() as resources:  # the shadow maps' memory, until shaded
         vis = maps = None
         if lit is not None:  # shadows: each covered pixel's world point, then each light's visibility there
@@ -548,6 +566,7 @@ def _opaque_from_winners(
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
+    image.passes.update(ids)
     return image, shaded
 
 
@@ -678,6 +697,7 @@ def render_frame(
     engine: str = "auto",
     seconds: dict[str, float] | None = None,
     report: Callable[[str, float], None] | None = None,
+    cryptomatte: Cryptomatte | None = None,
 ) -> FrameResult:
     """Render ``prepared`` by the stages of the module docstring, following ``the_plan``.
 
@@ -696,6 +716,9 @@ def render_frame(
             casts shadows, ``shade`` (with the fragment colours and fog), ``resolve_samples``
             (the transparency resolve and the box filter)).
         report: ``report(stage, fraction_done)``.
+        cryptomatte: a :class:`blinn_phong.id_passes.Cryptomatte` request (for ``prepared``'s
+            meshes) or None: its passes (``CryptoObject00`` …) are added to the image's passes,
+            computed from the visibility stage's samples (:mod:`blinn_phong.id_passes`).
 
     Returns:
         ``(image, shaded)``: the :class:`~blinn_phong.resolve.FrameImage` and the number of
@@ -706,6 +729,7 @@ def render_frame(
         return _render_in_strips(
             prepared, width, height, the_plan, shading=shading, samples=samples, gl_compat=gl_compat,
             cull_backfaces=cull_backfaces, fog=fog, engine=engine, seconds=seconds, report=report,
+            cryptomatte=cryptomatte,
         )  # fmt: skip
 
     def say(stage: str, fraction: float) -> None:
@@ -728,8 +752,9 @@ def render_frame(
     )
     if fused and method == "zbuffer":
         return _opaque_from_winners(
-            prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say
-        )
+            prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say,
+            cryptomatte,
+        )  # fmt: skip
 
     t = time.perf_counter()
     visible = frame_fragments(
@@ -745,6 +770,7 @@ def render_frame(
     )
     seconds["visibility"] = time.perf_counter() - t
     say("visibility", 0.4)
+    ids = _id_passes(cryptomatte, seconds, passes_from_fragments, prepared, visible, method)
 
     t = time.perf_counter()
     visibility = light_visibilities(prepared, visible, the_plan)
@@ -775,6 +801,7 @@ def render_frame(
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
+        image.passes.update(ids)
         return image, len(f)
 
     # Shade, colour and resolve band by band (whole pixel rows): the shading arrays never hold more
@@ -849,4 +876,4 @@ def render_frame(
         del shaded, colour, alpha
         seconds["resolve_samples"] += time.perf_counter() - t
         say("shade", 0.6 + 0.4 * row1 / height)
-    return FrameImage(rgba, depth, normal, passes), len(f_all)
+    return FrameImage(rgba, depth, normal, {**passes, **ids}), len(f_all)

@@ -28,12 +28,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from blinn_phong._feedback import start_feedback
 from blinn_phong.frame import Fog, frame_plan, scene_with_planned_shading
+from blinn_phong.id_passes import Cryptomatte
+from blinn_phong.light_groups import LightGroups
 from blinn_phong.pipeline import render_frame
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene, prepare_scene
@@ -135,6 +137,8 @@ def render(
     tolerance: float = 0.0,
     layers: int | None = None,
     deep: bool = False,
+    cryptomatte: Cryptomatte | None = None,
+    light_groups: LightGroups | None = None,
 ) -> RenderResult:
     """Render ``scene`` with a z-buffer and local (Blinn-)Phong lighting, plus the effects the plan needs.
 
@@ -182,6 +186,18 @@ def render(
         deep: also return the frame's fragments as a deep image (``result.deep``, made by a
             second pass of the stages, :func:`blinn_phong.deep_output.render_deep`); the plan's
             transparency method must be ``a_buffer``, ``depth_peeling`` or ``zbuffer``.
+        cryptomatte: a :class:`blinn_phong.id_passes.Cryptomatte` request (one name per entry of
+            ``scene.meshes`` in each layer) or None (default: no work). Its passes
+            (``CryptoObject00`` … as Cycles names them, (H, W, 4) float32 rank/coverage pairs,
+            :mod:`compositing.cryptomatte`) are added to ``result.passes``, counted from the
+            frame's own samples (:mod:`blinn_phong.id_passes`); the header entries (manifests)
+            are ``cryptomatte.metadata(view_layer)``.
+        light_groups: a :class:`blinn_phong.light_groups.LightGroups` (the group of each light,
+            of each mesh's emission and of the world's ambient) or None (default: no work). Adds
+            one pass ``Combined_<group>`` per group, (H, W, 3) float32: the frame's colour from
+            that group's emitters alone, rendered by the frame's own plan; the passes sum to
+            ``rgba[..., :3]`` when every emitter has a group and there is no fog
+            (:mod:`blinn_phong.light_groups`). Refused with ``gl_compat`` (its clamp is not linear).
 
     ``gl_compat=True`` renders with the plain z-buffer and no shadows or fog (asking for them
     raises ``ValueError``).
@@ -202,6 +218,27 @@ def render(
         raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
+    if cryptomatte is not None:
+        if not isinstance(cryptomatte, Cryptomatte):
+            raise TypeError(
+                "cryptomatte: expected a blinn_phong.Cryptomatte or None, "
+                f"got {type(cryptomatte).__name__}"
+            )
+        if cryptomatte.mesh_count != len(scene.meshes):
+            raise ValueError(
+                f"cryptomatte: expected one name per mesh ({len(scene.meshes)} meshes), "
+                f"got {cryptomatte.mesh_count} names per layer"
+            )
+        cryptomatte = cryptomatte.subset([len(m.triangles) > 0 for m in scene.meshes])
+    if light_groups is not None:
+        if not isinstance(light_groups, LightGroups):
+            raise TypeError(
+                f"light_groups: expected a blinn_phong.LightGroups or None, got {type(light_groups).__name__}"
+            )
+        if gl_compat:
+            raise ValueError("light_groups: not available with gl_compat (its colour clamp is not linear)")
+        light_groups.check(scene)
+        light_groups = light_groups.subset_meshes([len(m.triangles) > 0 for m in scene.meshes])
     # Size/memory, gl_compat light model, meshes without triangles dropped (blinn_phong/scene.py).
     scene = prepare_render_inputs(scene, width, height, samples, gl_compat)
     progress = start_feedback(engine, progress)  # compile notice, progress lines (blinn_phong/_feedback.py)
@@ -254,7 +291,25 @@ def render(
         engine=engine,
         seconds=seconds,
         report=report,
+        cryptomatte=cryptomatte,
     )
+    if light_groups is not None:
+        t = time.perf_counter()
+        group_fog = None if fog is None else replace(fog, color=(0.0, 0.0, 0.0))
+        for group in light_groups.groups:
+            split = light_groups.group_scene(scene, group)
+            name = light_groups.pass_name(group)
+            if split is None:
+                image.passes[name] = np.zeros((height, width, 3), np.float32)
+                continue
+            group_scene, kept = split
+            group_plan = replace(the_plan, shadows=tuple(the_plan.shadows[i] for i in kept))
+            part, _ = render_frame(
+                prepare_scene(group_scene), width, height, group_plan, shading=shading, samples=samples,
+                cull_backfaces=cull_backfaces, fog=group_fog, engine=engine,
+            )  # fmt: skip
+            image.passes[name] = np.ascontiguousarray(part.rgba[..., :3])
+        seconds["light_groups"] = time.perf_counter() - t
     report("done", 1.0)
     stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
     deep_image = None
