@@ -46,16 +46,18 @@ import os
 import sys
 import time
 import traceback
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import bpy
 import numpy as np
 
 from compositing import composite
 from compositing._kernel_cache import compile_clock
-from compositing.deep import DeepImage
 
 from . import convert, mapping, options, pipeline
+
+if TYPE_CHECKING:
+    from compositing.deep import DeepImage  # imported where used: it needs numba
 
 __all__ = [
     "ENGINE_ID",
@@ -181,6 +183,8 @@ def frame_deep_image(deep: DeepImage, converted: convert.ConvertedScene, crop: b
     when the region is the whole frame or ``crop`` (Render Region with Crop to Render Region: the
     saved frame is the region), else placed in the full frame with no samples outside the region
     (Blender saves such a frame at full size, transparent outside the region)."""
+    from compositing.deep import DeepImage
+
     x0, y0, x1, y1 = converted.region
     if crop or (x0, y0, x1, y1) == (0, 0, converted.width, converted.height):
         return deep

@@ -266,6 +266,14 @@ results["still"] = {"deep_output": engine.LAST_RENDER.get("deep_output"), "ok": 
 scene.render.filepath = out + "/anim/frame_"
 scene.frame_start, scene.frame_end = 1, 2
 bpy.ops.render.render(animation=True)
+# A render region, Crop off: Blender saves the full frame; the deep file has the region's samples in it.
+scene.render.use_border, scene.render.use_crop_to_border = True, False
+scene.render.border_min_x, scene.render.border_max_x = 0.25, 0.75
+scene.render.border_min_y, scene.render.border_max_y = 0.5, 1.0
+scene.render.filepath = out + "/border/frame_"
+scene.frame_set(1)
+bpy.ops.render.render(write_still=True)
+scene.render.use_border = False
 # Transparency Auto: the render fails, naming the setting; no deep file.
 scene.blinn_phong.transparency = "AUTO"
 results["panel_auto"] = draw()
@@ -298,6 +306,13 @@ def test_the_engine_writes_the_deep_exr_next_to_each_frame(blends: dict[str, Pat
             tmp_path / "anim" / f"frame_{frame:04d}.deep.exr",
         )
         np.testing.assert_allclose(flatten(read_deep(deep)), read_image(flat), rtol=0, atol=1e-6)
+    border = read_deep(tmp_path / "border" / "frame_0001.deep.exr")
+    assert border.shape == (48, 64)
+    rows, cols = np.nonzero(border.counts)  # Blender's border y counts from the bottom: the top half
+    assert rows.min() >= 0 and rows.max() < 24 and cols.min() >= 16 and cols.max() < 48
+    np.testing.assert_allclose(
+        flatten(border), read_image(tmp_path / "border" / "frame_.exr"), rtol=0, atol=1e-6
+    )
     assert "Deep EXR" in got["auto"] and "Transparency is 'Auto'" in got["auto"], got["auto"]
     assert any(kind == "label" and "Transparency is 'Auto'" in text for kind, text in got["panel_auto"])
     assert not (tmp_path / "auto").exists() or not list((tmp_path / "auto").glob("*.deep.exr"))
