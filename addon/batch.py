@@ -14,6 +14,14 @@ them; ``--format OPEN_EXR_MULTILAYER`` writes every pass the engine produces (Co
 Ambient, Diffuse, Specular, Shadow) under Blender's own layer names (``ViewLayer.Diffuse.R``...).
 Two tasks writing the same file are refused before anything renders (exit 2).
 
+With ``--deep`` (also taken from the file's Deep EXR setting, ``Scene.blinn_phong.deep_output``)
+each frame's deep image — every fragment the transparency resolve composites, from the same render
+pass — is written next to its output as ``<output without its extension>.deep.exr``
+(``shot_0001.png`` → ``shot_0001.deep.exr``; deep OpenEXR ``R, G, B, A, Z, ZBack`` through
+``compositing.deep_io``), one more output of the frame like the others (skipped, placeholders,
+read back, reported). It needs the file's Transparency to be A-Buffer, Depth Peeling or Opaque: any
+other is refused before the first render (exit 2), naming the file and the setting.
+
 With ``--background`` each frame is composited over an image or colour with any operator of
 ``compositing`` (``<output>_<operator>.exr`` linear and ``.png`` preview, next to the render);
 ``--verify`` runs the same composite through Blender's compositor (``addon.verify``) and compares.
@@ -154,6 +162,7 @@ class Task:
 
     ``output`` is the absolute path of the render (resolved before the job starts);
     ``file_format``/``color_depth`` the image settings it is written with (None: the file's own).
+    ``deep_output`` is the absolute path of the frame's deep EXR (empty: no deep output).
     ``job`` names the job (its temporary files carry it, so a job removes only its own);
     ``attempt_dir`` is the job's folder on the output storage: each attempt leaves a marker there,
     and every write needs it to exist (see :func:`write_permit`).
@@ -174,6 +183,7 @@ class Task:
     timeout: float | None = None
     attempt_dir: str | None = None
     job: str = ""
+    deep_output: str = ""
 
     @property
     def stem(self) -> str:
@@ -195,7 +205,16 @@ class Task:
 
     def outputs(self) -> list[str]:
         """Every file this task writes."""
-        return [self.output, *(self.composite_paths() if self.background else ())]
+        return [
+            self.output,
+            *((self.deep_output,) if self.deep_output else ()),
+            *(self.composite_paths() if self.background else ()),
+        ]
+
+    def placeholder_paths(self) -> list[str]:
+        """The files marked with an empty placeholder while the frame renders (with ``placeholder``):
+        the render and its deep image."""
+        return [self.output, *((self.deep_output,) if self.deep_output else ())] if self.placeholder else []
 
 
 def parse_frames(text: str) -> list[int]:
@@ -363,7 +382,8 @@ def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> b
 
     What proves a file whole: OpenImageIO opens it, every part (subimage: a multilayer EXR has one
     per pass) decodes without an error — a cut-off EXR, PNG, BMP fails here, and a cut-off TIFF or
-    JPEG decodes with an error message, which counts as failing — each part is ``size``
+    JPEG decodes with an error message, which counts as failing; a deep EXR part is read as deep
+    data (``read_native_deep_image``: every sample count and value) — each part is ``size``
     (width, height) when given, and a TGA still ends with its footer.
 
     Returns:
@@ -389,7 +409,11 @@ def read_back(path: str | os.PathLike, size: tuple[int, int] | None = None) -> b
                 raise OSError(
                     f"{path}: part {part} is {spec.width}×{spec.height}, expected {size[0]}×{size[1]}"
                 )
-            pixels = inp.read_image(part, 0, 0, spec.nchannels, oiio.FLOAT)
+            if spec.deep:
+                deep = inp.read_native_deep_image(part, 0)
+                pixels = deep if deep is not None and deep.initialized() else None
+            else:
+                pixels = inp.read_image(part, 0, 0, spec.nchannels, oiio.FLOAT)
             error = inp.geterror().strip()
             if pixels is None or error:
                 raise OSError(f"{path}: part {part} cannot be decoded ({error or 'no pixels'})")
@@ -749,7 +773,9 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         return result
     timer = _watchdog(task)
     registered_here: list[Any] = []
-    placeholder: Path | None = None
+    placeholders: list[Path] = []
+    engine_module: Any = None
+    write_deep_files = True
     try:
         import bpy
 
@@ -763,6 +789,10 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         scene = bpy.context.scene
         scene.render.engine = engine.ENGINE_ID
         scene.blinn_phong.abort_on_error = False
+        # The deep image is written here, under the job's rules, never by the engine itself.
+        scene.blinn_phong.deep_output = bool(task.deep_output)
+        engine_module = _engine_module()
+        write_deep_files, engine_module.WRITE_DEEP_FILES = engine_module.WRITE_DEEP_FILES, False
         scene.frame_set(task.frame)
         if scene.frame_current != task.frame:  # Blender clamps to its frame range
             raise ValueError(
@@ -775,13 +805,15 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         elif task.color_depth:
             settings.color_depth = task.color_depth
         output = Path(task.output)
-        if task.placeholder and not output.exists():
+        for marked in map(Path, task.placeholder_paths()):
+            if marked.exists():
+                continue
             with write_permit(task):
-                output.parent.mkdir(parents=True, exist_ok=True)
+                marked.parent.mkdir(parents=True, exist_ok=True)
                 try:  # an ordinary empty file: 0o666 minus the umask, as the frame itself gets
-                    fd = os.open(output, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+                    fd = os.open(marked, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
                     os.close(fd)
-                    placeholder = output
+                    placeholders.append(marked)
                 except FileExistsError:
                     pass
         t = time.perf_counter()
@@ -815,10 +847,13 @@ def run_task(task: Task | dict) -> dict[str, Any]:
                 f"{output.suffix} files cannot be read back here (OpenImageIO has no reader for them): "
                 "written without the check that the write succeeded"
             )
-        placeholder = None
+        placeholders = [p for p in placeholders if p != output]
         result["outputs"]["render"] = str(output)
         result["written"].append(str(output))
         result["format"] = {"file_format": settings.file_format, "color_depth": settings.color_depth}
+        if task.deep_output:
+            _write_deep_output(task, engine_module, size, result)
+            placeholders = [p for p in placeholders if p != Path(task.deep_output)]
         if task.background:
             rendered = _linear_render(scene, render_result, output, settings)
             _composite_and_verify(task, rendered, scene.render.film_transparent, result)
@@ -837,7 +872,10 @@ def run_task(task: Task | dict) -> dict[str, Any]:
     finally:
         if timer is not None:
             timer.cancel()
-        if placeholder is not None:
+        if engine_module is not None:
+            engine_module.WRITE_DEEP_FILES = write_deep_files
+            engine_module.LAST_DEEP.clear()  # the deep image's memory
+        for placeholder in placeholders:
             try:
                 with write_permit(task):
                     if placeholder.stat().st_size == 0:
@@ -852,6 +890,30 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         result["seconds"]["total"] = time.perf_counter() - started
         _finish_attempt(task, result)
     return result
+
+
+def _write_deep_output(task: Task, engine_module: Any, size: tuple[int, int], result: dict[str, Any]) -> None:
+    """Write the engine's deep image of the frame (``LAST_DEEP``) to ``task.deep_output``: through
+    :func:`atomic_target` under the job's permit, read back whole (every sample) before it
+    replaces anything."""
+    from compositing.deep_io import write_deep
+
+    image = engine_module.LAST_DEEP.get("image")
+    if image is None:
+        raise RuntimeError(f"{task.stem}: the engine returned no deep image; {task.deep_output} not written")
+    t = time.perf_counter()
+    try:
+        with (
+            write_permit(task),
+            atomic_target(task.deep_output, job=task.job, check=lambda tmp: read_back(tmp, size)) as tmp,
+        ):
+            write_deep(tmp, image, atomic=False)  # tmp is already this job's temporary file
+    except OSError as error:
+        raise OSError(f"writing {task.deep_output} failed, the previous file is kept: {error}") from None
+    result["seconds"]["write_deep"] = time.perf_counter() - t
+    result["outputs"]["deep"] = task.deep_output
+    result["written"].append(task.deep_output)
+    result["deep"] = {"samples": int(image.n_samples), "max_per_pixel": int(image.counts.max(initial=0))}
 
 
 def _linear_render(scene: Any, render_result: Any, output: Path, settings: Any) -> Any:
@@ -1433,6 +1495,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULT_TOLERANCE,
         help=f"max |ours - Blender| accepted by --verify (default {DEFAULT_TOLERANCE:g})",
     )
+    parser.add_argument(
+        "--deep",
+        action="store_true",
+        help="also write each frame's deep image (deep OpenEXR R, G, B, A, Z, ZBack) next to it as "
+        "<output without its extension>.deep.exr (also on when the file's Deep EXR setting is); needs "
+        "Transparency A-Buffer, Depth Peeling or Opaque in the file",
+    )
     parser.add_argument("--skip-existing", action="store_true", help="skip frames whose outputs exist")
     parser.add_argument(
         "--placeholders", action="store_true", help="mark frames in progress with an empty file"
@@ -1709,7 +1778,7 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
 
     from compositing import composite
 
-    from . import compat, mapping
+    from . import compat, mapping, options
 
     out_dir = args.out.resolve()
     problems: list[str] = []
@@ -1783,6 +1852,12 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
         render.filepath = pattern
         skip = args.skip_existing or not render.use_overwrite
         placeholder = args.placeholders or render.use_placeholder
+        deep = bool(getattr(args, "deep", False)) or scene.blinn_phong.deep_output
+        if deep and (problem := options.deep_output_problem(scene.blinn_phong.transparency)):
+            flag = "--deep" if getattr(args, "deep", False) else "Deep EXR (scene.blinn_phong.deep_output)"
+            problems.append(f"{flag}: {blend}: scene {scene.name!r}: {problem}")
+            continue
+        extension = render.file_extension if render.use_file_extension else ""
         source = "--output-pattern" if args.output_pattern is not None else f"{blend}: render.filepath"
         for frame in frames if frames is not None else [scene.frame_current]:
             try:
@@ -1795,6 +1870,7 @@ def _plan_job(args: argparse.Namespace, blends: Sequence[str], frames: list[int]
                 frame=frame,
                 out_dir=str(out_dir),
                 output=output,
+                deep_output=options.deep_output_path(output, extension) if deep else "",
                 file_format=args.format,
                 color_depth=args.color_depth,
                 output_pattern=args.output_pattern,
@@ -2007,14 +2083,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     failed = [r for r in results if not r["ok"]]
     finished_ok = {r["task"]["output"] for r in results if r["ok"]}
     for task in plan.tasks:  # placeholders of tasks that failed, were killed or never finished
-        output = Path(task.output)
-        if (
-            task.placeholder
-            and task.output not in finished_ok
-            and output.is_file()
-            and output.stat().st_size == 0
-        ):
-            output.unlink()
+        if task.output in finished_ok:
+            continue
+        for marked in map(Path, task.placeholder_paths()):
+            if marked.is_file() and marked.stat().st_size == 0:
+                marked.unlink()
     warnings = list(plan.warnings)
     for result in results:
         result["error"] = _trim(result["error"]) if result["error"] else None

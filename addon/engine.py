@@ -25,6 +25,21 @@ the passes into Blender's render result:
 Pixels go in with ``foreach_set`` on flat float32 arrays, bottom row first (Blender's order).
 ``bl_use_postprocess`` lets Blender's compositor run on the result.
 
+Deep EXR (``Scene.blinn_phong.deep_output``, Render Properties › Blinn-Phong › Deep Output): each
+frame rendered (F12, an animation, ``bpy.ops.render.render``; not previews or the viewport) is
+also rendered as a deep image in the same pass (``blinn_phong.render(..., deep=True)``) and
+written with ``compositing.deep_io.write_deep`` (atomic: a failed write keeps an existing file) to
+:func:`deep_file_path`: the path an animation render saves the current frame to
+(``RenderSettings.frame_path``, ``//`` relative to the .blend) with the format's extension replaced
+by ``.deep.exr``, e.g. ``//render/shot_####`` and PNG → ``//render/shot_0001.deep.exr`` for frame
+1. An F12 still is named the same way (Blender saves a still with Render › Write Still under the
+output path with its ``#`` kept; its deep file carries the frame number). The file has the saved
+frame's size (with a render border and Crop off, the border's pixels in the full frame). It
+needs Transparency A-Buffer, Depth Peeling or Opaque: with another setting the render fails
+before anything is rasterized, naming the setting. A failed deep write fails the render like any other error.
+:data:`LAST_DEEP` keeps the image; a caller that writes it itself (``addon.batch``) sets
+:data:`WRITE_DEEP_FILES` to False.
+
 Failures: Blender ignores exceptions raised in ``render()`` and writes whatever is in the result
 (black) as if it had succeeded. Here every failure is reported through ``report`` (the status bar
 and the log), ``error_set``, stderr, and :data:`LAST_RENDER`; the image is filled with a
@@ -41,7 +56,7 @@ import os
 import sys
 import time
 import traceback
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import bpy
 import numpy as np
@@ -53,20 +68,27 @@ from compositing.cryptomatte import pass_names
 
 from . import convert, mapping, options, pipeline
 
+if TYPE_CHECKING:
+    from compositing.deep import DeepImage  # imported where used: it needs numba
+
 __all__ = [
     "CRYPTOMATTE_LAYERS",
     "ENGINE_ID",
+    "LAST_DEEP",
     "LAST_PREVIEW",
     "LAST_RENDER",
     "PREVIEW_OPTIONS",
     "PREVIEW_TIMES",
+    "WRITE_DEEP_FILES",
     "BlinnPhongRenderEngine",
     "RenderCancelled",
     "ViewportState",
     "classes",
     "cryptomatte_layers",
     "cryptomatte_request",
+    "deep_file_path",
     "error_pattern",
+    "frame_deep_image",
     "light_group_names",
     "light_groups_request",
     "register",
@@ -89,7 +111,18 @@ LAST_RENDER: dict[str, Any] = {}
 """Status of the most recent render in this process: ``ok``, ``error``, ``seconds``, ``notes``,
 ``choices`` (what was rendered how, and why: including ``engine``, the kernels that ran, and
 ``embree``), ``stats`` (seconds per stage, ``compile`` apart), ``status`` (the status line), ``size``.
-Read by the Render panel and the batch runner."""
+Read by the Render panel and the batch runner. With Deep EXR on, ``deep_output`` is the file written
+(None when :data:`WRITE_DEEP_FILES` is False)."""
+
+LAST_DEEP: dict[str, Any] = {}
+"""The deep image of the most recent render with Deep EXR on: ``image`` (a
+``compositing.deep.DeepImage`` of the saved frame's size, :func:`frame_deep_image`), ``frame``,
+``path`` (the file written, or None). Emptied when a render starts."""
+
+WRITE_DEEP_FILES = True
+"""True: a render with Deep EXR on writes its deep image to :func:`deep_file_path`. A caller that
+writes the image itself, under its own rules (the batch runner: job-named temporary files,
+write permits, read-back), sets this False and takes ``LAST_DEEP["image"]``."""
 
 
 PREVIEW_OPTIONS = options.RenderOptions(samples_per_axis=2, shadows="NONE", transparency="AUTO")
@@ -219,6 +252,32 @@ def render_converted(
     return result
 
 
+def frame_deep_image(deep: DeepImage, converted: convert.ConvertedScene, crop: bool) -> DeepImage:
+    """The deep image of the saved frame: ``deep`` (rendered over ``converted.region``) as it is
+    when the region is the whole frame or ``crop`` (Render Region with Crop to Render Region: the
+    saved frame is the region), else placed in the full frame with no samples outside the region
+    (Blender saves such a frame at full size, transparent outside the region)."""
+    from compositing.deep import DeepImage
+
+    x0, y0, x1, y1 = converted.region
+    if crop or (x0, y0, x1, y1) == (0, 0, converted.width, converted.height):
+        return deep
+    counts = np.zeros((converted.height, converted.width), np.uint32)
+    counts[y0:y1, x0:x1] = deep.counts  # rows from the top; samples stay in row-major order
+    return DeepImage(counts, deep.z, deep.zback, deep.rgba)
+
+
+def deep_file_path(scene: bpy.types.Scene, frame: int | None = None) -> str:
+    """The deep EXR of ``frame`` (default: the current one): the frame's output path
+    (``RenderSettings.frame_path``, made absolute) with the format's extension replaced by
+    ``.deep.exr`` (:func:`addon.options.deep_output_path`)."""
+    render_settings = scene.render
+    frame = scene.frame_current if frame is None else int(frame)
+    output = bpy.path.abspath(render_settings.frame_path(frame=frame))
+    extension = render_settings.file_extension if render_settings.use_file_extension else ""
+    return os.path.abspath(options.deep_output_path(output, extension))
+
+
 VIEWPORT_REDUCTION = 4
 """The viewport's first frame after a change is rendered at 1/4 of the region per axis."""
 
@@ -274,6 +333,7 @@ def viewport_frame(
     width, height = mapping.viewport_size(int(region_width), int(region_height), reduction)
     cache = state.geometry if state is not None else None
     converted = convert.scene_from_depsgraph(depsgraph, view=(camera, width, height), geometry_cache=cache)
+    converted.options = dataclasses.replace(converted.options, deep_output=False)  # frames only
     if reduction > 1:
         converted.options = dataclasses.replace(converted.options, samples_per_axis=1)
     result = render_converted(converted)
@@ -324,6 +384,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
         started = time.perf_counter()
         LAST_RENDER.clear()
         LAST_RENDER.update({"ok": False, "error": None, "scene": scene.name, "frame": scene.frame_current})
+        LAST_DEEP.clear()
         try:
             self.update_stats("", "Blinn-Phong: converting the scene")
             converted = convert.scene_from_depsgraph(depsgraph)
@@ -339,6 +400,9 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             request = cryptomatte_request(depsgraph.view_layer, converted)
             groups = light_groups_request(depsgraph.view_layer, converted)
             result = render_converted(converted, progress, request, groups)
+            deep_path = None
+            if result.deep is not None:
+                deep_path = self._keep_deep(scene, converted, result.deep)
             self._write(converted, result, layer, cryptomatte=request, light_groups=groups)
         except RenderCancelled:
             LAST_RENDER.update({"error": "cancelled", "seconds": time.perf_counter() - started})
@@ -361,12 +425,37 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
                 "triangles": result.triangles,
             }
         )
+        if result.deep is not None:
+            LAST_RENDER["deep_output"] = deep_path
         LAST_RENDER["status"] = pipeline.status_line(result.choices, LAST_RENDER["seconds"], result.seconds)
         self.update_stats("", LAST_RENDER["status"])
         for warning in result.choices.get("warnings", []):
             print(f"Blinn-Phong: warning: {warning}", file=sys.stderr, flush=True)
         for note in notes:
             self.report({"WARNING"}, note)
+
+    def _keep_deep(
+        self, scene: bpy.types.Scene, converted: convert.ConvertedScene, deep: DeepImage
+    ) -> str | None:
+        """Keep the frame's deep image in :data:`LAST_DEEP` and, with :data:`WRITE_DEEP_FILES`,
+        write it (atomically) to :func:`deep_file_path`; returns the path written, or None."""
+        image = frame_deep_image(
+            deep, converted, bool(scene.render.use_border and scene.render.use_crop_to_border)
+        )
+        LAST_DEEP.update({"image": image, "frame": scene.frame_current, "path": None})
+        if not WRITE_DEEP_FILES:
+            return None
+        from compositing.deep_io import write_deep
+
+        path = deep_file_path(scene)
+        self.update_stats("", f"Blinn-Phong: writing {path}")
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        try:
+            write_deep(path, image)
+        except OSError as error:
+            raise OSError(f"Deep EXR: writing {path} failed, the previous file is kept: {error}") from None
+        LAST_DEEP["path"] = path
+        return path
 
     def _render_preview(self, depsgraph: bpy.types.Depsgraph) -> None:
         """A material/world preview (``bl_use_preview``): Blender's preview scene, rendered with

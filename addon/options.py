@@ -29,12 +29,16 @@ import numpy as np
 from blinn_phong._checks import choice_error
 
 __all__ = [
+    "DEEP_SUFFIX",
+    "DEEP_TRANSPARENCY",
     "PANELS",
     "SHADOW_SETTINGS",
     "TRANSPARENCY_SETTINGS",
     "RenderOptions",
     "Setting",
     "blender_property_arguments",
+    "deep_output_path",
+    "deep_output_problem",
     "settings",
     "visible_fields",
 ]
@@ -57,6 +61,15 @@ SHADOW_SETTINGS: dict[str, str | None] = {
     "VOLUME": "shadow_volume",
 }
 """Shadow setting -> shadow method (None: the planner's choice per light)."""
+
+DEEP_TRANSPARENCY = ("A_BUFFER", "DEPTH_PEELING", "OPAQUE")
+"""Transparency settings whose fragments a deep image can hold (``blinn_phong.deep_output``): the
+A-buffer (every fragment), depth peeling (the nearest ``peel_layers``) and Opaque (the nearest
+fragment). The planner's choice (Auto), sorted drawing and weighted blending keep no per-pixel
+depth order, so deep output refuses them."""
+
+DEEP_SUFFIX = ".deep.exr"
+"""A frame's deep image is written to its output path with the format's extension replaced by this."""
 
 SHADING_ITEMS = (
     ("FLAT", "Flat", "One colour per triangle, lit at its provoking vertex with the face normal"),
@@ -110,6 +123,7 @@ PANELS: dict[str, str] = {
     "main": "Blinn-Phong",
     "effects": "Transparency, Shadows, Fog",
     "pipeline": "Pipeline",
+    "output": "Deep Output",
 }
 """Render-tab panels by key -> label; ``main`` is the parent, the others its sub-panels."""
 
@@ -267,6 +281,15 @@ class RenderOptions:
         minimum=0.0,
         shown=lambda o: o.fog in ("EXP", "EXP2"),
     )
+    deep_output: bool = _setting(
+        False,
+        label="Deep EXR",
+        panel="output",
+        description="Also write each rendered frame's deep image (OpenEXR with R, G, B, A, Z, ZBack: "
+        "every fragment the transparency resolve composites, at its camera depth) next to the "
+        "frame's output file, named <output path without its extension>.deep.exr. Needs "
+        "Transparency A-Buffer, Depth Peeling or Opaque",
+    )
     engine: str = _setting(
         "AUTO",
         label="Kernels",
@@ -341,6 +364,41 @@ class RenderOptions:
                 value = float(value)
             values[f.name] = value
         return cls(**values)
+
+
+def deep_output_problem(transparency: str) -> str | None:
+    """Why a frame with the Transparency setting ``transparency`` cannot have deep output, or None.
+
+    The message names the setting, its value and the values that work (:data:`DEEP_TRANSPARENCY`).
+    """
+    if transparency in DEEP_TRANSPARENCY:
+        return None
+    labels = {key: label for key, label, _ in _field_setting("transparency").items}
+    names = [labels[key] for key in DEEP_TRANSPARENCY]
+    allowed = f"{', '.join(names[:-1])} or {names[-1]}"
+    return (
+        f"Transparency is {labels.get(transparency, transparency)!r}: deep output keeps each pixel's "
+        f"fragments in depth order and needs Transparency {allowed} (Render Properties › "
+        f"{PANELS['main']} › {PANELS['effects']}; scene.blinn_phong.transparency)"
+    )
+
+
+def deep_output_path(output: str, extension: str = "") -> str:
+    """Where the deep image of a frame whose output file is ``output`` goes.
+
+    ``output`` with its file extension ``extension`` (``RenderSettings.file_extension``, e.g.
+    ``".png"``; compared without case) removed, then :data:`DEEP_SUFFIX`:
+    ``shot_0001.png`` → ``shot_0001.deep.exr``, ``shot_0001.exr`` → ``shot_0001.deep.exr``. An
+    output without that extension (Blender's File Extensions off) keeps its whole name:
+    ``shot.v2_0001`` → ``shot.v2_0001.deep.exr``.
+    """
+    if extension and output.lower().endswith(extension.lower()):
+        output = output[: -len(extension)]
+    return output + DEEP_SUFFIX
+
+
+def _field_setting(name: str) -> Setting:
+    return next(f.metadata["setting"] for f in dataclasses.fields(RenderOptions) if f.name == name)
 
 
 def settings() -> tuple[tuple[str, Any, Setting], ...]:

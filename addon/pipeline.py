@@ -15,6 +15,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from blinn_phong import Cryptomatte, Fog, LightGroups, ShadowOptions, render
 from blinn_phong.scene import AmbientLight, Scene
 from compositing._kernel_cache import compile_clock
 
-from .options import SHADOW_SETTINGS, TRANSPARENCY_SETTINGS, RenderOptions
+from .options import SHADOW_SETTINGS, TRANSPARENCY_SETTINGS, RenderOptions, deep_output_problem
 
 __all__ = [
     "SHADOW_SETTINGS",
@@ -141,6 +142,8 @@ class FrameResult:
         seconds: wall time per stage; ``compile``: the seconds numba spent compiling kernels while
             the frame waited (absent when every kernel was already loaded).
         triangles: input triangle count.
+        deep: with ``options.deep_output`` the frame's fragments as a
+            :class:`compositing.deep.DeepImage` (``blinn_phong.render(..., deep=True)``), else None.
     """
 
     rgba: np.ndarray
@@ -149,6 +152,7 @@ class FrameResult:
     choices: dict[str, object]
     seconds: dict[str, float] = field(default_factory=dict)
     triangles: int = 0
+    deep: Any = None
 
 
 def _shadow_argument(
@@ -214,9 +218,15 @@ def render_frame(
     Returns:
         :class:`FrameResult`; ``choices["reasons"]`` holds one line per decision of the plan that
         was followed, ``choices["engine"]`` the kernels that ran and ``choices["embree"]`` whether
-        Embree was available.
+        Embree was available; ``deep`` the deep image when ``options.deep_output`` is on.
+
+    Raises:
+        ValueError: ``options.deep_output`` with a Transparency setting that keeps no depth order
+            (:func:`addon.options.deep_output_problem`), before anything is rendered.
     """
     options = options or RenderOptions()
+    if options.deep_output and (problem := deep_output_problem(options.transparency)):
+        raise ValueError(f"deep_output (Deep EXR): {problem}")
     shadows = _shadow_argument(scene, options, tuple(light_radii), tuple(casts_shadows))
     fog = None
     if options.fog != "NONE":
@@ -244,6 +254,7 @@ def render_frame(
             tolerance=options.tolerance,
             cryptomatte=cryptomatte,
             light_groups=light_groups,
+            deep=options.deep_output,
         )
     passes = dict(result.passes)
     passes.setdefault("shadow", result.rgba[..., 3:4].copy())
@@ -263,4 +274,6 @@ def render_frame(
     seconds = dict(result.stats.seconds)
     if compiling.seconds:
         seconds["compile"] = compiling.seconds
-    return FrameResult(result.rgba, result.depth, passes, choices, seconds, result.stats.triangles)
+    return FrameResult(
+        result.rgba, result.depth, passes, choices, seconds, result.stats.triangles, deep=result.deep
+    )

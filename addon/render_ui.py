@@ -21,6 +21,7 @@ __all__ = [
     "BLINN_PHONG_PT_render_effects",
     "BLINN_PHONG_PT_render_film",
     "BLINN_PHONG_PT_render_last",
+    "BLINN_PHONG_PT_render_output",
     "BLINN_PHONG_PT_render_pipeline",
     "classes",
     "register",
@@ -107,6 +108,33 @@ BLINN_PHONG_PT_render_pipeline = _settings_panel(
     bl_parent_id="BLINN_PHONG_PT_render",
     bl_options={"DEFAULT_CLOSED"},
 )
+
+
+class BLINN_PHONG_PT_render_output(_EnginePanel, bpy.types.Panel):  # noqa: N801
+    """Deep EXR next to each frame's output: the file it goes to, or why it cannot be written"""
+
+    bl_label = options.PANELS["output"]
+    bl_context = "render"
+    bl_parent_id = "BLINN_PHONG_PT_render"
+    bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        layout.use_property_split = True
+        settings = context.scene.blinn_phong
+        _draw_settings(layout, settings, "output")
+        if not settings.deep_output:
+            return
+        problem = options.deep_output_problem(settings.transparency)
+        if problem:
+            layout.label(text=problem, icon="ERROR")
+            return
+        try:
+            path = engine.deep_file_path(context.scene)
+        except RuntimeError as error:  # Blender 5.0 path templates: a broken {…} in the output path
+            layout.label(text=str(error).strip(), icon="ERROR")
+            return
+        layout.label(text=path, icon="FILE")
 
 
 class BLINN_PHONG_PT_render_film(_EnginePanel, bpy.types.Panel):  # noqa: N801
@@ -270,6 +298,7 @@ classes = (
     BLINN_PHONG_PT_render,
     BLINN_PHONG_PT_render_film,
     BLINN_PHONG_PT_render_effects,
+    BLINN_PHONG_PT_render_output,
     BLINN_PHONG_PT_render_pipeline,
     BLINN_PHONG_PT_render_last,
     BLINN_PHONG_PT_material,

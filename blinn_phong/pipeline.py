@@ -31,6 +31,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -60,6 +61,9 @@ from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragm
 from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
 from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
+
+if TYPE_CHECKING:
+    from blinn_phong.deep_fragments import DeepFragments
 
 __all__ = ["BAND_SAMPLES", "FrameResult", "light_visibilities", "render_frame"]
 
@@ -639,6 +643,7 @@ def _render_in_strips(
     """:func:`render_frame` strip by strip (whole pixel rows, :data:`STRIP_SAMPLES` samples each),
     each strip through every stage with its own :func:`strip_camera`, following the frame's plan."""
     samples = int(options["samples"])  # type: ignore[call-overload]
+    deep: DeepFragments | None = options.pop("deep", None)  # type: ignore[assignment]
     rows = max(1, STRIP_SAMPLES // (width * samples))
     bounds = [(r, min(height, r + rows)) for r in range(0, height, rows)]
     scene = prepared.scene
@@ -657,7 +662,7 @@ def _render_in_strips(
 
         part, n = render_frame(
             strip_prepared, width, row1 - row0, the_plan, seconds=strip_seconds, report=say,
-            **options,  # type: ignore[arg-type]
+            deep=None if deep is None else deep.strip(row0), **options,  # type: ignore[arg-type]
         )  # fmt: skip
         for stage, value in strip_seconds.items():
             seconds[stage] = seconds.get(stage, 0.0) + value
@@ -698,6 +703,7 @@ def render_frame(
     seconds: dict[str, float] | None = None,
     report: Callable[[str, float], None] | None = None,
     cryptomatte: Cryptomatte | None = None,
+    deep: DeepFragments | None = None,
 ) -> FrameResult:
     """Render ``prepared`` by the stages of the module docstring, following ``the_plan``.
 
@@ -719,6 +725,8 @@ def render_frame(
         cryptomatte: a :class:`blinn_phong.id_passes.Cryptomatte` request (for ``prepared``'s
             meshes) or None: its passes (``CryptoObject00`` …) are added to the image's passes,
             computed from the visibility stage's samples (:mod:`blinn_phong.id_passes`).
+        deep: a :class:`blinn_phong.deep_fragments.DeepFragments` that receives each band's
+            fragment colours (the band path runs: the fused passes keep no fragment colours).
 
     Returns:
         ``(image, shaded)``: the :class:`~blinn_phong.resolve.FrameImage` and the number of
@@ -730,6 +738,7 @@ def render_frame(
             prepared, width, height, the_plan, shading=shading, samples=samples, gl_compat=gl_compat,
             cull_backfaces=cull_backfaces, fog=fog, engine=engine, seconds=seconds, report=report,
             cryptomatte=cryptomatte,
+            deep=deep,
         )  # fmt: skip
 
     def say(stage: str, fraction: float) -> None:
@@ -747,8 +756,10 @@ def render_frame(
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog.
     lit = _shadow_lights(scene, the_plan)
-    fused = compiled and fused_shading_applies(
-        scene, shading, samples, gl_compat=gl_compat, shadows=lit is not None
+    fused = (
+        deep is None
+        and compiled
+        and fused_shading_applies(scene, shading, samples, gl_compat=gl_compat, shadows=lit is not None)
     )
     if fused and method == "zbuffer":
         return _opaque_from_winners(
@@ -820,7 +831,8 @@ def render_frame(
     # Fragment colours (α·c, α) of partial occlusion without fog: the compiled resolve computes
     # them in its own pass (resolve_frame with rgba None), no (N, 4) colour array per band.
     plain_colours = (
-        compiled
+        deep is None
+        and compiled
         and fog_parameters is None
         and f_all.samples == 1
         and (method == "zbuffer" or not visible.n_transparent)
@@ -854,6 +866,8 @@ def render_frame(
         colour = alpha = None
         if not plain_colours:
             colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
+        if deep is not None:
+            deep.add(prepared, band, colour, row0)
         seconds["shade"] += time.perf_counter() - t
         t = time.perf_counter()
         resolve_frame(  # writes straight into the band's rows of the frame buffers

@@ -72,7 +72,8 @@ class RenderStats:
 
     Attributes:
         seconds: wall time per stage (``prepare``, ``visibility`` — rasterization and
-            depth resolve —, ``shade``, ``resolve_samples``) in seconds.
+            depth resolve —, ``shade`` — with the deep fragments of ``deep=True`` —,
+            ``resolve_samples``, ``deep`` — joining the deep image's bands) in seconds.
         triangles: input triangles.
         shaded: samples shaded (visible samples; each shaded once).
     """
@@ -183,9 +184,11 @@ def render(
             :func:`blinn_phong.planner.plan` for the error each concern bounds).
         layers: layers for depth peeling, the name the plan's parameters use
             (``result.plan.transparency.params["layers"]``); same as ``peel_layers``.
-        deep: also return the frame's fragments as a deep image (``result.deep``, made by a
-            second pass of the stages, :func:`blinn_phong.deep_output.render_deep`); the plan's
-            transparency method must be ``a_buffer``, ``depth_peeling`` or ``zbuffer``.
+        deep: also return the frame's fragments as a deep image (``result.deep``,
+            :mod:`blinn_phong.deep_output`): the fragments each band resolves, collected in the
+            same pass (:class:`blinn_phong.deep_fragments.DeepFragments`); the plan's
+            transparency method must be ``a_buffer``, ``depth_peeling`` or ``zbuffer`` (else
+            ``ValueError`` before anything is rasterized).
         cryptomatte: a :class:`blinn_phong.id_passes.Cryptomatte` request (one name per entry of
             ``scene.meshes`` in each layer) or None (default: no work). Its passes
             (``CryptoObject00`` … as Cycles names them, (H, W, 4) float32 rank/coverage pairs,
@@ -272,6 +275,12 @@ def render(
     seconds["plan"] = time.perf_counter() - t
     if shading == "auto":
         scene, shading = scene_with_planned_shading(scene, the_plan, shading), "phong"
+    collector = None
+    if deep:
+        from blinn_phong.deep_fragments import DeepFragments
+
+        method = the_plan.transparency.method
+        collector = DeepFragments(height, width, method, the_plan.transparency.params.get("layers"))
 
     t = time.perf_counter()
     prepared = prepare_scene(scene)
@@ -292,7 +301,13 @@ def render(
         seconds=seconds,
         report=report,
         cryptomatte=cryptomatte,
+        deep=collector,
     )
+    deep_image = None
+    if collector is not None:
+        t = time.perf_counter()
+        deep_image = collector.image()
+        seconds["deep"] = time.perf_counter() - t
     if light_groups is not None:
         t = time.perf_counter()
         group_fog = None if fog is None else replace(fog, color=(0.0, 0.0, 0.0))
@@ -312,15 +327,6 @@ def render(
         seconds["light_groups"] = time.perf_counter() - t
     report("done", 1.0)
     stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
-    deep_image = None
-    if deep:
-        from blinn_phong.deep_output import render_deep
-
-        deep_image = render_deep(
-            scene, width, height, shading=shading, samples=samples, gl_compat=gl_compat,
-            cull_backfaces=cull_backfaces, engine=engine, transparency=the_plan.transparency.method,
-            layers=the_plan.transparency.params.get("layers"), shadows=shadows, fog=fog, tolerance=tolerance,
-        )  # fmt: skip
     return RenderResult(
         image.rgba, image.depth, image.normal, image.passes, stats, plan=the_plan, deep=deep_image
     )

@@ -188,6 +188,7 @@ def write_deep(
     compression: str = "zips",
     float_format: str = "float",
     progress: Callable[[float], None] | None = None,
+    atomic: bool = True,
 ) -> None:
     """Write ``image`` as a deep OpenEXR file (channels ``R, G, B, A, Z, ZBack``).
 
@@ -199,6 +200,9 @@ def write_deep(
         compression: ``"zips"`` or ``"none"``.
         float_format: ``"float"`` or ``"half"`` for RGBA (depth is float32).
         progress: called with the fraction of values handed to OpenImageIO.
+        atomic: True: through a temporary file renamed over ``path`` on success. False: straight
+            into ``path``, for a caller whose ``path`` is its own temporary file (e.g.
+            ``addon.batch.atomic_target``, which names it after the job and checks it first).
 
     Raises:
         ValueError: not ``.exr``, bad options.
@@ -230,7 +234,7 @@ def write_deep(
     spec.attribute("compression", compression)
     if tiled:
         spec.tile_width = spec.tile_height = tile_size
-    write_atomic(path, spec, lambda out: out.write_deep_image(dd))
+    write_atomic(path, spec, lambda out: out.write_deep_image(dd), atomic=atomic)
 
 
 def read_deep(path: str | os.PathLike, *, progress: Callable[[float], None] | None = None) -> DeepImage:

@@ -36,6 +36,7 @@ colour-science's (IEC 61966-2-1:1999, ``colour.models.eotf_sRGB`` and
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
 from collections.abc import Callable
@@ -140,9 +141,7 @@ def _channel_map(names: tuple[str, ...], declared_alpha: int, path: str) -> Chan
         rgb = (rest[0], rest[1], rest[2] if len(rest) > 2 else -1)
         guessed = True
     else:
-        raise ValueError(
-            f"path: cannot read {path!r}: no colour channel among {list(names)} (only alpha)"
-        )
+        raise ValueError(f"path: cannot read {path!r}: no colour channel among {list(names)} (only alpha)")
     used = {i for i in rgb if i >= 0} | ({alpha} if alpha is not None else set())
     ignored = tuple(i for i in range(c) if i not in used)
     return ChannelMap(tuple(names), rgb, alpha, ignored, guessed)
@@ -331,11 +330,16 @@ def _write(path: str, pixels: np.ndarray, names: tuple[str, ...], fmt, *, unasso
     write_atomic(path, spec, lambda out: out.write_image(pixels))
 
 
-def write_atomic(path: str | os.PathLike, spec: object, write: Callable[[object], bool]) -> None:
+def write_atomic(
+    path: str | os.PathLike, spec: object, write: Callable[[object], bool], *, atomic: bool = True
+) -> None:
     """Open an OpenImageIO output with ``spec`` on a temporary file, ``write(output)``, close it and
     rename it over ``path``; any failure raises ``OSError`` naming ``path`` and leaves ``path`` as
-    it was (:func:`compositing._atomic.atomic_path`)."""
-    with atomic_path(path) as tmp:
+    it was (:func:`compositing._atomic.atomic_path`).
+
+    ``atomic=False`` writes ``path`` itself: for a caller whose ``path`` is already a temporary
+    file of its own (it then owns what a failure leaves there)."""
+    with atomic_path(path) if atomic else contextlib.nullcontext(os.fspath(path)) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None:
             raise OSError(f"path: cannot create {path!r}: {oiio.geterror()}")

@@ -86,3 +86,26 @@ def test_panels_show_the_dependent_settings_only_when_they_apply() -> None:
 def test_bad_values_are_named(kwargs: dict, message: str) -> None:
     with pytest.raises((ValueError, TypeError), match=message):
         RenderOptions(**kwargs)
+
+
+def test_deep_output_setting_its_file_name_and_the_transparency_it_needs() -> None:
+    assert options.visible_fields("output", RenderOptions()) == ["deep_output"]
+    assert RenderOptions().deep_output is False
+    # The format's extension (any case) is replaced; a name without it is kept whole.
+    assert options.deep_output_path("/r/shot_0001.png", ".png") == "/r/shot_0001.deep.exr"
+    assert options.deep_output_path("/r/shot_0001.EXR", ".exr") == "/r/shot_0001.deep.exr"
+    assert options.deep_output_path("/r/shot.v2_0001", ".png") == "/r/shot.v2_0001.deep.exr"
+    assert options.deep_output_path("/r/shot.v2_0001", "") == "/r/shot.v2_0001.deep.exr"
+    # Exactly the settings whose core method keeps a per-pixel depth order (blinn_phong.deep_output).
+    from blinn_phong.deep_output import DEEP_METHODS
+
+    keeps_order = [k for k, method in options.TRANSPARENCY_SETTINGS.items() if method in DEEP_METHODS]
+    assert sorted(keeps_order) == sorted(options.DEEP_TRANSPARENCY)
+    for key in options.TRANSPARENCY_SETTINGS:
+        problem = options.deep_output_problem(key)
+        assert (problem is None) == (key in keeps_order), key
+    assert options.deep_output_problem("WEIGHTED") == (
+        "Transparency is 'Weighted Blended': deep output keeps each pixel's fragments in depth order "
+        "and needs Transparency A-Buffer, Depth Peeling or Opaque (Render Properties › Blinn-Phong › "
+        "Transparency, Shadows, Fog; scene.blinn_phong.transparency)"
+    )

@@ -1,9 +1,11 @@
-"""Deep output of the renderer (:func:`blinn_phong.deep_output.render_deep`) against its flat renders.
+"""Deep output of the renderer (``render(..., deep=True)``, :func:`blinn_phong.deep_output.render_deep`)
+against its flat renders.
 
 Oracle: :func:`blinn_phong.render` with the A-buffer (or depth peeling) on the same scene:
 flattening the deep frame must give the flat frame, for every transparency model, fog and
-Kay–Greenberg opacity, and two renders of separate object sets that interpenetrate, deep-merged,
-must give one render of both.
+Kay–Greenberg opacity, in bands and strips and with the compiled stages, and two renders of
+separate object sets that interpenetrate, deep-merged, must give one render of both. The deep
+image comes from the same pass as the flat frame: the frame is rasterized once.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
+from blinn_phong import pipeline, visibility
 from blinn_phong.deep_output import render_deep
 from blinn_phong.primitives import grid_plane, uv_sphere
 from compositing.deep import flatten, merge
@@ -125,3 +128,72 @@ def test_render_returns_the_deep_frame_on_request():
     assert bp.render(s, 8, 6, shadows="none", engine="numpy").deep is None
     with pytest.raises(ValueError, match="deep output keeps depth-sorted fragments"):
         bp.render(s, 8, 6, transparency="weighted_blended", shadows="none", engine="numpy", deep=True)
+
+
+def test_render_rasterizes_once_for_the_flat_and_the_deep_frame(monkeypatch):
+    """One pass: the deep image holds the fragments the flat frame's resolve used."""
+    calls = []
+    rasterize = visibility.rasterize
+
+    def counting(*args, **kwargs):
+        calls.append(args[2:4])
+        return rasterize(*args, **kwargs)
+
+    monkeypatch.setattr(visibility, "rasterize", counting)
+    s = scene(spheres(list(MATERIALS.values())) + floor_and_ball())
+    result = bp.render(s, W, H, transparency="a_buffer", shadows="none", engine="numpy", deep=True)
+    assert calls == [(W, H)]
+    np.testing.assert_allclose(flatten(result.deep), result.rgba, rtol=0, atol=1e-6)
+    assert result.stats.seconds["deep"] >= 0
+
+
+@pytest.mark.parametrize("transparency", ["a_buffer", "depth_peeling"])
+def test_deep_frame_in_bands_and_strips(monkeypatch, transparency):
+    """Bands of 5 rows and strips of 7 rows (the last ones short) give the deep image of one band,
+    and its flatten is the flat frame of the same render."""
+    s = scene(spheres(list(MATERIALS.values())) + floor_and_ball())
+    kw = dict(transparency=transparency, layers=2 if transparency == "depth_peeling" else None)
+    one = bp.render(s, W, H, shadows="none", engine="numpy", deep=True, **kw)
+    monkeypatch.setattr(pipeline, "BAND_SAMPLES", W * 5)
+    monkeypatch.setattr(pipeline, "STRIP_SAMPLES", W * 7)
+    parts = bp.render(s, W, H, shadows="none", engine="numpy", deep=True, **kw)
+    np.testing.assert_allclose(flatten(parts.deep), parts.rgba, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(parts.deep.counts, one.deep.counts)
+    # Strips rasterize with their own projection: window depths and barycentrics round apart.
+    np.testing.assert_allclose(parts.deep.z, one.deep.z, rtol=1e-6, atol=0)
+    np.testing.assert_allclose(parts.deep.rgba, one.deep.rgba, rtol=0, atol=2e-6)
+
+
+def test_supersampled_deep_frame_in_strips_groups_surfaces_per_pixel(monkeypatch):
+    """With 2×2 samples, a pixel's subpixels lie in one strip: strips change nothing in the grouping."""
+    s = scene(spheres(list(MATERIALS.values())) + floor_and_ball())
+    one = bp.render(s, W, H, samples=4, transparency="a_buffer", shadows="none", engine="numpy", deep=True)
+    monkeypatch.setattr(pipeline, "STRIP_SAMPLES", W * 4 * 5)
+    parts = bp.render(s, W, H, samples=4, transparency="a_buffer", shadows="none", engine="numpy", deep=True)
+    np.testing.assert_array_equal(parts.deep.counts, one.deep.counts)
+    np.testing.assert_allclose(flatten(parts.deep), flatten(one.deep), rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("samples", [1, 4])
+def test_compiled_deep_frame_flattens_to_the_compiled_flat_frame(samples):
+    """The compiled stages: the flat frame of a plain render (the fused resolve) against the
+    deep frame of ``render(deep=True)`` (the band path, which keeps fragment colours)."""
+    s = scene(spheres(list(MATERIALS.values())) + floor_and_ball())
+    kw = dict(transparency="a_buffer", shadows="none", engine="numba", samples=samples, progress=False)
+    flat = bp.render(s, W, H, **kw)
+    result = bp.render(s, W, H, deep=True, **kw)
+    np.testing.assert_allclose(result.rgba, flat.rgba, rtol=0, atol=1e-6)
+    if samples == 1:
+        np.testing.assert_allclose(flatten(result.deep), flat.rgba, rtol=0, atol=1e-6)
+    reference = bp.render(s, W, H, deep=True, **{**kw, "engine": "numpy"})
+    np.testing.assert_array_equal(result.deep.counts, reference.deep.counts)
+    np.testing.assert_allclose(result.deep.rgba, reference.deep.rgba, rtol=0, atol=1e-5)
+
+
+def test_a_refused_method_is_refused_before_rasterizing(monkeypatch):
+    def fail(*args, **kwargs):
+        raise AssertionError("rasterized")
+
+    monkeypatch.setattr(visibility, "rasterize", fail)
+    with pytest.raises(ValueError, match="transparency: deep output keeps depth-sorted fragments"):
+        bp.render(scene(floor_and_ball()), 8, 6, transparency="sort_objects", engine="numpy", deep=True)
