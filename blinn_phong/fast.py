@@ -24,9 +24,11 @@ and :mod:`blinn_phong.resolve` hold the numpy references.
 
 The depth test is ``GL_LESS`` in draw order, as :func:`blinn_phong.raster.resolve_nearest`:
 smaller depth wins, equal depths go to the lower triangle index. Rasterization splits the image
-into horizontal bands processed in parallel (numba ``prange``), the resolve runs rows in
-parallel; each band or row owns its samples, so there are no write races and the results do
-not depend on the thread count (tests/blinn_phong/test_engines_agree.py checks every kernel
+into horizontal bands processed in parallel (numba ``prange``); the other kernels are serial
+loops that release the GIL, run on shares of their rows or fragments on threads
+(:mod:`compositing._threads`: a numba-parallel loop costs seconds more to compile, and most of
+them ran no faster); each band, row or fragment owns its outputs, so there are no write races
+and the results do not depend on the thread count (tests/blinn_phong/test_engines_agree.py checks every kernel
 against the reference).
 """
 
@@ -61,6 +63,16 @@ _interpolated: object = None
 #: points), set by :func:`_plain_kernel`.
 _stacked_visibility: object = None
 _nearest_run: object = None
+
+
+def _shares(kernel: object, n: int, *args: object) -> None:
+    """``kernel(share, *args)`` for shares of ``range(n)`` (int64 arrays) on threads
+    (:func:`compositing._threads.run_shares`): the compiled kernels below are serial loops that
+    release the GIL, each iteration writing its own outputs (no write races, and the same
+    results on any number of threads)."""
+    from compositing._threads import run_shares
+
+    run_shares(lambda share: kernel(share, *args), np.arange(n, dtype=np.int64))  # type: ignore[operator]
 
 
 @functools.lru_cache(maxsize=1)
@@ -167,6 +179,9 @@ def _kernel() -> object:  # a numba dispatcher
     _triangle_setup, _sample_depth, _winner_point = triangle_setup, sample_depth, winner_point
     _unit_face_normal, _interpolated = unit_face_normal, interpolated
 
+    # The rasterization loops stay numba-parallel: as serial loops over shares they ran 2–5×
+    # slower (their inner loops re-read the triangle's arrays after every store into an output
+    # that LLVM cannot prove distinct; a parallel loop's body is compiled knowing it is).
     @numba.njit(parallel=True, cache=True, fastmath=False)
     def zbuffer(
         n_bands, fine_w, fine_h, selected, x0, x1, y0, y1, a, b, c, top_left, xe, ye, area, z, source
@@ -405,11 +420,11 @@ def _surface_kernel() -> object:  # a numba dispatcher
 
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def surface(
-        tri_ids, bary, triangles, eye_pos, eye_n, world_n, flip, out_p, out_n, out_w
+        share, tri_ids, bary, triangles, eye_pos, eye_n, world_n, flip, out_p, out_n, out_w
     ):  # pragma: no cover
-        for i in numba.prange(tri_ids.shape[0]):
+        for i in share:
             t = tri_ids[i]
             v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
             b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
@@ -445,7 +460,9 @@ def surface_at_fragments_compiled(
     out_p = np.empty((n, 3))
     out_n = np.empty((n, 3))
     out_w = np.empty((n, 3))
-    _surface_kernel()(
+    _shares(
+        _surface_kernel(),
+        n,
         np.ascontiguousarray(triangle, dtype=np.int64),
         np.ascontiguousarray(bary),
         np.ascontiguousarray(triangles, dtype=np.int64),
@@ -464,11 +481,25 @@ def surface_at_fragments_compiled(
 def _scatter_kernel() -> object:  # a numba dispatcher
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def scatter(
-        keys, rgb, alpha, ambient, diffuse, specular, normal, depth, o_rgba, o_amb, o_dif, o_spe, o_nrm, o_z
+        share,
+        keys,
+        rgb,
+        alpha,
+        ambient,
+        diffuse,
+        specular,
+        normal,
+        depth,
+        o_rgba,
+        o_amb,
+        o_dif,
+        o_spe,
+        o_nrm,
+        o_z,
     ):  # pragma: no cover
-        for i in numba.prange(keys.shape[0]):
+        for i in share:
             key = keys[i]
             a = alpha[i]
             for ch in range(3):
@@ -507,7 +538,7 @@ def scatter_samples_compiled(
         np.zeros((n_keys, 3), np.float32),
         np.ones(n_keys, np.float32),
     )
-    _scatter_kernel()(keys, rgb, alpha, ambient, diffuse, specular, normal, depth, *out)
+    _shares(_scatter_kernel(), len(keys), keys, rgb, alpha, ambient, diffuse, specular, normal, depth, *out)
     return out
 
 
@@ -666,8 +697,9 @@ def _colour_kernel() -> object:  # a numba dispatcher
     global _fogged
     _fogged = _fog_function()  # a module global, not a closure variable: see _plain_kernel
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def colours(
+        share,
         tri,
         bary,
         triangles,
@@ -685,7 +717,7 @@ def _colour_kernel() -> object:  # a numba dispatcher
         out_alpha,
     ):  # pragma: no cover - compiled
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
-        for i in numba.prange(tri.shape[0]):
+        for i in share:
             t = tri[i]
             v0, v1, v2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
             b0, b1, b2 = bary[i, 0], bary[i, 1], bary[i, 2]
@@ -745,7 +777,9 @@ def fragment_colours_compiled(
     out_rgba = np.empty((n, 4))
     out_alpha = np.empty(n)
     kg, washout, model = side_params
-    _colour_kernel()(
+    _shares(
+        _colour_kernel(),
+        n,
         np.ascontiguousarray(triangle, dtype=np.int64),
         np.ascontiguousarray(bary),
         np.ascontiguousarray(triangles, dtype=np.int64),
@@ -774,8 +808,9 @@ RESOLVE_CODES = {"zbuffer": 0, "front_to_back": 1, "weighted_blended": 2}
 def _resolve_kernel() -> object:  # a numba dispatcher
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def resolve(
+        share,
         width,
         height,
         n_samples,
@@ -806,7 +841,7 @@ def _resolve_kernel() -> object:  # a numba dispatcher
     ):  # pragma: no cover - compiled
         inv = 1.0 / n_samples
         scale_exact = (n_samples & (n_samples - 1)) == 0
-        for row in numba.prange(height):
+        for row in share:
             # Scratch space per row (one thread each), reused for every pixel of the row.
             order = np.empty(max(max_list, 1), np.int64)
             res = np.empty(4)
@@ -901,8 +936,9 @@ def _resolve_kernel() -> object:  # a numba dispatcher
 def _resolve_plain_kernel() -> object:  # a numba dispatcher
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def resolve_plain(
+        share,
         width,
         height,
         opaque_of,
@@ -927,7 +963,7 @@ def _resolve_plain_kernel() -> object:  # a numba dispatcher
         # (α·c, α) of partial occlusion computed here: the same float32 values, since a sum of
         # one term is that term (``0.0 + x`` keeps numpy's sign of zero) and 1/1 scales exactly.
         one = np.float32(1.0)
-        for row in numba.prange(height):
+        for row in share:
             for col in range(width):
                 o = opaque_of[row * width + col]
                 if o < 0:
@@ -974,7 +1010,8 @@ def resolve_plain_compiled(
     """:func:`resolve_frame_compiled` with code 0 (z-buffer), one sample per pixel and the fragment
     colours ``(α·c, α)`` (partial occlusion, no fog) computed in the same pass: the same float32
     images without the (N, 4) fragment-colour array. ``out`` as there (C-contiguous float32)."""
-    _resolve_plain_kernel()(
+    _shares(
+        _resolve_plain_kernel(), height,
         width, height, opaque_of, np.ascontiguousarray(rgb), np.ascontiguousarray(alpha),
         np.ascontiguousarray(ambient), np.ascontiguousarray(diffuse), np.ascontiguousarray(specular),
         np.ascontiguousarray(normal), np.ascontiguousarray(depth), vis_mean is not None,
@@ -1025,7 +1062,8 @@ def resolve_frame_compiled(
             np.zeros((height, width, 1), f32) if vis_mean is not None else np.zeros((0, 0, 1), f32),
         )
     max_list = int(np.diff(offsets).max()) if code != 0 and len(offsets) > 1 else 0
-    _resolve_kernel()(
+    _shares(
+        _resolve_kernel(), height,
         width, height, n_samples, code, max_layers, max_list, n_opaque, opaque_of, offsets,
         np.ascontiguousarray(sort_key, dtype=np.float64), np.ascontiguousarray(weight, dtype=np.float64),
         np.ascontiguousarray(rgba), np.ascontiguousarray(alpha), np.ascontiguousarray(ambient),
@@ -1582,15 +1620,16 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
 
     _kernel()  # sets _winner_point (a module global, as in _plain_kernel)
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def winner_surface(
+        share,
         width, height, row_order, winner, rank, xe, ye, area, a, b, c, z, w, weights, source, triangles,
         world, face_normal, triangle_mesh, out_points, out_normals, out_mesh,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per covered pixel (its row ``rank[pixel]``): the winner's perspective-correct
         # barycentrics (_winner_point, as ``finish``), the world point interpolated as
         # raster.interpolate sums it (k = 0, 1, 2), its triangle's unit face normal and mesh.
-        for i_row in numba.prange(height):
+        for i_row in share:
             row = row_order[i_row]  # rows interleaved over the threads (balanced work)
             cy = row + 0.5
             for col in range(width):
@@ -1608,10 +1647,10 @@ def _winner_surface_kernel() -> object:  # a numba dispatcher
                 nx, ny, nz = face_normal[src, 0], face_normal[src, 1], face_normal[src, 2]
                 out_normals[i, 0], out_normals[i, 1], out_normals[i, 2] = nx, ny, nz
 
-    @numba.njit(parallel=True, cache=True)
-    def face_normals(triangles, world, out):  # pragma: no cover - compiled
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def face_normals(share, triangles, world, out):  # pragma: no cover - compiled
         # normals.face_normals over the world corners (_unit_face_normal)
-        for f in numba.prange(triangles.shape[0]):
+        for f in share:
             nx, ny, nz = _unit_face_normal(world, triangles[f, 0], triangles[f, 1], triangles[f, 2])
             out[f, 0], out[f, 1], out[f, 2] = nx, ny, nz
 
@@ -1641,7 +1680,13 @@ def face_normals_compiled(triangles: np.ndarray, world_vertices: np.ndarray) -> 
     """
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     out = np.empty((len(tris), 3))
-    _winner_surface_kernel()[1](tris, np.ascontiguousarray(world_vertices, dtype=np.float64), out)
+    _shares(
+        _winner_surface_kernel()[1],
+        len(tris),
+        tris,
+        np.ascontiguousarray(world_vertices, dtype=np.float64),
+        out,
+    )
     return out
 
 
@@ -1680,7 +1725,8 @@ def winner_surfaces_compiled(
     tris = np.ascontiguousarray(triangles, dtype=np.int64)
     verts = np.ascontiguousarray(world_vertices, dtype=np.float64)
     faces = face_normals_compiled(tris, verts)
-    winner_surface(
+    _shares(
+        winner_surface, setup.height,
         setup.width, setup.height, _row_order(setup.height), winner, rank, setup.x_exact, setup.y_exact,
         setup.area, setup.a,
         setup.b, setup.c, setup.z, setup.w, np.ascontiguousarray(setup.weights), setup.source,
@@ -1706,8 +1752,9 @@ def _setup_kernels() -> object:  # numba dispatchers
                     n += 1
             n_in[t] = n
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def setup(
+        share,
         clip, tri, whole, extra, fine_w, fine_h, cull, w_out, xe_out, ye_out, z_out, area_out, front_out,
         keep_out, ok_out, x0_out, x1_out, y0_out, y1_out, a_out, b_out, c_out, tl_out, scale,
     ):  # fmt: skip  # pragma: no cover - compiled
@@ -1716,7 +1763,7 @@ def _setup_kernels() -> object:  # numba dispatchers
         n_whole = whole.shape[0]
         half_w = 0.5 * fine_w
         half_h = 0.5 * fine_h
-        for s in numba.prange(n_whole + extra.shape[0]):
+        for s in share:
             ok = True
             x = (0.0, 0.0, 0.0)
             y = (0.0, 0.0, 0.0)
@@ -1812,7 +1859,8 @@ def setup_triangles_compiled(
     x0, x1, y0, y1 = (np.empty(n, np.int64) for _ in range(4))
     a, b, c = (np.empty((n, 3), f64) for _ in range(3))
     top_left = np.empty((n, 3), np.bool_)
-    setup(
+    _shares(
+        setup, n,
         clip, tri, whole, np.ascontiguousarray(extra, dtype=f64), fine_w, fine_h, bool(cull_backfaces),
         w, xe, ye, z, area, front, keep, ok, x0, x1, y0, y1, a, b, c, top_left, float(1 << SUBPIXEL_BITS),
     )  # fmt: skip
