@@ -66,13 +66,11 @@ _nearest_run: object = None
 
 
 def _shares(kernel: object, n: int, *args: object) -> None:
-    """``kernel(share, *args)`` for shares of ``range(n)`` (int64 arrays) on threads
-    (:func:`compositing._threads.run_shares`): the compiled kernels below are serial loops that
-    release the GIL, each iteration writing its own outputs (no write races, and the same
-    results on any number of threads)."""
-    from compositing._threads import run_shares
+    """``kernel(share, *args)`` for shares of ``range(n)`` on threads
+    (:func:`compositing._threads.in_shares`)."""
+    from compositing._threads import in_shares
 
-    run_shares(lambda share: kernel(share, *args), np.arange(n, dtype=np.int64))  # type: ignore[operator]
+    in_shares(kernel, n, *args)  # type: ignore[arg-type]
 
 
 @functools.lru_cache(maxsize=1)

@@ -488,7 +488,10 @@ def _shade_compiled(
         vis3 = np.zeros((0, 0, 1))
     else:  # (N, L) -> (N, L, 1); (N, L, 3) per channel
         vis3 = np.ascontiguousarray(vis if vis.ndim == 3 else vis[:, :, None], dtype=np.float64)
-    _kernel()(
+    from compositing._threads import in_shares
+
+    in_shares(
+        _kernel(), count,
         np.ascontiguousarray(p), np.ascontiguousarray(n), ids, base, a_cm, d_cm, s_cm, shininess,
         light_tables(lights), bool(model.local_viewer), model.specular == "blinn", vis3,
         ambient, diffuse, specular,
@@ -611,7 +614,8 @@ _point_terms: object = None
 
 @functools.lru_cache(maxsize=1)
 def _kernel() -> object:  # a numba dispatcher
-    """The lighting equation as a compiled, parallel per-point loop over :func:`point_terms`."""
+    """The lighting equation as a compiled per-point loop over :func:`point_terms`, for the points
+    ``share`` (shares of all points run on threads: :func:`compositing._threads.in_shares`)."""
     import numba
 
     global _point_terms
@@ -619,15 +623,16 @@ def _kernel() -> object:  # a numba dispatcher
     # and a compiled function in one would change it in every process (no cache hit, ever).
     _point_terms = point_terms()
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def kernel(
+        share,
         p, n, ids, bases, a_cms, d_cms, s_cms, shininesses, lights, local_viewer, blinn, vis,
         out_amb, out_dif, out_spe,
     ):  # fmt: skip  # pragma: no cover - compiled
         count = p.shape[0]
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         has_vis = vis.shape[0] == count and vis.shape[1] == pos.shape[0] and count > 0
-        for q in numba.prange(count):
+        for q in share:
             ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                 q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], ids[q], bases, a_cms, d_cms,
                 s_cms, shininesses, pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,

@@ -52,6 +52,7 @@ import numpy as np
 
 from blinn_phong.mesh_facts import _mesh_facts, coordinate_tolerance
 from blinn_phong.scene import Scene
+from compositing._threads import in_shares
 
 __all__ = ["LIT", "SHADOWED", "TRACE", "caster_tables", "rays_to_trace"]
 
@@ -198,8 +199,9 @@ def _slab(o, d, inv, a, b, t0, t1):  # pragma: no cover - compiled
     return max(t0, ta), min(t1, tb)
 
 
-@numba.njit(parallel=True, cache=True)
-def rays_to_trace_kernel(
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _rays_to_trace_kernel_share(
+    share,
     points,
     normals,
     mesh_of,
@@ -219,7 +221,7 @@ def rays_to_trace_kernel(
 ):  # pragma: no cover - compiled
     """The tests of the module docstring per point, in parallel (see :func:`rays_to_trace`)."""
     margin = pad
-    for i in numba.prange(points.shape[0]):
+    for i in share:
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         # the ray of shadow_kernels.hard_shadow_rays, in float64
@@ -300,3 +302,9 @@ def rays_to_trace_kernel(
                     continue  # the padded box is missed: no hit on this caster
                 answer = TRACE  # keep looking: another caster may prove the shadow
         out[i] = answer
+
+
+def rays_to_trace_kernel(points: np.ndarray, *args: object) -> None:
+    """The compiled :func:`_rays_to_trace_kernel_share` (same arguments, without ``share``) over every row, in
+    shares on threads (:func:`compositing._threads.in_shares`)."""
+    in_shares(_rays_to_trace_kernel_share, points.shape[0], points, *args)

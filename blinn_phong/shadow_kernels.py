@@ -54,6 +54,7 @@ import numba
 import numpy as np
 
 from blinn_phong._scratch import ScratchPool, carve, carved_bytes
+from compositing._threads import in_shares
 
 __all__ = [
     "area_light_rays",
@@ -1207,9 +1208,9 @@ def receiver_visibility_compiled(
     return out
 
 
-@numba.njit(parallel=True, cache=True)
-def hard_shadow_rays(
-    points, normals, light, positional, centre, offset, ulps, o32, d32, t32
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _hard_shadow_rays_share(
+    share, points, normals, light, positional, centre, offset, ulps, o32, d32, t32
 ):  # pragma: no cover
     """Shadow rays of points for one light, written into float32 arrays (compiled).
 
@@ -1221,7 +1222,7 @@ def hard_shadow_rays(
     Returns the number of rows with a non-finite point or normal (left unwritten).
     """
     bad = 0
-    for i in numba.prange(points.shape[0]):
+    for i in share:
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
         if not (math.isfinite(px + py + pz) and math.isfinite(nx + ny + nz)):
@@ -1252,6 +1253,13 @@ def hard_shadow_rays(
     return bad
 
 
+def hard_shadow_rays(points: np.ndarray, *args: object) -> int:
+    """The compiled :func:`_hard_shadow_rays_share` (same arguments, without ``share``) over every row, in
+    shares on threads (:func:`compositing._threads.in_shares`); returns the sum of the shares'
+    counts."""
+    return int(sum(in_shares(_hard_shadow_rays_share, points.shape[0], points, *args)))
+
+
 @numba.njit(cache=True)
 def corner_bounds(world_triangles):  # pragma: no cover - compiled
     """(lo, hi): per-axis minimum and maximum of the (n, 3, 3) corners (exact, as ``min``/``max``)."""
@@ -1268,8 +1276,10 @@ def corner_bounds(world_triangles):  # pragma: no cover - compiled
     return lo, hi
 
 
-@numba.njit(parallel=True, cache=True)
-def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  # pragma: no cover - compiled
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _area_light_rays_share(
+    share, origins, s, t, corner, edge_u, edge_v, offset, d32, t32
+):  # pragma: no cover - compiled
     """Shadow rays towards one jittered sample ``corner + s·edge_u + t·edge_v`` per point (compiled).
 
     ``origins``: (n, 3) float64 offset ray origins (world); ``s``, ``t``: (n,) sample
@@ -1277,7 +1287,7 @@ def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  #
     unit directions and ``t32`` (n,) ``max(distance − offset, 0)``, as
     :func:`blinn_phong.raytrace.area_light_visibility` computes them with numpy.
     """
-    for i in numba.prange(origins.shape[0]):
+    for i in share:
         dx = (corner[0] + s[i] * edge_u[0] + t[i] * edge_v[0]) - origins[i, 0]
         dy = (corner[1] + s[i] * edge_u[1] + t[i] * edge_v[1]) - origins[i, 1]
         dz = (corner[2] + s[i] * edge_u[2] + t[i] * edge_v[2]) - origins[i, 2]
@@ -1287,9 +1297,15 @@ def area_light_rays(origins, s, t, corner, edge_u, edge_v, offset, d32, t32):  #
         t32[i] = max(dist - offset[i], 0.0)
 
 
-@numba.njit(parallel=True, cache=True)
-def fragment_surface(
-    triangle, bary, triangles, world_vertices, face_normals, out_points, out_normals
+def area_light_rays(origins: np.ndarray, *args: object) -> None:
+    """The compiled :func:`_area_light_rays_share` (same arguments, without ``share``) over every row, in
+    shares on threads (:func:`compositing._threads.in_shares`)."""
+    in_shares(_area_light_rays_share, origins.shape[0], origins, *args)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _fragment_surface_share(
+    share, triangle, bary, triangles, world_vertices, face_normals, out_points, out_normals
 ):  # pragma: no cover - compiled
     """World-space point and face normal of each fragment, in one compiled pass.
 
@@ -1300,7 +1316,7 @@ def fragment_surface(
     (the formula of :func:`blinn_phong.raster.interpolate`, summed in the order k = 0, 1, 2) and
     ``out_normals[i] = face_normals[t]``, ``t = triangle[i]``.
     """
-    for i in numba.prange(triangle.shape[0]):
+    for i in share:
         t = triangle[i]
         a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         w0, w1, w2 = bary[i, 0], bary[i, 1], bary[i, 2]
@@ -1308,3 +1324,9 @@ def fragment_surface(
             va, vb, vc = world_vertices[a, k], world_vertices[b, k], world_vertices[c, k]
             out_points[i, k] = (w0 * va + w1 * vb) + w2 * vc
             out_normals[i, k] = face_normals[t, k]
+
+
+def fragment_surface(triangle: np.ndarray, *args: object) -> None:
+    """The compiled :func:`_fragment_surface_share` (same arguments, without ``share``) over every row, in
+    shares on threads (:func:`compositing._threads.in_shares`)."""
+    in_shares(_fragment_surface_share, triangle.shape[0], triangle, *args)

@@ -55,6 +55,17 @@ def _shutdown() -> None:  # pragma: no cover - at exit
         _pool.shutdown(wait=True)
 
 
+def in_shares(kernel: Callable[..., _Result], n: int, *args: object) -> Sequence[_Result]:
+    """``kernel(share, *args)`` for shares of ``range(n)`` (C-contiguous int64 arrays) on threads:
+    :func:`run_shares` for a compiled kernel whose loop runs over ``share``'s indices.
+
+    Such a kernel is a serial loop (``numba.njit(nogil=True)``) where each index writes its own
+    outputs, so there are no write races and its results do not depend on the number of
+    threads. Returns each share's result, in order (e.g. a count to sum).
+    """
+    return run_shares(lambda share: kernel(share, *args), np.arange(n, dtype=np.int64))
+
+
 def run_shares(work: Callable[[np.ndarray], _Result], items: np.ndarray) -> Sequence[_Result]:
     """``work(share)`` for contiguous shares of ``items`` (1-D), on :func:`thread_count` threads.
 
