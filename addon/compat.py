@@ -267,7 +267,8 @@ def collection_link_states(collection: bpy.types.Collection) -> list[tuple[bpy.t
     """``(object, "INCLUDE" | "EXCLUDE")`` for every object a light-linking collection holds, as
     Blender's depsgraph reads it (``depsgraph_light_linking.cc``): a direct member with its own
     state, a member of a child collection (at any depth) with that child's state; children first,
-    then the direct members, so a later entry for the same object wins."""
+    then the direct members, so a later entry for the same object wins. Without light-linking
+    data on collections every member is included."""
 
     def state(item: object) -> str:
         linking = getattr(item, "light_linking", None)
@@ -276,16 +277,15 @@ def collection_link_states(collection: bpy.types.Collection) -> list[tuple[bpy.t
     def objects_of(child: bpy.types.Collection) -> list[bpy.types.Object]:
         return list(child.all_objects)
 
+    # collection_children / collection_objects run over the same lists as children / objects
     out: list[tuple[bpy.types.Object, str]] = []
-    children = getattr(collection, "collection_children", None)
-    if children is not None:
-        for item in children:
-            out.extend((obj, state(item)) for obj in objects_of(item.collection))
-    members = getattr(collection, "collection_objects", None)
-    if members is not None:
-        out.extend((item.object, state(item)) for item in members)
-    else:  # no light-linking data on collections: every member included
-        out.extend((obj, "INCLUDE") for obj in collection.all_objects)
+    settings = getattr(collection, "collection_children", None)
+    for i, child in enumerate(collection.children):
+        link = "INCLUDE" if settings is None else state(settings[i])
+        out.extend((obj, link) for obj in objects_of(child))
+    settings = getattr(collection, "collection_objects", None)
+    for i, obj in enumerate(collection.objects):
+        out.append((obj, "INCLUDE" if settings is None else state(settings[i])))
     return out
 
 
