@@ -573,6 +573,7 @@ def _opaque_from_winners(
     seconds: dict[str, float],
     say: Callable[[str, float], None],
     cryptomatte: Cryptomatte | None = None,
+    holdout: np.ndarray | None = None,
 ) -> FrameResult:
     """The opaque z-buffer frame (no transparency, one sample, per-pixel shading, fog or not,
     shadows or not) by the compiled engine: the z-buffer, then (with shadows: ``lit`` from
@@ -582,7 +583,10 @@ def _opaque_from_winners(
     fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
-    order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
+    order: :func:`blinn_phong.fast.shade_plain_winners_compiled`). ``holdout``: (M,) bool per mesh
+    (:func:`blinn_phong.linking.holdout_meshes`) or None; pixels a holdout wins are then set to
+    transparent black (colour, alpha and light passes), as the general path's alpha-weighted
+    passes give.
     """
     t = time.perf_counter()
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, cull_backfaces)
@@ -616,6 +620,11 @@ def _opaque_from_winners(
             # (snapped coverage): shaded again from the general path's visibilities
             vis = _winner_visibility(prepared, lit, verts, all_verts, setup, winner)  # type: ignore[arg-type]
             shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
+        if holdout is not None:
+            pixel = np.flatnonzero(winner >= 0)
+            held = pixel[holdout[prepared.triangle_mesh[setup.source[winner[pixel]]]]]
+            for buffer in (image.rgba, *image.passes.values()):
+                buffer.reshape(-1, buffer.shape[-1])[held] = 0.0
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
@@ -805,18 +814,18 @@ def render_frame(
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog.
     lit = _shadow_lights(scene, the_plan)
-    holdout = holdout_meshes(scene)  # the fused passes have no holdouts: the band path below
+    holdout = holdout_meshes(scene)
     fused = (
-        holdout is None
-        and deep is None
+        deep is None
         and compiled
         and fused_shading_applies(scene, shading, samples, gl_compat=gl_compat, shadows=lit is not None)
     )
     if fused and method == "zbuffer":
         return _opaque_from_winners(
             prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say,
-            cryptomatte,
+            cryptomatte, holdout,
         )  # fmt: skip
+    fused = fused and holdout is None  # the fused fragment pass has no holdouts: the band path below
 
     t = time.perf_counter()
     visible = frame_fragments(
