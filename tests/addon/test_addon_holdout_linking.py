@@ -13,7 +13,9 @@ bounces (direct light only: light linking acts on a light's direct contribution)
 * Light linking: a floor, a cube and a sphere lit by one point light whose receiver collection
   includes the cube alone; rendered with and without the light, in both engines: the pixels that
   change are the same away from edges (the cube's lit faces, never the floor or the sphere),
-  and without the link the floor changes too (so the link is what the test sees).
+  and without the link the floor changes too (so the link is what the test sees). Likewise with
+  a receiver collection that only excludes the floor (through a child collection set to Exclude):
+  the cube and the sphere change, the floor does not.
 * Shadow linking: the light's blocker collection includes the sphere alone; each engine renders it
   with the sphere's and then with the cube's shadow removed (Ray Visibility › Shadow off): the
   sphere's removal changes the same pixels in both (its shadow on the floor), the cube's changes
@@ -128,6 +130,12 @@ receivers = bpy.data.collections.new("Receivers")
 receivers.objects.link(cube)
 lamp.light_linking.receiver_collection = receivers
 shoot("light_linked")
+excluded = bpy.data.collections.new("Excluded")
+excluded.children.link(bpy.data.collections.new("Ground"))
+excluded.children["Ground"].objects.link(floor)
+excluded.collection_children[0].light_linking.link_state = "EXCLUDE"
+lamp.light_linking.receiver_collection = excluded
+shoot("light_excluded")
 lamp.hide_render = True
 shoot("dark")
 lamp.hide_render = False
@@ -200,11 +208,15 @@ def test_light_linking_lights_the_same_pixels_as_cycles(renders: dict[str, np.nd
         unlinked = _changed(renders[f"light_unlinked_{engine}"], renders[f"dark_{engine}"])
         assert 0.02 < linked.mean() < 0.3, engine  # the cube's lit faces only
         assert unlinked.mean() > linked.mean() + 0.3, engine  # the floor too, without the link
-    ours = _changed(renders["light_linked_ours"], renders["dark_ours"])
-    cycles = _changed(renders["light_linked_cycles"], renders["dark_cycles"])
-    away = _uniform(ours) & _uniform(cycles)
-    assert away.mean() > 0.8
-    assert np.array_equal(ours[away], cycles[away])
+    for name in ("light_linked", "light_excluded"):
+        ours = _changed(renders[f"{name}_ours"], renders["dark_ours"])
+        cycles = _changed(renders[f"{name}_cycles"], renders["dark_cycles"])
+        away = _uniform(ours) & _uniform(cycles)
+        assert away.mean() > 0.8, name
+        assert np.array_equal(ours[away], cycles[away]), name
+    excluded = _changed(renders["light_excluded_ours"], renders["dark_ours"])
+    linked = _changed(renders["light_linked_ours"], renders["dark_ours"])
+    assert excluded.mean() > linked.mean() + 0.02 and excluded.mean() < 0.5  # cube and sphere, no floor
 
 
 def test_shadow_linking_blocks_with_the_same_pixels_as_cycles(renders: dict[str, np.ndarray]) -> None:
