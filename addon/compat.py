@@ -19,6 +19,10 @@ File Output                ``base_path``, ``layer_slots``      ``directory``, ``
                                                                ``file_output_items``, ``save_as_render``
 =========================  ==================================  ==========================================
 
+Light linking (``Object.light_linking``, ``CollectionObject.light_linking``) exists from 4.0, so in
+every supported release; :func:`light_linking_collections` reads it by feature all the same (a
+build without it links nothing), as :func:`object_holdout` reads the view layer's holdout flags.
+
 Sources: Blender 5.0 Python API change log (https://docs.blender.org/api/5.0/change_log.html),
 ``source/blender/nodes/composite/nodes/node_composite_alpha_over.cc`` and the PyPI ``bpy``
 wheels 4.2.23 and 5.0.1, where each row was checked. Blender 5.2 LTS (``bpy`` 5.2.3, Python 3.13,
@@ -35,13 +39,16 @@ __all__ = [
     "add_file_output",
     "add_render_output",
     "alpha_over_modes",
+    "collection_link_states",
     "compositor_tree",
     "configure_alpha_convert",
     "configure_alpha_over",
     "light_emission",
+    "light_linking_collections",
     "link_alpha_over",
     "math_node_type",
     "new_group_tree",
+    "object_holdout",
     "set_full_precision",
     "set_image_format",
     "world_uses_nodes",
@@ -245,3 +252,54 @@ def light_emission(light: bpy.types.Light) -> tuple[float, tuple[float, float, f
     if getattr(light, "use_temperature", False):
         colour = [c * float(t) for c, t in zip(colour, light.temperature_color, strict=True)]
     return energy, (colour[0], colour[1], colour[2])
+
+
+def light_linking_collections(obj: bpy.types.Object) -> tuple[object, object]:
+    """``(receiver_collection, blocker_collection)`` of an emitter's light linking (None for unset;
+    both None where the build has no ``Object.light_linking``)."""
+    linking = getattr(obj, "light_linking", None)
+    if linking is None:
+        return None, None
+    return getattr(linking, "receiver_collection", None), getattr(linking, "blocker_collection", None)
+
+
+def collection_link_states(collection: bpy.types.Collection) -> list[tuple[bpy.types.Object, str]]:
+    """``(object, "INCLUDE" | "EXCLUDE")`` for every object a light-linking collection holds, as
+    Blender's depsgraph reads it (``depsgraph_light_linking.cc``): a direct member with its own
+    state, a member of a child collection (at any depth) with that child's state; children first,
+    then the direct members, so a later entry for the same object wins. Without light-linking
+    data on collections every member is included."""
+
+    def state(item: object) -> str:
+        linking = getattr(item, "light_linking", None)
+        return str(getattr(linking, "link_state", "INCLUDE"))
+
+    def objects_of(child: bpy.types.Collection) -> list[bpy.types.Object]:
+        return list(child.all_objects)
+
+    # collection_children / collection_objects run over the same lists as children / objects
+    out: list[tuple[bpy.types.Object, str]] = []
+    settings = getattr(collection, "collection_children", None)
+    for i, child in enumerate(collection.children):
+        link = "INCLUDE" if settings is None else state(settings[i])
+        out.extend((obj, link) for obj in objects_of(child))
+    settings = getattr(collection, "collection_objects", None)
+    for i, obj in enumerate(collection.objects):
+        out.append((obj, "INCLUDE" if settings is None else state(settings[i])))
+    return out
+
+
+def object_holdout(obj: bpy.types.Object, view_layer: object) -> bool:
+    """Whether ``obj`` is held out: ``Object.is_holdout`` or a collection of it marked *Holdout* in
+    ``view_layer`` (``Object.holdout_get``; objects not based in the view layer, e.g. instances
+    of a collection, read only their own flag)."""
+    original = getattr(obj, "original", obj)
+    if getattr(original, "is_holdout", False):
+        return True
+    getter = getattr(original, "holdout_get", None)
+    if getter is None or view_layer is None:
+        return False
+    try:
+        return bool(getter(view_layer=view_layer))
+    except (RuntimeError, TypeError):
+        return False

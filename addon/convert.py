@@ -10,7 +10,11 @@ Reads what the renderer needs out of Blender and nothing else; every formula liv
 * object transforms (``matrix_world`` of each instance, parenting included);
 * the scene camera (perspective or orthographic, sensor fit, shift, clipping, pixel aspect), the
   resolution percentage and the render border;
-* point, spot, sun and area lights, and the world colour as the global ambient light.
+* point, spot, sun and area lights, and the world colour as the global ambient light;
+* holdouts (a Holdout node on the active Material Output's Surface, ``Object.is_holdout``, a
+  collection marked *Holdout* in the view layer) as ``Mesh.holdout``, and light and shadow linking
+  (``Object.light_linking`` receiver and blocker collections) as ``Scene.light_links``
+  (:func:`light_links`).
 
 Convention changes happen here: Blender's matrices are row-major ``Matrix`` objects acting on column
 vectors, which numpy reads unchanged (``np.array(matrix)``); Blender's camera looks down -Z with +Y
@@ -30,6 +34,7 @@ from blinn_phong.scene import (
     AmbientLight,
     Camera,
     DirectionalLight,
+    LightLink,
     LightModel,
     Material,
     Mesh,
@@ -51,8 +56,10 @@ __all__ = [
     "cryptomatte_names",
     "derived_light_values",
     "light_from_object",
+    "light_links",
     "light_radius",
     "material_from_blender",
+    "material_is_holdout",
     "mesh_arrays",
     "principled_inputs",
     "scene_from_depsgraph",
@@ -168,6 +175,57 @@ def _surface_principled(tree: bpy.types.NodeTree, name: str, notes: list[str]) -
             return source
         notes.append(f"{name}: the surface is a {source.bl_label} node; the first Principled BSDF is used")
     return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+def material_is_holdout(material: bpy.types.Material | None) -> bool:
+    """True when a Holdout node feeds the Surface of the material's active Material Output."""
+    tree = None if material is None else material.node_tree
+    if tree is None:
+        return False
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
+    output = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+    surface = output.inputs.get("Surface") if output is not None else None
+    return bool(surface is not None and surface.is_linked and surface.links[0].from_node.type == "HOLDOUT")
+
+
+def _linked_objects(collection: object) -> dict[str, bool] | None:
+    """Per object name, whether a light-linking collection links it (None: no collection: all).
+
+    Blender's rule (``depsgraph_light_linking.cc``, ``EmitterSetMembership::get_mask``): when the
+    collection includes anything, only its included objects are linked; otherwise every object
+    but its excluded ones. Names not in the dict follow the ``"*"`` entry.
+    """
+    if collection is None:
+        return None
+    states: dict[str, str] = {}
+    for obj, state in compat.collection_link_states(collection):  # type: ignore[arg-type]
+        states[obj.name] = state
+    any_included = "INCLUDE" in states.values()
+    out = {
+        name: (state == "INCLUDE") if any_included else (state != "EXCLUDE") for name, state in states.items()
+    }
+    out["*"] = not any_included
+    return out
+
+
+def light_links(
+    light_objects: list[bpy.types.Object], mesh_objects: list[str]
+) -> tuple[LightLink | None, ...] | None:
+    """``Scene.light_links`` of the lights (their objects, in ``scene.lights`` order) over the meshes
+    (the name of each mesh's original object): a receiver mask from ``receiver_collection``, a
+    blocker mask from ``blocker_collection`` (:func:`_linked_objects`); None when no light links."""
+    links: list[LightLink | None] = []
+    for obj in light_objects:
+        masks = []
+        for collection in compat.light_linking_collections(obj):
+            linked = _linked_objects(collection)
+            masks.append(
+                None
+                if linked is None
+                else np.array([linked.get(name, linked["*"]) for name in mesh_objects], dtype=bool)
+            )
+        links.append(None if masks[0] is None and masks[1] is None else LightLink(masks[0], masks[1]))
+    return tuple(links) if any(link is not None for link in links) else None
 
 
 def principled_inputs(material: bpy.types.Material | None) -> tuple[dict[str, object], list[str]]:
@@ -525,6 +583,8 @@ def scene_from_depsgraph(
     lights: list[DirectionalLight | PointLight | SpotLight | AmbientLight] = []
     light_radii: list[float] = []
     casts_shadows: list[bool] = []
+    light_objects: list[bpy.types.Object] = []
+    mesh_objects: list[str] = []  # the original object of each mesh, for light linking
     no_shadow_objects: list[str] = []
     shadow_objects = 0
     if geometry_cache is None:
@@ -536,6 +596,7 @@ def scene_from_depsgraph(
         matrix = np.array(instance.matrix_world, dtype=np.float64)
         if obj.type == "LIGHT":
             lights.append(light_from_object(obj.data, matrix))
+            light_objects.append(getattr(obj, "original", obj))
             groups["lights"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
             light_radii.append(0.0 if obj.data.type == "SUN" else light_radius(obj.data))
             # Light > Cast Shadow off, or Object > Visibility > Ray Visibility > Shadow off on the lamp
@@ -576,6 +637,7 @@ def scene_from_depsgraph(
             triangles = triangles[:, ::-1]
         object_meshes: list[tuple[Mesh, str, dict[str, object], tuple[str, str, str]]] = []
         failed = None
+        held_out = compat.object_holdout(obj, getattr(depsgraph, "view_layer", None))
         for slot_index in np.unique(material_index):
             blender_material = slots[slot_index] if 0 <= slot_index < len(slots) else None
             material_name = blender_material.name if blender_material else "(none)"
@@ -600,6 +662,7 @@ def scene_from_depsgraph(
                 shading=extra.pop("shading"),
                 uv=uv,
                 casts_shadows=bool(getattr(obj, "visible_shadow", True)),  # Ray Visibility > Shadow
+                holdout=held_out or material_is_holdout(blender_material),
             )
             ids = cryptomatte_names(obj, blender_material)
             object_meshes.append((mesh, f"{obj.name}/{material_name}", extra, ids))
@@ -617,6 +680,7 @@ def scene_from_depsgraph(
             for layer, value in zip(("object", "material", "asset"), ids, strict=True):
                 crypto[layer].append(value)
             groups["meshes"].append(str(getattr(obj, "lightgroup", "")))  # type: ignore[union-attr]
+            mesh_objects.append(getattr(obj, "original", obj).name)
 
     if no_shadow_objects and shadow_objects == 0:
         # Object > Visibility > Ray Visibility > Shadow off on every object: nothing casts a shadow,
@@ -630,7 +694,12 @@ def scene_from_depsgraph(
         two_sided=options.two_sided,
     )
     scene = Scene(
-        meshes=tuple(meshes), lights=tuple(lights), camera=camera, ambient=ambient, light_model=light_model
+        meshes=tuple(meshes),
+        lights=tuple(lights),
+        camera=camera,
+        ambient=ambient,
+        light_model=light_model,
+        light_links=light_links(light_objects, mesh_objects),
     )
     background = None if render.film_transparent else ambient
     return ConvertedScene(

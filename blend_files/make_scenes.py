@@ -19,6 +19,12 @@ Writes:
 * ``textures.blend``: an alpha-clipped fence card (an Image Texture node feeding the Principled
   BSDF's Base Color and Alpha; Closest interpolation, texel alpha 0 or 1) standing on a
   checker-textured floor beside an untextured box, under a sun casting shadows;
+* ``passes.blend``: compositor passes: a crate, a ball and a cone on a floor under a sun; a red
+  rim light linked to the ball alone (its receiver collection "Rim receivers"; the floor and
+  the other shapes get none of its light); a card whose material is a Holdout node cutting a
+  transparent hole through the cone and the floor; Cryptomatte (object) on the view layer. The
+  compositor puts the render over ``images/backplate.exr`` (Alpha Over: the holdout's hole shows
+  the backplate) and picks "Crate" with a Cryptomatte node shown in a Viewer node;
 * ``images/backplate.exr``: a sky gradient over a checkered ground, linear premultiplied RGBA;
 * ``images/fence.png``, ``images/floor_checker.png``: the two 32×32 textures of ``textures.blend``
   (sRGB PNGs generated here, referenced by the .blend with relative paths ``//images/…``).
@@ -44,7 +50,7 @@ import numpy as np  # noqa: E402
 from addon import compat, engine, properties  # noqa: E402
 
 WIDTH, HEIGHT = 320, 180
-SCENES = ("showcase", "transparency", "shadows", "compositing", "textures")
+SCENES = ("showcase", "transparency", "shadows", "compositing", "textures", "passes")
 #: Texture size (texels) of the generated fence and floor images.
 TEXTURE_SIZE = 32
 #: Edge length (m) of the textured floor plane, centred at the origin (UV 0…1 across it).
@@ -329,6 +335,92 @@ def make_compositing(backplate_path: Path) -> bpy.types.Scene:
     return scene
 
 
+def make_passes(backplate_path: Path) -> bpy.types.Scene:
+    """Cryptomatte pick, holdout and a linked light, and the compositor nodes that use them."""
+    scene = _reset("Passes")
+    _add(
+        "primitive_plane_add",
+        _material("Floor", (0.6, 0.6, 0.6), specular=0.05),
+        smooth=False,
+        size=10,
+        location=(0, 0, 0),
+    )
+    crate = _add(
+        "primitive_cube_add",
+        _material("Wood", (0.8, 0.5, 0.2)),
+        smooth=False,
+        size=1.0,
+        location=(-1.7, 0, 0.5),
+    )
+    crate.name = "Crate"
+    ball = _add(
+        "primitive_uv_sphere_add",
+        _material("Paint", (0.2, 0.4, 0.8), shininess=60),
+        radius=0.6,
+        segments=32,
+        ring_count=16,
+        location=(0, 0.3, 0.6),
+    )
+    ball.name = "Ball"
+    cone = _add(
+        "primitive_cone_add",
+        _material("Leaf", (0.3, 0.7, 0.3)),
+        smooth=False,
+        radius1=0.6,
+        depth=1.4,
+        location=(1.7, 0, 0.7),
+    )
+    cone.name = "Cone"
+    holdout = bpy.data.materials.new("Holdout")
+    holdout.use_nodes = True
+    nodes = holdout.node_tree.nodes
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    holdout.node_tree.links.new(nodes.new("ShaderNodeHoldout").outputs[0], output.inputs["Surface"])
+    card = _add(
+        "primitive_plane_add",
+        holdout,
+        smooth=False,
+        size=1.0,
+        location=(1.3, -1.2, 0.6),
+        rotation=(1.4, 0, 0.3),
+    )
+    card.name = "Holdout card"
+    _light(scene, "SUN", "Key", (3, -4, 6), (0, 0, 0), 2.0)
+    rim = _light(scene, "POINT", "Rim", (1.4, -0.9, 1.3), (0, 0.3, 0.6), 250.0, color=(1.0, 0.2, 0.1))
+    receivers = bpy.data.collections.new("Rim receivers")
+    receivers.objects.link(ball)
+    rim.light_linking.receiver_collection = receivers
+    _camera(scene, (0, -7, 3), (0, 0, 0.4))
+    scene.blinn_phong.shadows = "AUTO"
+    scene.view_layers[0].use_pass_cryptomatte_object = True
+
+    tree = compat.compositor_tree(scene)
+    compat.set_full_precision(scene)
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    layers.location = (-400, 0)
+    plate = tree.nodes.new("CompositorNodeImage")
+    plate.location = (-400, 300)
+    image = bpy.data.images.load(str(backplate_path))
+    image.filepath = "//images/" + backplate_path.name
+    image.colorspace_settings.name = "Non-Color"
+    image.alpha_mode = "PREMUL"
+    plate.image = image
+    over = tree.nodes.new("CompositorNodeAlphaOver")
+    compat.link_alpha_over(tree, over, plate.outputs["Image"], layers.outputs["Image"])
+    compat.configure_alpha_over(over, "src_over", straight_alpha=False, factor=1.0)
+    tree.links.new(over.outputs["Image"], compat.add_render_output(tree))
+    pick = tree.nodes.new("CompositorNodeCryptomatteV2")
+    pick.location = (0, -300)
+    pick.source = "RENDER"
+    pick.scene = scene
+    pick.matte_id = "Crate"
+    tree.links.new(layers.outputs["Image"], pick.inputs["Image"])
+    viewer = tree.nodes.new("CompositorNodeViewer")
+    viewer.location = (300, -300)
+    tree.links.new(pick.outputs["Image"], viewer.inputs["Image"])
+    return scene
+
+
 def fence_texels(size: int = TEXTURE_SIZE) -> np.ndarray:
     """The fence card's sRGB bytes, (size, size, 4) uint8, row 0 at the top, straight alpha.
 
@@ -459,6 +551,7 @@ def main(argv: list[str] | None = None) -> int:
         "shadows": make_shadows,
         "compositing": lambda: make_compositing(plate),
         "textures": lambda: make_textures(out / "images"),
+        "passes": lambda: make_passes(plate),
     }
     properties.register()
     engine.register()

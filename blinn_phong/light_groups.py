@@ -25,6 +25,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+from blinn_phong.linking import links_of_lights
 from blinn_phong.scene import Material, Scene
 
 __all__ = ["LightGroups"]
@@ -115,6 +116,7 @@ class LightGroups:
                 scene,
                 meshes=tuple(meshes),
                 lights=tuple(scene.lights[i] for i in lights),
+                light_links=links_of_lights(scene, lights),
                 ambient=scene.ambient if self.world == group else _BLACK,
             ),
             lights,

@@ -16,6 +16,11 @@
 6. :func:`blinn_phong.resolve.resolve_frame` — the transparency method per sample, then the
    box filter and the nearest surface's depth, normal and light passes.
 
+Holdout meshes (``Mesh.holdout``) are opaque fragments of colour ``(0, 0, 0, 0)`` after step 5,
+which every resolve of step 6 composites as it does any opaque fragment; light and shadow linking
+(``Scene.light_links``) acts in step 3 (:mod:`blinn_phong.linking`). Frames with either take the
+general stages (the fused passes have neither).
+
 With transparency ``zbuffer``, no shadow and no fog, steps 3 and the transparency part of 6
 do nothing: the plain z-buffer render *is* this pipeline with no effects. Every stage has a
 numpy reference and a compiled (numba) twin, selected by ``engine``.
@@ -43,6 +48,7 @@ from blinn_phong.fast import (
     winner_surfaces_compiled,
 )
 from blinn_phong.id_passes import Cryptomatte, passes_from_fragments, passes_from_winners
+from blinn_phong.linking import holdout_meshes, linked_visibility, lit_links
 from blinn_phong.normals import face_normals
 from blinn_phong.planner import Plan
 from blinn_phong.prepared import PreparedScene, prepare_scene
@@ -194,16 +200,24 @@ def _fragment_surface(
 
 
 def _soft_visibility(
-    light: object, params: dict[str, object], ray_scene: object, points: np.ndarray, normals: np.ndarray
+    light: object,
+    params: dict[str, object],
+    ray_scene: object,
+    points: np.ndarray,
+    normals: np.ndarray,
+    aim: np.ndarray | None = None,
 ) -> np.ndarray:
     """Area-light visibility: a square of side ``2·radius`` at the light, facing along a spot light's
-    axis, else towards the centre of the scene's bounding box (never the camera's view)."""
+    axis, else towards ``aim``, by default the centre of the casters' bounding box (never the
+    camera's view)."""
     from blinn_phong.raytrace import area_light_visibility  # Embree: imported only when used
 
     radius = float(params["radius"])  # type: ignore[arg-type]
     centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
-    corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
-    axis = (corners.min(axis=0) + corners.max(axis=0)) / 2 - centre
+    if aim is None:
+        corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
+        aim = (corners.min(axis=0) + corners.max(axis=0)) / 2
+    axis = aim - centre
     if isinstance(light, SpotLight):
         axis = np.array(light.direction, dtype=np.float64)
     if float(np.linalg.norm(axis)) < 1e-12:
@@ -226,13 +240,16 @@ def _soft_visibility(
 
 
 def _shadow_lights(scene: Scene, the_plan: Plan) -> list[tuple[object, object]] | None:
-    """The scene's non-ambient lights with their shadow choices; None when none casts shadows."""
+    """The scene's non-ambient lights with their shadow choices; None when none casts shadows
+    and none has a receiver mask (:class:`blinn_phong.scene.LightLink`)."""
     lit = [
         (light, c)
         for light, c in zip(scene.lights, the_plan.shadows, strict=True)
         if not isinstance(light, AmbientLight)
     ]
-    return lit if any(c.method != "none" for _, c in lit) else None
+    links = lit_links(scene) or ()
+    receivers = any(link is not None and link.receivers is not None for link in links)
+    return lit if receivers or any(c.method != "none" for _, c in lit) else None
 
 
 def light_visibilities(
@@ -271,7 +288,8 @@ def light_visibilities(
     verts = _world_vertices(scene)
     compiled = use_compiled(engine)
     world, normal = _fragment_surface(prepared, visible.fragments, verts, compiled)
-    mesh_of = prepared.triangle_mesh[visible.fragments.triangle] if compiled else None
+    linked = scene.light_links is not None
+    mesh_of = prepared.triangle_mesh[visible.fragments.triangle] if compiled or linked else None
     return _visibility_at(scene, lit, verts, world, normal, compiled, mesh_of)
 
 
@@ -386,7 +404,36 @@ def _visibility_at(
     hard shadows trace only the rays that may be occluded (:func:`_traced_hard`).
     ``binning``: the points' screen tiles for shadow volumes
     (:func:`blinn_phong.shadow_volume.pixel_binning` of a frame's pixels), or None.
+    With ``scene.light_links`` (``mesh_of`` required) each light with blockers is computed
+    against them alone and receiver masks zero their lights (:func:`blinn_phong.linking.linked_visibility`).
     """
+    if scene.light_links is not None:
+        assert mesh_of is not None
+        tris = _world_triangles(scene, verts)
+        aim = (tris.reshape(-1, 3).min(axis=0) + tris.reshape(-1, 3).max(axis=0)) / 2 if len(tris) else None
+
+        def unlinked(part: Scene, lights: list[tuple[object, object]]) -> np.ndarray:
+            return _unlinked_visibility_at(
+                part, lights, verts, world, normal, compiled, mesh_of, binning, aim
+            )
+
+        return linked_visibility(scene, lit, mesh_of, unlinked)
+    return _unlinked_visibility_at(scene, lit, verts, world, normal, compiled, mesh_of, binning)
+
+
+def _unlinked_visibility_at(
+    scene: Scene,
+    lit: list[tuple[object, object]],
+    verts: list[np.ndarray],
+    world: np.ndarray,
+    normal: np.ndarray,
+    compiled: bool,
+    mesh_of: np.ndarray | None = None,
+    binning: tuple | None = None,
+    aim: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`_visibility_at` of lights without links (``aim``: where soft lights face, as
+    :func:`_soft_visibility` takes it)."""
     tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
         return np.ones((len(world), len(lit)))
@@ -411,7 +458,7 @@ def _visibility_at(
                     from blinn_phong.raytrace import cached_ray_scene  # Embree: imported only when used
 
                     ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
-                column = _soft_visibility(light, c.params, ray_scene[0], world, normal)
+                column = _soft_visibility(light, c.params, ray_scene[0], world, normal, aim)
             elif culled and c.method == "ray_traced" and not (coloured or c.params):
                 column = _traced_hard(scene, light, tris, world, normal, mesh_of, culling)
             elif (
@@ -492,6 +539,8 @@ def _frame_map_stack(
     the pixels up itself), else None."""
     from blinn_phong import frame_maps  # compiled engine only: imports numba
 
+    if prepared.scene.light_links is not None:
+        return None  # linked lights: the general path's visibilities (blinn_phong.linking)
     options = []
     for light, c in lit:
         params = dict(c.params)  # type: ignore[attr-defined]
@@ -524,6 +573,7 @@ def _opaque_from_winners(
     seconds: dict[str, float],
     say: Callable[[str, float], None],
     cryptomatte: Cryptomatte | None = None,
+    holdout: np.ndarray | None = None,
 ) -> FrameResult:
     """The opaque z-buffer frame (no transparency, one sample, per-pixel shading, fog or not,
     shadows or not) by the compiled engine: the z-buffer, then (with shadows: ``lit`` from
@@ -533,7 +583,10 @@ def _opaque_from_winners(
     fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
-    order: :func:`blinn_phong.fast.shade_plain_winners_compiled`).
+    order: :func:`blinn_phong.fast.shade_plain_winners_compiled`). ``holdout``: (M,) bool per mesh
+    (:func:`blinn_phong.linking.holdout_meshes`) or None; pixels a holdout wins are then set to
+    transparent black (colour, alpha and light passes), as the general path's alpha-weighted
+    passes give.
     """
     t = time.perf_counter()
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, cull_backfaces)
@@ -567,6 +620,11 @@ def _opaque_from_winners(
             # (snapped coverage): shaded again from the general path's visibilities
             vis = _winner_visibility(prepared, lit, verts, all_verts, setup, winner)  # type: ignore[arg-type]
             shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
+        if holdout is not None:
+            pixel = np.flatnonzero(winner >= 0)
+            held = pixel[holdout[prepared.triangle_mesh[setup.source[winner[pixel]]]]]
+            for buffer in (image.rgba, *image.passes.values()):
+                buffer.reshape(-1, buffer.shape[-1])[held] = 0.0
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
@@ -756,6 +814,7 @@ def render_frame(
     # Fog does not keep a frame off the fused pass: that pass fogs each fragment itself, before
     # any blending, with the colour stage's compiled fog.
     lit = _shadow_lights(scene, the_plan)
+    holdout = holdout_meshes(scene)
     fused = (
         deep is None
         and compiled
@@ -764,8 +823,9 @@ def render_frame(
     if fused and method == "zbuffer":
         return _opaque_from_winners(
             prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say,
-            cryptomatte,
+            cryptomatte, holdout,
         )  # fmt: skip
+    fused = fused and holdout is None  # the fused fragment pass has no holdouts: the band path below
 
     t = time.perf_counter()
     visible = frame_fragments(
@@ -831,7 +891,8 @@ def render_frame(
     # Fragment colours (α·c, α) of partial occlusion without fog: the compiled resolve computes
     # them in its own pass (resolve_frame with rgba None), no (N, 4) colour array per band.
     plain_colours = (
-        deep is None
+        holdout is None
+        and deep is None
         and compiled
         and fog_parameters is None
         and f_all.samples == 1
@@ -866,6 +927,10 @@ def render_frame(
         colour = alpha = None
         if not plain_colours:
             colour, alpha = fragment_colours(prepared, band, shaded, fog_parameters, engine=stage_engine)
+        if holdout is not None:  # transparent black, opaque (blinn_phong.linking)
+            held = holdout[prepared.triangle_mesh[band.fragments.triangle]]
+            colour[held] = 0.0  # type: ignore[index]
+            alpha[held] = 0.0  # type: ignore[index]
         if deep is not None:
             deep.add(prepared, band, colour, row0)
         seconds["shade"] += time.perf_counter() - t

@@ -607,6 +607,28 @@ def _shadow_pairs(
     return pairs
 
 
+def _linked_pairs(
+    scene: Scene, index: int, pairs: list[tuple[int, int]]
+) -> tuple[list[tuple[int, int]], str]:
+    """The ``(caster, receiver)`` pairs that can show a shadow of light ``index``: the caster one of
+    the light's blockers, the receiver one of its receivers (``Scene.light_links``) and not a
+    holdout (``Mesh.holdout``: its colour is 0 however it is lit); with the reason when none is left."""
+    link = None if scene.light_links is None else scene.light_links[index]
+    kept = [
+        (a, b)
+        for a, b in pairs
+        if not scene.meshes[b].holdout
+        and (link is None or link.blockers is None or link.blockers[a])
+        and (link is None or link.receivers is None or link.receivers[b])
+    ]
+    if kept or link is None:
+        return kept, "every mesh the light's shadows could fall on is a holdout (its colour is 0)"
+    return kept, (
+        "light linking: none of the light's blockers can shadow one of its receivers (the other "
+        "occluders are not linked to it)"
+    )
+
+
 @dataclass(frozen=True)
 class MapGeometry:
     """What the shadow-map models read of a scene, for one directional light (world units).
@@ -667,6 +689,9 @@ def _plan_shadow(
             "no occluder between the light and anything: every shadow volume misses the other meshes "
             "and no mesh can shade itself (each is planar, or convex and never lit from inside)",
         )
+    pairs, why_not = _linked_pairs(scene, index, pairs)
+    if not pairs:
+        return Choice("none", why_not)
     receivers = {b for _, b in pairs}
     casters = {a for a, _ in pairs}
     see_through = _see_through_casters(scene, casters)

@@ -179,9 +179,11 @@ def shadow_pass_values(visibility: np.ndarray) -> np.ndarray:
 
 
 def side_tables(scene: Scene) -> tuple[list[Material], np.ndarray]:
-    """Materials indexed ``2·mesh + back`` (back faces under two-sided lighting), and their opacity flag."""
+    """Materials indexed ``2·mesh + back`` (back faces under two-sided lighting), and their opacity
+    flag (a holdout mesh, ``Mesh.holdout``, is opaque whatever its material)."""
     materials = [m for mesh in scene.meshes for m in (mesh.material, mesh.back_material or mesh.material)]
-    opaque = np.array([not m.transparent for m in materials], dtype=bool)
+    holdout = [mesh.holdout for mesh in scene.meshes for _ in (0, 1)]
+    opaque = np.array([h or not m.transparent for m, h in zip(materials, holdout, strict=True)], dtype=bool)
     return materials, opaque
 
 

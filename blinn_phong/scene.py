@@ -58,6 +58,7 @@ __all__ = [
     "Camera",
     "DirectionalLight",
     "Light",
+    "LightLink",
     "LightModel",
     "Material",
     "Mesh",
@@ -458,6 +459,12 @@ class Mesh:
             receives shadows and is seen), as Blender's Object › Visibility › Ray Visibility ›
             Shadow. The planner still counts it as a possible occluder, which can only add
             shadow work, never error.
+        holdout: True for a holdout surface (Blender's Holdout shader, ``Object.is_holdout``, a
+            view layer's collection *Holdout*; Porter & Duff's ``out``): wherever it is the
+            nearest opaque surface of a sample the sample is transparent black ``(0, 0, 0, 0)``
+            and what lies behind it stays hidden; transparent surfaces in front of it are
+            composited over that transparent black. The mesh counts as opaque whatever its
+            material's opacity; it still casts shadows as ``casts_shadows`` says.
     """
 
     positions: np.ndarray
@@ -470,10 +477,13 @@ class Mesh:
     normal_weighting: Literal["area", "angle"] = "area"
     uv: np.ndarray | None = None
     casts_shadows: bool = True
+    holdout: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.casts_shadows, (bool, np.bool_)):
             raise TypeError(f"Mesh.casts_shadows: expected a bool, got {type(self.casts_shadows).__name__}")
+        if not isinstance(self.holdout, (bool, np.bool_)):
+            raise TypeError(f"Mesh.holdout: expected a bool, got {type(self.holdout).__name__}")
         positions = float_array(self.positions, "Mesh.positions", (None, 3))
         _check_coordinate_range(positions, "Mesh.positions")
         tri = np.asarray(self.triangles)
@@ -662,6 +672,46 @@ class Camera:
 # --------------------------------------------------------------------------- scene
 
 
+def _mesh_mask(value: object, name: str, n_meshes: int) -> np.ndarray | None:
+    """``value`` as a read-only (n_meshes,) bool array, or None for None."""
+    if value is None:
+        return None
+    mask = np.asarray(value)
+    if mask.shape != (n_meshes,) or mask.dtype != np.bool_:
+        raise ValueError(
+            f"{name}: expected None or a bool array of shape ({n_meshes},) (one flag per entry of "
+            f"Scene.meshes), got dtype {mask.dtype}, shape {mask.shape}"
+        )
+    mask = mask.copy()
+    mask.flags.writeable = False
+    return mask
+
+
+@dataclass(frozen=True, eq=False)
+class LightLink:
+    """Light and shadow linking of one light (Blender 4.0+ ``Object.light_linking``).
+
+    Attributes:
+        receivers: None (every mesh receives the light) or an (M,) bool array over
+            ``Scene.meshes``: the meshes the light lights. Elsewhere its diffuse and specular
+            terms are 0, as if it were shadowed there (its visibility is 0).
+        blockers: None (every mesh with ``casts_shadows`` may shadow it) or an (M,) bool array:
+            the only meshes that cast its shadows (each also needs ``casts_shadows``), for
+            every shadow method.
+
+    ``LightLink()`` (both None) links nothing. The masks are checked against the scene by
+    :class:`Scene` and stored read-only.
+    """
+
+    receivers: np.ndarray | None = None
+    blockers: np.ndarray | None = None
+
+    @property
+    def linked(self) -> bool:
+        """True when the light has a receiver or a blocker mask."""
+        return self.receivers is not None or self.blockers is not None
+
+
 @dataclass(frozen=True, eq=False)
 class Scene:
     """Everything a render needs.
@@ -674,6 +724,11 @@ class Scene:
         camera: the camera (required).
         ambient: the global ambient ``a_cs`` (``GL_LIGHT_MODEL_AMBIENT``, default 0.2 grey).
         light_model: see :class:`LightModel`.
+        light_links: None (no light linking: every light lights every mesh and is blocked by
+            every caster, at no cost) or one :class:`LightLink` (or None) per entry of
+            ``lights``. An :class:`AmbientLight` cannot be linked, nor can a light with a
+            non-zero ``ambient`` colour have receivers (its ambient term is not shadowed, so
+            it could not be withheld from the other meshes); lights from Blender have none.
     """
 
     meshes: tuple[Mesh, ...]
@@ -681,6 +736,7 @@ class Scene:
     camera: Camera | None = None
     ambient: Colour = (0.2, 0.2, 0.2)
     light_model: LightModel = field(default_factory=LightModel)
+    light_links: tuple[LightLink | None, ...] | None = None
 
     def __post_init__(self) -> None:
         meshes = _as_tuple(self.meshes, (Mesh,), "Scene.meshes", "a Mesh or a sequence of Meshes")
@@ -707,6 +763,44 @@ class Scene:
         object.__setattr__(self, "meshes", meshes)
         object.__setattr__(self, "lights", lights)
         object.__setattr__(self, "ambient", colour3(self.ambient, "Scene.ambient"))
+        if self.light_links is not None:
+            object.__setattr__(self, "light_links", _check_links(self.light_links, lights, len(meshes)))
+
+
+def _check_links(links: object, lights: tuple, n_meshes: int) -> tuple[LightLink | None, ...] | None:
+    """``Scene.light_links`` checked against the scene; None when no entry links anything."""
+    if isinstance(links, LightLink) or isinstance(links, str | bytes) or not hasattr(links, "__iter__"):
+        raise TypeError(
+            f"Scene.light_links: expected None or a sequence of LightLink/None, got {type(links).__name__}"
+        )
+    links = tuple(links)  # type: ignore[arg-type]
+    if len(links) != len(lights):
+        raise ValueError(
+            f"Scene.light_links: expected one entry per light ({len(lights)}), got {len(links)}"
+        )
+    out: list[LightLink | None] = []
+    for i, (link, light) in enumerate(zip(links, lights, strict=True)):
+        if link is None:
+            out.append(None)
+            continue
+        if not isinstance(link, LightLink):
+            raise TypeError(
+                f"Scene.light_links[{i}]: expected a LightLink or None, got {type(link).__name__}"
+            )
+        receivers = _mesh_mask(link.receivers, f"Scene.light_links[{i}].receivers", n_meshes)
+        blockers = _mesh_mask(link.blockers, f"Scene.light_links[{i}].blockers", n_meshes)
+        if receivers is None and blockers is None:
+            out.append(None)
+            continue
+        if isinstance(light, AmbientLight):
+            raise ValueError(f"Scene.light_links[{i}]: an AmbientLight cannot be linked, got {link!r}")
+        if receivers is not None and any(light.ambient):
+            raise ValueError(
+                f"Scene.light_links[{i}].receivers: the light's ambient colour must be 0 to link its "
+                f"receivers (the ambient term is not shadowed), got ambient {light.ambient}"
+            )
+        out.append(LightLink(receivers, blockers))
+    return tuple(out) if any(link is not None for link in out) else None
 
 
 def _as_tuple(value: object, single: tuple[type, ...], name: str, expected: str) -> tuple:
@@ -745,10 +839,23 @@ def prepare_render_inputs(
         )
     if all(len(m.triangles) for m in scene.meshes):
         return scene
+    kept = np.array([len(m.triangles) > 0 for m in scene.meshes], dtype=bool)
+    links = None
+    if scene.light_links is not None:
+        links = tuple(
+            None
+            if link is None
+            else LightLink(
+                None if link.receivers is None else link.receivers[kept],
+                None if link.blockers is None else link.blockers[kept],
+            )
+            for link in scene.light_links
+        )
     return Scene(
         tuple(m for m in scene.meshes if len(m.triangles)),
         scene.lights,
         scene.camera,
         scene.ambient,
         scene.light_model,
+        links,
     )

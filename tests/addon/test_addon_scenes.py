@@ -20,7 +20,7 @@ from compositing.io import read_image
 
 pytestmark = [pytest.mark.blender, pytest.mark.timeout(400)]
 
-SCENES = ("showcase", "transparency", "shadows", "compositing")
+SCENES = ("showcase", "transparency", "shadows", "compositing", "passes")
 
 RENDER_ALL = """
 import sys
@@ -34,10 +34,10 @@ engine.register()
 out = Path(sys.argv[1])
 facts = {}
 try:
-    for name in ("showcase", "transparency", "shadows", "compositing"):
+    for name in ("showcase", "transparency", "shadows", "compositing", "passes"):
         bpy.ops.wm.open_mainfile(filepath=str(Path(sys.argv[2]) / f"{name}.blend"), load_ui=False)
         scene = bpy.context.scene
-        scene.render.resolution_percentage = 100 if name == "compositing" else 50
+        scene.render.resolution_percentage = 100 if name in ("compositing", "passes") else 50
         settings = scene.render.image_settings
         settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
         use_compositing = scene.render.use_compositing
@@ -46,10 +46,12 @@ try:
         bpy.ops.render.render(write_still=True)
         last = dict(engine.LAST_RENDER)
         converted = convert.scene_from_depsgraph(bpy.context.evaluated_depsgraph_get())
-        core = engine.render_converted(converted)
+        core = engine.render_converted(
+            converted, cryptomatte=engine.cryptomatte_request(bpy.context.view_layer, converted)
+        )
         np.save(out / f"{name}_core.npy", core.rgba)
         np.save(out / f"{name}_shadow.npy", core.passes["shadow"])
-        if name == "compositing":
+        if name in ("compositing", "passes"):
             scene.render.use_compositing = use_compositing
             scene.render.filepath = str(out / f"{name}_blender_over.exr")
             bpy.ops.render.render(write_still=True)
@@ -57,6 +59,12 @@ try:
             "engine": scene.render.engine, "ok": last["ok"], "error": last["error"],
             "choices": last["choices"], "meshes": len(converted.scene.meshes),
             "lights": [type(l).__name__ for l in converted.scene.lights], "names": converted.mesh_names,
+            "holdouts": [n for n, m in zip(converted.mesh_names, converted.scene.meshes) if m.holdout],
+            "links": None if converted.scene.light_links is None else [
+                None if l is None or l.receivers is None else l.receivers.tolist()
+                for l in converted.scene.light_links
+            ],
+            "crypto": sorted(k for k in core.passes if k.startswith("Crypto")),
         }
 finally:
     engine.unregister()
@@ -125,6 +133,26 @@ def test_compositing_scene_blender_alpha_over_equals_our_src_over(rendered: tupl
     np.testing.assert_allclose(blender, ours, atol=1e-5)
 
 
+def test_passes_scene_holds_out_links_and_picks(rendered: tuple[Path, dict]) -> None:
+    """The holdout card makes a hole the compositor fills with the backplate; the rim light is
+    linked to the ball alone; Cryptomatte passes are rendered."""
+    out, facts = rendered
+    passes = facts["passes"]
+    assert passes["holdouts"] == ["Holdout card/Holdout"]
+    ball = passes["names"].index("Ball/Paint")
+    rim = passes["lights"].index("PointLight")
+    assert passes["links"][rim] == [i == ball for i in range(len(passes["names"]))]
+    assert passes["crypto"] == ["CryptoObject00", "CryptoObject01", "CryptoObject02"]
+    render = read_image(out / "passes.exr")
+    hole = render[..., 3] == 0  # the sky, and the card in front of the floor and the cone
+    assert render[170:, :, 3].min() == 1.0  # the floor covers the bottom rows
+    assert 0.02 < hole[110:].mean() < 0.3  # but for the card's hole
+    backplate = read_image(REPO / "blend_files" / "images" / "backplate.exr")
+    blender = read_image(out / "passes_blender_over.exr")
+    np.testing.assert_allclose(blender, composite(render, backplate, "src_over"), atol=1e-5)
+    np.testing.assert_allclose(blender[hole], backplate[hole], atol=1e-5)
+
+
 def test_generator_rebuilds_the_scenes(tmp_path: Path) -> None:
     got = run_bpy(
         f"""
@@ -144,6 +172,7 @@ def test_generator_rebuilds_the_scenes(tmp_path: Path) -> None:
         "compositing.blend",
         "fence.png",
         "floor_checker.png",
+        "passes.blend",
         "shadows.blend",
         "showcase.blend",
         "textures.blend",
