@@ -227,13 +227,17 @@ def render_converted(
     was compiled.
     """
     width, height = converted.region_size
+    engine, note = pipeline.frame_engine(converted.options.engine)
+    frame_options = converted.options
+    if engine != frame_options.engine:  # compiling in the background: numpy meanwhile
+        frame_options = dataclasses.replace(frame_options, engine=engine)
     with compile_clock() as compiling:
-        pipeline.warm_kernels(converted.options.engine)
+        pipeline.warm_kernels(engine)
         result = pipeline.render_frame(
             converted.scene,
             width,
             height,
-            converted.options,
+            frame_options,
             light_radii=tuple(converted.light_radii),
             casts_shadows=tuple(converted.casts_shadows),
             progress=progress,
@@ -241,6 +245,8 @@ def render_converted(
             light_groups=light_groups,
         )
         result.choices["region"] = list(converted.region)
+        if note:
+            result.choices["compile_note"] = note
         if converted.background is not None:
             # Film → Transparent off: the world shows behind the objects (Porter-Duff src over).
             world = np.array([*converted.background, 1.0], dtype=np.float32)
@@ -648,7 +654,9 @@ classes = (BlinnPhongRenderEngine,)
 
 
 def register() -> None:
-    """Register the engine class."""
+    """Register the engine class; with Blender's interface, kernels compile in a background
+    process while the first frames render with numpy (:func:`pipeline.frame_engine`)."""
+    pipeline.BACKGROUND_COMPILE = not bpy.app.background
     for cls in classes:
         bpy.utils.register_class(cls)
 

@@ -82,6 +82,49 @@ def warm_kernels(requested: str = "AUTO") -> float:
     return _WARMED[kernels]
 
 
+#: Interactive Blender (a UI): a frame whose kernels are not compiled yet renders with numpy while a
+#: background process compiles them (:func:`frame_engine`). The engine sets it at register (off in
+#: background mode: the batch and headless runs compile in their own process, nothing to freeze).
+BACKGROUND_COMPILE = False
+_warmup: dict[str, Any] = {}
+
+
+def frame_engine(requested: str = "AUTO") -> tuple[str, str | None]:
+    """The ``RenderOptions.engine`` to render an interactive frame with, and a note for the status line.
+
+    With :data:`BACKGROUND_COMPILE` and the compiled kernels neither loaded in this process nor
+    compiled on this machine (:func:`blinn_phong.warmup.is_warm`), the first call starts
+    ``python -m blinn_phong.warmup`` in a background process
+    (:func:`blinn_phong.warmup.start_background`) and frames render with the numpy engine (the
+    same images, slower) until it has exited; then with the compiled kernels, loaded from the
+    cache in about a second. Compiling in Blender's own process would hold Python's global
+    interpreter lock for minutes, and Blender's interface would freeze. If the background
+    process fails, frames compile in this process as before (and the note says why).
+
+    Returns:
+        ``(engine, note)``: ``requested`` or ``"NUMPY"``; the note is None when nothing is
+        compiling.
+    """
+    kernels, _warning = kernel_engine(requested)
+    if kernels != "numba" or not BACKGROUND_COMPILE or kernels in _WARMED:
+        return requested, None
+    from blinn_phong import warmup
+
+    process = _warmup.get("process")
+    if process is None:
+        if warmup.is_warm():
+            return requested, None
+        process = _warmup["process"] = warmup.start_background()
+        _warmup["started"] = time.perf_counter()
+    code = process.poll()
+    if code is None:
+        elapsed = time.perf_counter() - _warmup["started"]
+        return "NUMPY", f"kernels compiling in the background ({elapsed:.0f} s): numpy engine meanwhile"
+    if code != 0:
+        return requested, f"background compile failed (exit {code}): kernels compiled in Blender"
+    return requested, None
+
+
 def status_line(choices: dict[str, object], seconds: float, stats: dict[str, float] | None = None) -> str:
     """The render's one-line status: time, kernels, Embree and the methods the plan chose.
 
@@ -93,6 +136,8 @@ def status_line(choices: dict[str, object], seconds: float, stats: dict[str, flo
     kernels = str(choices.get("engine", "?")) + (", Embree" if choices.get("embree") else ", no Embree")
     if choices.get("warnings"):
         kernels += " (WARNING: fallback)"
+    if choices.get("compile_note"):
+        kernels += f" ({choices['compile_note']})"
     shadows = choices.get("shadows") or []
     parts = [
         head,

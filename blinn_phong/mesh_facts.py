@@ -17,9 +17,12 @@ them against each other and against :class:`scipy.spatial.ConvexHull`).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import math
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -225,10 +228,26 @@ def _kernels() -> dict[str, object] | None:
 _COMPILED_FROM = 20_000
 
 
+#: True while a frame renders with the numpy engine (:func:`reference_only`): the facts use the
+#: numpy reference too, so that such a frame compiles nothing (a frame rendered while its kernels
+#: compile elsewhere must not compile them itself).
+_REFERENCE_ONLY: contextvars.ContextVar[bool] = contextvars.ContextVar("reference_only", default=False)
+
+
+@contextlib.contextmanager
+def reference_only() -> Iterator[None]:
+    """Within the block, every fact is computed by the numpy reference (no kernel compiles)."""
+    token = _REFERENCE_ONLY.set(True)
+    try:
+        yield
+    finally:
+        _REFERENCE_ONLY.reset(token)
+
+
 def _compiled(n: int) -> dict[str, object] | None:
     """The compiled passes for a mesh of ``n`` triangles (or points), or None for the numpy
     reference: both decide the same (tested); the choice is only about time."""
-    if n < _COMPILED_FROM and "numba" not in sys.modules:
+    if _REFERENCE_ONLY.get() or (n < _COMPILED_FROM and "numba" not in sys.modules):
         return None
     return _kernels()
 

@@ -26,6 +26,7 @@ per-pixel version of the same equation (a GLSL fragment shader) followed by the 
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -119,6 +120,23 @@ class RenderResult:
     deep: object = None
 
 
+def _numpy_engine_compiles_nothing(func: Callable[..., RenderResult]) -> Callable[..., RenderResult]:
+    """``engine="numpy"`` renders without compiling any kernel: the planner's mesh facts use
+    their numpy reference too (:func:`blinn_phong.mesh_facts.reference_only`)."""
+
+    @functools.wraps(func)
+    def wrapper(*args: object, **kwargs: object) -> RenderResult:
+        if kwargs.get("engine") != "numpy":
+            return func(*args, **kwargs)
+        from blinn_phong.mesh_facts import reference_only
+
+        with reference_only():
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+@_numpy_engine_compiles_nothing
 def render(
     scene: Scene,
     width: int,
@@ -224,8 +242,7 @@ def render(
     if cryptomatte is not None:
         if not isinstance(cryptomatte, Cryptomatte):
             raise TypeError(
-                "cryptomatte: expected a blinn_phong.Cryptomatte or None, "
-                f"got {type(cryptomatte).__name__}"
+                f"cryptomatte: expected a blinn_phong.Cryptomatte or None, got {type(cryptomatte).__name__}"
             )
         if cryptomatte.mesh_count != len(scene.meshes):
             raise ValueError(

@@ -63,7 +63,12 @@ def in_shares(kernel: Callable[..., _Result], n: int, *args: object) -> Sequence
     outputs, so there are no write races and its results do not depend on the number of
     threads. Returns each share's result, in order (e.g. a count to sum).
     """
-    return run_shares(lambda share: kernel(share, *args), np.arange(n, dtype=np.int64))
+    items = np.arange(n, dtype=np.int64)
+    if thread_count() > 1 and n > 1:
+        # an empty share first, on this thread: the kernel is compiled (or loaded) here, where
+        # warnings and the compile clock's listeners see it, not in a pool thread
+        kernel(items[:0], *args)
+    return run_shares(lambda share: kernel(share, *args), items)
 
 
 def run_shares(work: Callable[[np.ndarray], _Result], items: np.ndarray) -> Sequence[_Result]:
