@@ -244,10 +244,17 @@ def reference_only() -> Iterator[None]:
         _REFERENCE_ONLY.reset(token)
 
 
+#: Meshes below this many triangles use the numpy reference even when numba is loaded: it takes
+#: milliseconds once per mesh (measured on the 2-core VM: 0.8 ms at 224 triangles, 5 ms at
+#: 2,208, 30 ms at 9,024), while the compiled passes cost about 5 s of compilation in the first
+#: process on a machine (``docs/compile.md``): an everyday scene of small meshes compiles none.
+_NUMPY_BELOW = 5_000
+
+
 def _compiled(n: int) -> dict[str, object] | None:
     """The compiled passes for a mesh of ``n`` triangles (or points), or None for the numpy
     reference: both decide the same (tested); the choice is only about time."""
-    if _REFERENCE_ONLY.get() or (n < _COMPILED_FROM and "numba" not in sys.modules):
+    if _REFERENCE_ONLY.get() or n < _NUMPY_BELOW or (n < _COMPILED_FROM and "numba" not in sys.modules):
         return None
     return _kernels()
 

@@ -273,21 +273,22 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
     return k - base
 
 
-@numba.njit(parallel=True, cache=True)
-def _setup(world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, slots):  # pragma: no cover
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _setup_tasks(
+    share, world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, filled
+):  # pragma: no cover
     # every (face, chunk of triangles) is one task; chunk c of n fills the slots from 2·t0 on (a
     # triangle takes at most two), so the tasks write disjoint rows. Faces whose rectangle is
-    # empty (r0 > r1) are skipped. Fills the records ``rec`` (F, 2n, _NREC), the texel boxes
-    # ``box`` (F, 2n, 4) and the slots drawn per face ``slots`` (F, 2n; the first count[f] of
-    # row f); returns count (F,). The arrays come from numpy, whose large allocations get
-    # transparent huge pages: a fresh 20 MB of 4 KiB pages costs milliseconds of page faults.
+    # empty (r0 > r1) are skipped. Fills the records ``rec`` (F, 2n, _NREC) and the texel boxes
+    # ``box`` (F, 2n, 4), and ``filled[f, chunk]`` the slots each task drew. The arrays come
+    # from numpy, whose large allocations get transparent huge pages: a fresh 20 MB of 4 KiB
+    # pages costs milliseconds of page faults.
     n_faces = vps.shape[0]
     n = world.shape[0]
-    filled = np.zeros((n_faces, n_chunks), np.int64)
-    # worker w (of W = workers, the threads) takes the tasks w, w + W, w + 2W, ... of face-major
-    # order: every W-th chunk of every face, so that each thread gets a share of every part of
-    # the mesh list
-    for w in numba.prange(workers):
+    # worker w (of W = workers, the threads; ``share``: the workers of this call) takes the tasks
+    # w, w + W, w + 2W, ... of face-major order: every W-th chunk of every face, so that each
+    # thread gets a share of every part of the mesh list
+    for w in share:
         for task in range(w, n_faces * n_chunks, workers):
             f = task // n_chunks
             ch = task % n_chunks
@@ -298,6 +299,13 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, slot
             filled[f, ch] = _setup_range(
                 world, t0, t1, vps[f], res, slope_bias, rects[f], rec[f], box[f], 2 * t0
             )
+
+
+@numba.njit(cache=True)
+def _slots(filled, n, slots):  # pragma: no cover - compiled
+    # the slots drawn per face ``slots`` (F, 2n; the first count[f] of row f), in chunk order;
+    # returns count (F,)
+    n_faces, n_chunks = filled.shape
     count = np.zeros(n_faces, np.int64)
     for f in range(n_faces):
         k = 0
@@ -308,6 +316,17 @@ def _setup(world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, slot
                 k += 1
         count[f] = k
     return count
+
+
+def _setup(
+    world: np.ndarray, vps: np.ndarray, rects: np.ndarray, res: float, slope_bias: float, n_chunks: int,
+    workers: int, rec: np.ndarray, box: np.ndarray, slots: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """The triangles' records and texel boxes per face (:func:`_setup_tasks`, the workers on
+    threads), then the slots each face draws (:func:`_slots`); returns count (F,)."""
+    filled = np.zeros((vps.shape[0], n_chunks), np.int64)
+    in_shares(_setup_tasks, workers, world, vps, rects, res, slope_bias, n_chunks, workers, rec, box, filled)
+    return _slots(filled, world.shape[0], slots)
 
 
 @numba.njit(cache=True)
@@ -395,14 +414,16 @@ def _scan_rows(depth, r0, r1, c0, c1, slots, constant_bias, rec, box):  # pragma
                     depth[py, px] = biased
 
 
-@numba.njit(parallel=True, cache=True)
-def _scan(out, rects, n_bands, workers, slots, count, constant_bias, rec, box):  # pragma: no cover
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _scan_tasks(
+    share, out, rects, n_bands, workers, slots, count, constant_bias, rec, box
+):  # pragma: no cover
     # every (face, band of the face's rows) is one task; worker w takes the tasks w, w + W, ...
     # of face-major order, i.e. every W-th band of every face: the work of a map is far from
     # uniform over its rows (a sphere in a few bands), and neighbouring bands hold similar
     # work. Faces with an empty rectangle are left unwritten.
     n_faces = out.shape[0]
-    for w in numba.prange(workers):
+    for w in share:
         for task in range(w, n_faces * n_bands, workers):
             f = task // n_bands
             band = task % n_bands
@@ -440,7 +461,9 @@ def _render_maps(
         rec, box, slots = carve(buf, *parts)
         count = _setup(world, vps, rects, float(res), float(slope_bias), n_chunks, threads, rec, box, slots)
         n_bands = max(1, min(res, 4 * threads))
-        _scan(out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box)
+        in_shares(
+            _scan_tasks, threads, out, rects, n_bands, threads, slots, count, float(constant_bias), rec, box
+        )
     return out
 
 
