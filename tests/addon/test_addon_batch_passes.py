@@ -23,23 +23,9 @@ import pytest
 
 from compositing.cryptomatte import layer_key, matte, name_hash, name_id
 from tests.addon.addon_testing import REPO
-from tests.addon.test_addon_cryptomatte import _parts
+from tests.addon.test_addon_cryptomatte import _passes
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
-
-
-def _passes(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
-    """Pixels, channel names (the part after the pass) by ``<layer>.<pass>``, and the header
-    strings, of a multilayer EXR written as one part or as one part per pass."""
-    parts, header, names = _parts(path)
-    pixels: dict[str, np.ndarray] = {}
-    channels: dict[str, list[str]] = {}
-    for part, image in parts.items():
-        for index, full in enumerate(names[part]):
-            stem, _, channel = (f"{part}.{full}" if part else full).rpartition(".")
-            channels.setdefault(stem, []).append(channel)
-            pixels.setdefault(stem, []).append(image[..., index])  # type: ignore[attr-defined]
-    return {k: np.stack(v, axis=-1) for k, v in pixels.items()}, header, channels
 
 
 def _bits(name: str) -> int:

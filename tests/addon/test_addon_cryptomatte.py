@@ -130,6 +130,27 @@ def _parts(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str,
     return pixels, header, channels
 
 
+def _passes(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
+    """Pixels, channel names (the part after the pass) by ``<layer>.<pass>``, and the header
+    strings, of a multilayer EXR written as one part per pass (Blender 4.5 and later) or as one
+    part whose channels are named ``<layer>.<pass>.<channel>`` (Blender 4.2)."""
+    parts, header, names = _parts(path)
+    pixels: dict[str, np.ndarray] = {}
+    channels: dict[str, list[str]] = {}
+    for part, image in parts.items():
+        for index, full in enumerate(names[part]):
+            qualified = full if not part or full.startswith(f"{part}.") else f"{part}.{full}"
+            stem, _, channel = qualified.rpartition(".")
+            channels.setdefault(stem, []).append(channel)
+            pixels.setdefault(stem, []).append(image[..., index])  # type: ignore[attr-defined]
+    order = "RGBArgbaXYZxyzUVW"  # a single-part file may store a pass's channels sorted by name
+    for stem, names_ in channels.items():
+        ranked = sorted(range(len(names_)), key=lambda i: order.find(names_[i]) % 99)
+        channels[stem] = [names_[i] for i in ranked]
+        pixels[stem] = [pixels[stem][i] for i in ranked]  # type: ignore[index]
+    return {k: np.stack(v, axis=-1) for k, v in pixels.items()}, header, channels
+
+
 def _layer(pixels: dict[str, np.ndarray], stem: str) -> list[np.ndarray]:
     return [pixels[f"ViewLayer.{stem}{i:02d}"] for i in range(3)]
 
@@ -145,8 +166,8 @@ def _ids(passes: list[np.ndarray]) -> set[int]:
 
 def test_cryptomatte_matches_cycles_and_blenders_node(tmp_path: Path) -> None:
     got = run_bpy(SCRIPT, tmp_path, args=(str(tmp_path),), timeout=540)
-    cycles, cycles_header, cycles_channels = _parts(tmp_path / "cycles.exr")
-    ours, our_header, our_channels = _parts(tmp_path / "ours.exr")
+    cycles, cycles_header, cycles_channels = _passes(tmp_path / "cycles.exr")
+    ours, our_header, our_channels = _passes(tmp_path / "ours.exr")
 
     for stem in ("CryptoObject", "CryptoMaterial", "CryptoAsset"):
         assert f"{stem}00" in got["outputs"] and f"{stem}02" in got["outputs"]  # registered

@@ -203,11 +203,15 @@ def _bpy_only_python() -> Path:
     return python
 
 
+_CACHE_OVERRIDE = "BLINN_PHONG_KERNEL_CACHE"
+
+
 def _clean_env(root: Path) -> dict[str, str]:
     env = {
         key: value
         for key, value in os.environ.items()
-        if key not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "VIRTUAL_ENV", "PYTHONHOME")
+        # the kernel cache override too: the installed extension must choose its own directory
+        if key not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "VIRTUAL_ENV", "PYTHONHOME", _CACHE_OVERRIDE)
     }
     env.update(PYTHONNOUSERSITE="1", BLENDER_USER_RESOURCES=str(root / "blender_user"))
     return env

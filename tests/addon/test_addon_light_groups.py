@@ -12,10 +12,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import OpenImageIO as oiio  # noqa: N813 (the library's documented alias)
 import pytest
 
 from tests.addon.addon_testing import run_bpy
+from tests.addon.test_addon_cryptomatte import _passes
 
 pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]
 
@@ -80,16 +80,7 @@ emit({"outputs": outputs})
 
 
 def _parts(path: Path) -> dict[str, np.ndarray]:
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    out = {}
-    index = 0
-    while image.seek_subimage(index, 0):
-        spec = image.spec()
-        out[spec.get_string_attribute("name")] = image.read_image(index, 0, 0, spec.nchannels, oiio.FLOAT)
-        index += 1
-    image.close()
-    return out
+    return _passes(path)[0]
 
 
 def test_light_group_passes_are_registered_and_sum_to_combined(tmp_path: Path) -> None:
