@@ -25,8 +25,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from blinn_phong.linking import links_of_lights
-from blinn_phong.scene import Material, Scene
+from blinn_phong.scene import AmbientLight, Material, Scene
 
 __all__ = ["LightGroups"]
 
@@ -86,6 +88,38 @@ class LightGroups:
     def pass_name(group: str) -> str:
         """``Combined_<group>``, Cycles' name of a group's pass."""
         return f"Combined_{group}"
+
+    def kernel_tables(self, scene: Scene, source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the shading kernels need to split each fragment's colour by group in the frame's
+        own pass: ``(group_of, base)``.
+
+        ``group_of`` (L,) int64: the group index (in ``groups``) of each light of the kernel's light
+        tables, ``source`` (L,) being their indices in ``scene.lights``
+        (:attr:`blinn_phong.lighting.EyeLights.source`); −1 for a light in no group. ``base``
+        (2·M, G, 3) float64, per material side (``2·mesh + back``, as the kernels' material
+        tables) and group: the terms of :func:`blinn_phong.lighting.material_tables`'s ``base``
+        that belong to the group, ``e_cm`` if the mesh is in it, plus ``a_cm`` times the world's
+        ambient if the world is in it and the radiances of its AmbientLights.
+        """
+        self.check(scene)
+        index = {g: k for k, g in enumerate(self.groups)}
+        group_of = np.array(
+            [-1 if self.lights[i] is None else index[self.lights[i]] for i in np.asarray(source, np.int64)],
+            dtype=np.int64,
+        )
+        ambient = np.zeros((len(self.groups), 3))  # the world's and the AmbientLights' radiance, per group
+        if self.world is not None:
+            ambient[index[self.world]] += np.asarray(scene.ambient, dtype=np.float64)
+        for light, g in zip(scene.lights, self.lights, strict=True):
+            if g is not None and isinstance(light, AmbientLight):
+                ambient[index[g]] += np.asarray(light.radiance, dtype=np.float64)
+        base = np.zeros((2 * len(scene.meshes), len(self.groups), 3))
+        for m, (mesh, g) in enumerate(zip(scene.meshes, self.meshes, strict=True)):
+            for side, material in enumerate((mesh.material, mesh.back_material or mesh.material)):
+                base[2 * m + side] = np.asarray(material.ambient, dtype=np.float64) * ambient
+                if g is not None:
+                    base[2 * m + side, index[g]] += np.asarray(material.emission, dtype=np.float64)
+        return group_of, base
 
     def group_scene(self, scene: Scene, group: str) -> tuple[Scene, list[int]] | None:
         """``scene`` with only ``group``'s emitters, and the indices of the lights it keeps;
