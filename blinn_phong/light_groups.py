@@ -8,12 +8,24 @@ Here the lighting equation is a sum of terms, each from one emitter:
 * the global ambient ``Scene.ambient · a_cm`` (the world's light) — the world's group;
 * each mesh's emission ``e_cm`` — the mesh's (its object's) group.
 
-A group's pass is the frame rendered with only its own emitters (the other lights left out, the
+A group's pass is the frame's colour from only its own emitters (the other lights left out, the
 world's ambient and the other meshes' emission set to 0), following the frame's own plan (the
 same transparency method, shading frequencies and shadow methods), so it is exactly the part of
 Combined those emitters make: the frame's colour is linear in them, fragment by fragment and
-through every transparency resolve (alphas do not depend on light). Hence, when every emitter
-belongs to some group, the group passes sum to Combined's RGB up to float rounding. Emitters in
+through every transparency resolve (alphas do not depend on light).
+
+How it is made: when the frame takes the compiled engine's fused pass (one sample per pixel, the
+z-buffer, the A-buffer or depth peeling, no Gouraud-shaded mesh, a frame small enough for one
+strip), that pass makes the group passes as it shades: the lighting equation adds each light's
+terms into its group too (:func:`blinn_phong.lighting.point_terms` with
+:meth:`LightGroups.kernel_tables`),
+and each group's fragment colour is composited with the frame's own alphas. Every other frame
+(the numpy engine, several samples, weighted blended OIT and the sorted draw orders, Gouraud
+meshes, holdouts with transparency, deep output, strips) renders each group's frame apart with
+the scene of :meth:`LightGroups.group_scene` (visibility, shadows and shading again per group).
+
+Hence, when every emitter belongs to some group, the group passes sum to Combined's RGB up to
+float rounding. Emitters in
 no group appear in no pass (as in Cycles). Fog's own colour is in no group: each group's pass is
 fogged towards black (the fog factor applied to the group's light), so with fog the passes sum to
 Combined minus the fog's colour contribution. The GL preset clamps colours, which is not linear:
