@@ -1124,7 +1124,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
         maps, world, n_opaque, offsets, max_layers, max_list,
-        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow, group_of, group_base, o_groups,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its visible fragments: ``index[pixel]`` is the z-buffer's winning
         # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
@@ -1140,6 +1140,11 @@ def _plain_kernel() -> object:  # a numba dispatcher
         # writes, with the same operations in the same order. One row per call: the parallel loop
         # of ``plain`` stays a few lines (numba's parallel transformation of a large loop body
         # is what made this kernel slow to compile: docs/compile.md).
+        # Light groups (``o_groups`` (G, H, W, 3), G > 0): each fragment's colour per group, its
+        # base ``group_base[mid, g]`` plus its lights' terms (point_terms with ``group_of``),
+        # premultiplied, fogged towards black (the fog factor alone) and composited with the
+        # same coverage as the frame's colour; Gouraud meshes are not split (the caller does
+        # not ask for groups then).
         triangles, triangle_mesh, eye_pos, eye_n, world_n = geometry
         bases, a_cms, d_cms, s_cms, shininesses, opacity = materials
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
@@ -1168,6 +1173,9 @@ def _plain_kernel() -> object:  # a numba dispatcher
         s_cw = np.empty(scratch)
         s_face = np.zeros(scratch, np.int64)
         j_cov = 0  # the next covered pixel of the row (maps)
+        n_groups = o_groups.shape[0]
+        g_frag = np.zeros((n_groups, 3))  # a fragment's colour per group
+        g_acc = np.zeros((n_groups, 3))  # the pixel's composited colour per group
         if has_maps:
             # The row's covered pixels first: each winner's depth and barycentrics (read back
             # below), its world point (as winner_surface) and its visibility per light, in
@@ -1227,8 +1235,14 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 o_depth[row, col] = np.float32(1.0)
                 if has_vis:
                     o_shadow[row, col, 0] = 0.0
+                for g in range(n_groups):
+                    for ch in range(3):
+                        o_groups[g, row, col, ch] = 0.0
                 continue
             n_row += 1
+            for g in range(n_groups):
+                for ch in range(3):
+                    g_acc[g, ch] = 0.0
             # The pixel's fragments, front to back: the nearest ``max_layers`` transparent ones
             # sorted by depth (stable in draw order), then the opaque one; each composited
             # under the ones before it (resolve's "B over A": acc = c·(1 − acc_α) + acc, and
@@ -1324,10 +1338,13 @@ def _plain_kernel() -> object:  # a numba dispatcher
                     sg = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 7)
                     sb = _lerp(vertex_terms, back, v0, v1, v2, b0, b1, b2, 8)
                 else:  # one call site of the (inlined) lighting equation for flat and phong
+                    for g in range(n_groups):
+                        for ch in range(3):
+                            g_frag[g, ch] = group_base[mid, g, ch]
                     ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                         v, px, py, pz, nx, ny, nz, mid, bases, a_cms, d_cms, s_cms, shininesses,
                         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn,
-                        has_vis, r_vis3 if has_maps else vis,
+                        has_vis, r_vis3 if has_maps else vis, group_of, g_frag,
                     )  # fmt: skip
                 r, g, b = ar + dr + sr, ag + dg + sg, ab + db + sb  # ShadingTerms.color
                 if gl_compat:  # lighting.gl_clamp, then the colour sum clamped
@@ -1346,6 +1363,16 @@ def _plain_kernel() -> object:  # a numba dispatcher
                         fog_mode, fog_radial, density, start, end, cr, cg, cb, fx, fy, fz, pr, pg, pb, a
                     )
                 cover = 1.0 - acc3
+                if n_groups > 0:
+                    f_fog = 1.0  # fog towards black: f·(α·c)
+                    if fog_mode >= 0:
+                        f_fog = _fogged(
+                            fog_mode, fog_radial, density, start, end, 0.0, 0.0, 0.0, fx, fy, fz,
+                            1.0, 1.0, 1.0, a,
+                        )[0]  # fmt: skip
+                    for g in range(n_groups):
+                        for ch in range(3):
+                            g_acc[g, ch] = (f_fog * (a * g_frag[g, ch])) * cover + g_acc[g, ch]
                 acc0 = pr * cover + acc0
                 acc1 = pg * cover + acc1
                 acc2 = pb * cover + acc2
@@ -1395,6 +1422,9 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 o_shadow[row, col, 0] = 0.0 + np.float32(mean * a)
             elif has_vis:
                 o_shadow[row, col, 0] = 0.0 + np.float32(vis_mean[v] * a)
+            for g in range(n_groups):
+                for ch in range(3):
+                    o_groups[g, row, col, ch] = 0.0 + np.float32(g_acc[g, ch])
         return n_row
 
     # a module global, not a closure variable (as _point_terms: the disk cache's key)
@@ -1407,7 +1437,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
         maps, world, n_opaque, offsets, max_layers, max_list,
-        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+        o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow, group_of, group_base, o_groups,
     ):  # fmt: skip  # pragma: no cover - compiled
         # The rows ``row_order`` (a share of the frame's: compositing._threads runs the shares on
         # threads, the GIL released); each row is written by one call of plain_row, so there are
@@ -1419,7 +1449,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
                 source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
                 geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
                 maps, world, n_opaque, offsets, max_layers, max_list,
-                o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow,
+                o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow, group_of, group_base, o_groups,
             )  # fmt: skip
         return covered
 
@@ -1464,6 +1494,33 @@ _NO_MAPS = (
 )  # fmt: skip
 _NO_WORLD = np.zeros((0, 3))
 _NO_WORLD.flags.writeable = False  # one signature: the kernel reads world vertices as read-only views
+#: No light groups for the fused kernel: ``(group_of, group_base, out)``.
+_NO_GROUPS = (np.zeros(0, np.int64), np.zeros((0, 0, 3)), np.zeros((0, 0, 0, 3), np.float32))
+
+
+def _group_args(
+    groups: tuple[np.ndarray, np.ndarray, np.ndarray] | None, n_lights: int, height: int, width: int,
+    n_materials: int,
+) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """The fused kernel's ``(group_of, group_base, o_groups)`` of ``groups`` (see
+    :func:`shade_plain_fragments_compiled`), checked, or :data:`_NO_GROUPS`."""
+    if groups is None:
+        return _NO_GROUPS
+    group_of, base, out = groups
+    group_of = np.ascontiguousarray(group_of, dtype=np.int64)
+    base = np.ascontiguousarray(base, dtype=np.float64)
+    n = out.shape[0] if out.ndim == 4 else -1
+    if group_of.shape != (n_lights,) or (group_of >= n).any() or base.shape != (n_materials, n, 3):
+        raise ValueError(
+            f"groups: expected group_of ({n_lights},) < G and base ({n_materials}, G, 3) for out "
+            f"(G, H, W, 3), got {group_of.shape}, {base.shape} and {out.shape}"
+        )
+    if n < 1 or out.shape[1:] != (height, width, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(
+            f"groups: expected out a C-contiguous float32 (G ≥ 1, {height}, {width}, 3) array, "
+            f"got {out.dtype} {out.shape}"
+        )
+    return group_of, base, out
 
 
 def _row_order(height: int) -> np.ndarray:
@@ -1496,6 +1553,7 @@ def shade_plain_fragments_compiled(
     out: tuple[np.ndarray, ...],
     fog: FogArgs = None,
     transparent: tuple[int, np.ndarray, int] | None = None,
+    groups: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> None:
     """The frame's shading and resolve fused: each pixel's fragments shaded, resolved and written.
 
@@ -1517,6 +1575,15 @@ def shade_plain_fragments_compiled(
     (``max_layers`` = the layers) of :func:`resolve_frame_compiled`: sorted by depth, the
     nearest ``max_layers`` composited front to back over the opaque colour; passes, normal and
     depth of the nearest fragment.
+
+    ``groups``: None, or light groups' passes (:mod:`blinn_phong.light_groups`) made in the same
+    pass: ``(group_of, base, out)`` with ``group_of`` (L,) int64 the group of each light of the
+    tables (−1: none), ``base`` (2·M, G, 3) float64 each material side's terms that do not depend
+    on a light of the tables, per group (emission, ``a_cm``·global ambient, ``a_cm``·ambient
+    lights), and ``out`` (G, H, W, 3) float32, written like ``rgba``'s colour: each fragment's
+    colour from group g's emitters alone, premultiplied, fogged towards black (the fog factor
+    applied), composited with the frame's coverages. Not for Gouraud-shaded meshes (their
+    vertex terms are not split by group).
     """
     two_sided, geometry, materials, lights, flags, frequencies = tables
     fragments = (
@@ -1537,6 +1604,7 @@ def shade_plain_fragments_compiled(
         np.zeros((0, 0, 1)) if visibility is None else np.ascontiguousarray(visibility, dtype=np.float64),
         np.zeros(0) if vis_mean is None else np.ascontiguousarray(vis_mean, dtype=np.float64),
         _NO_INDEX, _NO_MAPS, _NO_WORLD, *lists, *out,
+        *_group_args(groups, len(lights[0]), height, width, len(materials[0])),
     )  # fmt: skip
 
 
@@ -1561,6 +1629,7 @@ def shade_plain_winners_compiled(
     fog: FogArgs = None,
     visibility: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     maps: tuple[tuple[np.ndarray, ...], np.ndarray] | None = None,
+    groups: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> int:
     """:func:`shade_plain_fragments_compiled` straight from the z-buffer's winners (one sample per
     pixel, ``fog`` as there): barycentrics and depth as :func:`frame_fragments_compiled` computes
@@ -1576,6 +1645,9 @@ def shade_plain_winners_compiled(
     vertices. Each pixel's world point (as :func:`winner_surfaces_compiled` computes it) is
     looked up in the maps as it is shaded (:func:`blinn_phong.shadow_kernels.stacked_visibility`),
     and the shadow pass is the mean of its visibilities (:func:`blinn_phong.resolve.shadow_pass_values`).
+
+    ``groups``: light groups' passes made in the same pass, as for
+    :func:`shade_plain_fragments_compiled`.
 
     Returns the number of covered pixels (fragments shaded)."""
     if setup.k != 1:
@@ -1606,7 +1678,7 @@ def shade_plain_winners_compiled(
             setup.width, setup.height, _row_order(setup.height), True, winner, *_NO_FRAGMENTS, *sub,
             two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
             visibility is not None or maps is not None, vis, vis_mean, rank, stack, world, 0, _NO_INDEX, 0, 0,
-            *out,
+            *out, *_group_args(groups, len(lights[0]), setup.height, setup.width, len(materials[0])),
         )
     )  # fmt: skip
 

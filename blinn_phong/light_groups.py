@@ -8,12 +8,24 @@ Here the lighting equation is a sum of terms, each from one emitter:
 * the global ambient ``Scene.ambient · a_cm`` (the world's light) — the world's group;
 * each mesh's emission ``e_cm`` — the mesh's (its object's) group.
 
-A group's pass is the frame rendered with only its own emitters (the other lights left out, the
+A group's pass is the frame's colour from only its own emitters (the other lights left out, the
 world's ambient and the other meshes' emission set to 0), following the frame's own plan (the
 same transparency method, shading frequencies and shadow methods), so it is exactly the part of
 Combined those emitters make: the frame's colour is linear in them, fragment by fragment and
-through every transparency resolve (alphas do not depend on light). Hence, when every emitter
-belongs to some group, the group passes sum to Combined's RGB up to float rounding. Emitters in
+through every transparency resolve (alphas do not depend on light).
+
+How it is made: when the frame takes the compiled engine's fused pass (one sample per pixel, the
+z-buffer, the A-buffer or depth peeling, no Gouraud-shaded mesh, a frame small enough for one
+strip), that pass makes the group passes as it shades: the lighting equation adds each light's
+terms into its group too (:func:`blinn_phong.lighting.point_terms` with
+:meth:`LightGroups.kernel_tables`),
+and each group's fragment colour is composited with the frame's own alphas. Every other frame
+(the numpy engine, several samples, weighted blended OIT and the sorted draw orders, Gouraud
+meshes, holdouts with transparency, deep output, strips) renders each group's frame apart with
+the scene of :meth:`LightGroups.group_scene` (visibility, shadows and shading again per group).
+
+Hence, when every emitter belongs to some group, the group passes sum to Combined's RGB up to
+float rounding. Emitters in
 no group appear in no pass (as in Cycles). Fog's own colour is in no group: each group's pass is
 fogged towards black (the fog factor applied to the group's light), so with fog the passes sum to
 Combined minus the fog's colour contribution. The GL preset clamps colours, which is not linear:
@@ -25,8 +37,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from blinn_phong.linking import links_of_lights
-from blinn_phong.scene import Material, Scene
+from blinn_phong.scene import AmbientLight, Material, Scene
 
 __all__ = ["LightGroups"]
 
@@ -86,6 +100,38 @@ class LightGroups:
     def pass_name(group: str) -> str:
         """``Combined_<group>``, Cycles' name of a group's pass."""
         return f"Combined_{group}"
+
+    def kernel_tables(self, scene: Scene, source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the shading kernels need to split each fragment's colour by group in the frame's
+        own pass: ``(group_of, base)``.
+
+        ``group_of`` (L,) int64: the group index (in ``groups``) of each light of the kernel's light
+        tables, ``source`` (L,) being their indices in ``scene.lights``
+        (:attr:`blinn_phong.lighting.EyeLights.source`); −1 for a light in no group. ``base``
+        (2·M, G, 3) float64, per material side (``2·mesh + back``, as the kernels' material
+        tables) and group: the terms of :func:`blinn_phong.lighting.material_tables`'s ``base``
+        that belong to the group, ``e_cm`` if the mesh is in it, plus ``a_cm`` times the world's
+        ambient if the world is in it and the radiances of its AmbientLights.
+        """
+        self.check(scene)
+        index = {g: k for k, g in enumerate(self.groups)}
+        group_of = np.array(
+            [-1 if self.lights[i] is None else index[self.lights[i]] for i in np.asarray(source, np.int64)],
+            dtype=np.int64,
+        )
+        ambient = np.zeros((len(self.groups), 3))  # the world's and the AmbientLights' radiance, per group
+        if self.world is not None:
+            ambient[index[self.world]] += np.asarray(scene.ambient, dtype=np.float64)
+        for light, g in zip(scene.lights, self.lights, strict=True):
+            if g is not None and isinstance(light, AmbientLight):
+                ambient[index[g]] += np.asarray(light.radiance, dtype=np.float64)
+        base = np.zeros((2 * len(scene.meshes), len(self.groups), 3))
+        for m, (mesh, g) in enumerate(zip(scene.meshes, self.meshes, strict=True)):
+            for side, material in enumerate((mesh.material, mesh.back_material or mesh.material)):
+                base[2 * m + side] = np.asarray(material.ambient, dtype=np.float64) * ambient
+                if g is not None:
+                    base[2 * m + side, index[g]] += np.asarray(material.emission, dtype=np.float64)
+        return group_of, base
 
     def group_scene(self, scene: Scene, group: str) -> tuple[Scene, list[int]] | None:
         """``scene`` with only ``group``'s emitters, and the indices of the lights it keeps;

@@ -505,13 +505,18 @@ def point_terms() -> object:  # a numba dispatcher
 
     ``point_terms()(q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
     pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis,
-    vis)`` returns the nine floats ``(ambient, diffuse, specular)`` RGB of the module
+    vis, group_of, group_sum)`` returns the nine floats ``(ambient, diffuse, specular)`` RGB of the module
     docstring's equation at the point ``p`` with unit normal ``n`` (zero normals get ambient and
     emission only), for material ``m`` of the tables of :func:`material_tables` (``bases`` =
     emission + ``a_cm``·(global ambient + AmbientLights)) and the lights of an
     :class:`EyeLights` as the arrays of :func:`light_tables`. With ``has_vis``, ``vis[q, i, c]``
     (an (N, L, K) array, K = 1 or 3: one factor per light, or one per RGB channel) multiplies
     light i's diffuse and specular terms.
+
+    Light groups (:mod:`blinn_phong.light_groups`): ``group_of`` (L,) int64 is each light's group
+    (−1: none) and ``group_sum`` a (G, 3) float64 scratch; light i's ambient, diffuse and specular
+    terms (the ones summed into the result) are also added into ``group_sum[group_of[i]]``. An
+    empty ``group_of`` (shape (0,)) turns this off (``group_sum`` is then not touched).
 
     It evaluates each light with the same Python functions as the numpy engine
     (:func:`_view_vector`, :func:`_light_direction`, :func:`_reflection`), compiled for scalars
@@ -531,8 +536,10 @@ def point_terms() -> object:  # a numba dispatcher
     def terms(
         q, px, py, pz, nx, ny, nz, m, bases, a_cms, d_cms, s_cms, shininesses,
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe, local_viewer, blinn, has_vis, vis,
+        group_of, group_sum,
     ):  # fmt: skip  # pragma: no cover - compiled
         vx, vy, vz = _view_vector(px, py, pz, local_viewer)
+        grouped = group_of.shape[0] > 0
         ar, ag, ab = bases[m, 0], bases[m, 1], bases[m, 2]
         a0, a1, a2 = a_cms[m, 0], a_cms[m, 1], a_cms[m, 2]
         d0, d1, d2 = d_cms[m, 0], d_cms[m, 1], d_cms[m, 2]
@@ -548,9 +555,15 @@ def point_terms() -> object:  # a numba dispatcher
                 (spot_dir[i, 0], spot_dir[i, 1], spot_dir[i, 2]),
                 cos_cut[i], spot_exp[i], (atten[i, 0], atten[i, 1], atten[i, 2]),
             )  # fmt: skip
-            ar += att * (a0 * l_amb[i, 0])
-            ag += att * (a1 * l_amb[i, 1])
-            ab += att * (a2 * l_amb[i, 2])
+            tr, tg, tb = att * (a0 * l_amb[i, 0]), att * (a1 * l_amb[i, 1]), att * (a2 * l_amb[i, 2])
+            ar += tr
+            ag += tg
+            ab += tb
+            group = group_of[i] if grouped else -1
+            if group >= 0:  # the light's group: its ambient term ...
+                group_sum[group, 0] += tr
+                group_sum[group, 1] += tg
+                group_sum[group, 2] += tb
             if att == 0.0 or nx * lx + ny * ly + nz * lz <= 0.0:
                 continue  # _reflection gives exactly 0 here
             fd, fs = _reflection(nx, ny, nz, lx, ly, lz, vx, vy, vz, att, shininess, blinn)
@@ -559,12 +572,22 @@ def point_terms() -> object:  # a numba dispatcher
                 wr = vis[q, i, 0]
                 wg = vis[q, i, 1] if per_channel else wr
                 wb = vis[q, i, 2] if per_channel else wr
-            dr += fd * (d0 * l_dif[i, 0]) * wr
-            dg += fd * (d1 * l_dif[i, 1]) * wg
-            db += fd * (d2 * l_dif[i, 2]) * wb
-            sr += fs * (s0 * l_spe[i, 0]) * wr
-            sg += fs * (s1 * l_spe[i, 1]) * wg
-            sb += fs * (s2 * l_spe[i, 2]) * wb
+            tr = fd * (d0 * l_dif[i, 0]) * wr
+            tg = fd * (d1 * l_dif[i, 1]) * wg
+            tb = fd * (d2 * l_dif[i, 2]) * wb
+            ur = fs * (s0 * l_spe[i, 0]) * wr
+            ug = fs * (s1 * l_spe[i, 1]) * wg
+            ub = fs * (s2 * l_spe[i, 2]) * wb
+            dr += tr
+            dg += tg
+            db += tb
+            sr += ur
+            sg += ug
+            sb += ub
+            if group >= 0:  # ... and its diffuse and specular terms
+                group_sum[group, 0] += tr + ur
+                group_sum[group, 1] += tg + ug
+                group_sum[group, 2] += tb + ub
         return ar, ag, ab, dr, dg, db, sr, sg, sb
 
     return terms
@@ -632,11 +655,13 @@ def _kernel() -> object:  # a numba dispatcher
         count = p.shape[0]
         pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe = lights
         has_vis = vis.shape[0] == count and vis.shape[1] == pos.shape[0] and count > 0
+        no_groups = np.zeros(0, np.int64)
+        no_sums = np.zeros((0, 3))
         for q in share:
             ar, ag, ab, dr, dg, db, sr, sg, sb = _point_terms(
                 q, p[q, 0], p[q, 1], p[q, 2], n[q, 0], n[q, 1], n[q, 2], ids[q], bases, a_cms, d_cms,
                 s_cms, shininesses, pos, spot_dir, cos_cut, spot_exp, atten, l_amb, l_dif, l_spe,
-                local_viewer, blinn, has_vis, vis,
+                local_viewer, blinn, has_vis, vis, no_groups, no_sums,
             )  # fmt: skip
             out_amb[q, 0], out_amb[q, 1], out_amb[q, 2] = ar, ag, ab
             out_dif[q, 0], out_dif[q, 1], out_dif[q, 2] = dr, dg, db

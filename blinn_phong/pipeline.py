@@ -48,6 +48,7 @@ from blinn_phong.fast import (
     winner_surfaces_compiled,
 )
 from blinn_phong.id_passes import Cryptomatte, passes_from_fragments, passes_from_winners
+from blinn_phong.light_groups import LightGroups
 from blinn_phong.linking import holdout_meshes, linked_visibility, lit_links
 from blinn_phong.normals import face_normals
 from blinn_phong.planner import Plan
@@ -574,6 +575,7 @@ def _opaque_from_winners(
     say: Callable[[str, float], None],
     cryptomatte: Cryptomatte | None = None,
     holdout: np.ndarray | None = None,
+    light_groups: LightGroups | None = None,
 ) -> FrameResult:
     """The opaque z-buffer frame (no transparency, one sample, per-pixel shading, fog or not,
     shadows or not) by the compiled engine: the z-buffer, then (with shadows: ``lit`` from
@@ -586,7 +588,7 @@ def _opaque_from_winners(
     order: :func:`blinn_phong.fast.shade_plain_winners_compiled`). ``holdout``: (M,) bool per mesh
     (:func:`blinn_phong.linking.holdout_meshes`) or None; pixels a holdout wins are then set to
     transparent black (colour, alpha and light passes), as the general path's alpha-weighted
-    passes give.
+    passes give. ``light_groups``: their passes made in the same pass (:func:`_group_buffers`).
     """
     t = time.perf_counter()
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, width, height, 1, cull_backfaces)
@@ -614,12 +616,16 @@ def _opaque_from_winners(
         t = time.perf_counter()
         image = _empty_frame(height, width, lit is not None)
         tables = plain_tables(prepared, gl_compat, shading)
-        shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis, maps)
+        groups = _group_buffers(light_groups, prepared, tables, height, width)
+        shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis, maps, groups)
         if maps is not None and maps[0].miss[0]:  # type: ignore[attr-defined]
             # a pixel's point lay farther off its triangle than the cube's rectangles allow for
             # (snapped coverage): shaded again from the general path's visibilities
             vis = _winner_visibility(prepared, lit, verts, all_verts, setup, winner)  # type: ignore[arg-type]
-            shaded = shade_plain_winners_compiled(setup, winner, tables, _targets(image), fog, vis)
+            shaded = shade_plain_winners_compiled(
+                setup, winner, tables, _targets(image), fog, vis, None, groups
+            )
+        image.passes.update(_group_passes(light_groups, groups))  # (held out below, as the colour)
         if holdout is not None:
             pixel = np.flatnonzero(winner >= 0)
             held = pixel[holdout[prepared.triangle_mesh[setup.source[winner[pixel]]]]]
@@ -630,6 +636,29 @@ def _opaque_from_winners(
         say("shade", 1.0)
     image.passes.update(ids)
     return image, shaded
+
+
+def _group_buffers(
+    light_groups: LightGroups | None, prepared: PreparedScene, tables: tuple, height: int, width: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The fused kernels' ``groups`` argument for ``light_groups`` (``(group_of, base, out)``:
+    :meth:`blinn_phong.light_groups.LightGroups.kernel_tables` and an uninitialised (G, H, W, 3)
+    float32 buffer), or None: no request, or a Gouraud-shaded mesh (its interpolated vertex terms
+    are not split by group)."""
+    if light_groups is None or (tables[5][0] == 2).any():
+        return None
+    group_of, base = light_groups.kernel_tables(prepared.scene, prepared.lights.source)
+    return group_of, base, np.empty((len(light_groups.groups), height, width, 3), np.float32)
+
+
+def _group_passes(
+    light_groups: LightGroups | None, groups: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+) -> dict[str, np.ndarray]:
+    """``Combined_<group>`` → its (H, W, 3) view of the buffer :func:`_group_buffers` made (none
+    without one)."""
+    if light_groups is None or groups is None:
+        return {}
+    return {light_groups.pass_name(g): groups[2][i] for i, g in enumerate(light_groups.groups)}
 
 
 def _winner_visibility(
@@ -762,6 +791,7 @@ def render_frame(
     report: Callable[[str, float], None] | None = None,
     cryptomatte: Cryptomatte | None = None,
     deep: DeepFragments | None = None,
+    light_groups: LightGroups | None = None,
 ) -> FrameResult:
     """Render ``prepared`` by the stages of the module docstring, following ``the_plan``.
 
@@ -785,6 +815,10 @@ def render_frame(
             computed from the visibility stage's samples (:mod:`blinn_phong.id_passes`).
         deep: a :class:`blinn_phong.deep_fragments.DeepFragments` that receives each band's
             fragment colours (the band path runs: the fused passes keep no fragment colours).
+        light_groups: a :class:`blinn_phong.light_groups.LightGroups` (for ``prepared``'s scene)
+            or None. When the frame takes a fused pass (compiled engine, one sample, no Gouraud
+            mesh, no strips), its passes ``Combined_<group>`` are made in that pass and added to
+            the image's passes; otherwise none are added (the caller renders them apart).
 
     Returns:
         ``(image, shaded)``: the :class:`~blinn_phong.resolve.FrameImage` and the number of
@@ -823,7 +857,7 @@ def render_frame(
     if fused and method == "zbuffer":
         return _opaque_from_winners(
             prepared, width, height, lit, shading, gl_compat, cull_backfaces, fog_args, seconds, say,
-            cryptomatte, holdout,
+            cryptomatte, holdout, light_groups,
         )  # fmt: skip
     fused = fused and holdout is None  # the fused fragment pass has no holdouts: the band path below
 
@@ -860,18 +894,22 @@ def render_frame(
         if visible.n_transparent and sorted_resolve:
             layers = the_plan.transparency.params.get("layers") if method == "depth_peeling" else None
             transparent = (visible.n_opaque, visible.offsets, int(layers) if layers else len(f))  # type: ignore[call-overload]
+        tables = plain_tables(prepared, gl_compat, shading)
+        groups = _group_buffers(light_groups, prepared, tables, height, width)
         shade_plain_fragments_compiled(
             width, height, visible.opaque_of, f.triangle, f.bary, f.depth, f.front_facing,
-            plain_tables(prepared, gl_compat, shading),
+            tables,
             None if visibility is None else (visibility if visibility.ndim == 3 else visibility[:, :, None]),
             None if visibility is None else shadow_pass_values(visibility),
             _targets(image),
             fog_args,
             transparent,
+            groups,
         )  # fmt: skip
         seconds["shade"] = time.perf_counter() - t
         seconds["resolve_samples"] = 0.0
         say("shade", 1.0)
+        image.passes.update(_group_passes(light_groups, groups))
         image.passes.update(ids)
         return image, len(f)
 

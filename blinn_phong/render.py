@@ -319,13 +319,18 @@ def render(
         report=report,
         cryptomatte=cryptomatte,
         deep=collector,
+        light_groups=light_groups,
     )
     deep_image = None
     if collector is not None:
         t = time.perf_counter()
         deep_image = collector.image()
         seconds["deep"] = time.perf_counter() - t
-    if light_groups is not None:
+    if light_groups is not None and not all(
+        light_groups.pass_name(g) in image.passes for g in light_groups.groups
+    ):
+        # Not made in the frame's own pass (numpy engine, band path, strips, Gouraud meshes,
+        # several samples): each group's frame rendered with its emitters alone.
         t = time.perf_counter()
         group_fog = None if fog is None else replace(fog, color=(0.0, 0.0, 0.0))
         for group in light_groups.groups:
