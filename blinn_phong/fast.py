@@ -1075,11 +1075,18 @@ def resolve_frame_compiled(
 
 #: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
 _point_terms: object = None
-_plain_row: object = None
+_plain_row_maps: object = None
+_plain_row_plain: object = None
 
 
-@functools.lru_cache(maxsize=1)
-def _plain_kernel() -> object:  # a numba dispatcher
+@functools.lru_cache(maxsize=2)
+def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
+    """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself.
+
+    Two variants, so that a frame without shadow maps does not compile the shadow-map look-ups
+    (``shadow_kernels.nearest_run`` and ``stacked_visibility``, about 4 s of compilation): the
+    branch on the constant ``with_maps`` is removed before numba types the function, and the
+    variants are cached apart (their names and closure values differ)."""
     import hashlib
     import math
 
@@ -1118,7 +1125,6 @@ def _plain_kernel() -> object:  # a numba dispatcher
     # numpy's error model (a division by zero gives inf or nan, as in numpy and in a parallel
     # loop's body, where numba uses it too): Python's would test every division and keep LLVM
     # from optimising the row's loops (measured: 2× the time per frame).
-    @numba.njit(cache=True, error_model="numpy")
     def plain_row(
         row, width, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
@@ -1176,7 +1182,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         n_groups = o_groups.shape[0]
         g_frag = np.zeros((n_groups, 3))  # a fragment's colour per group
         g_acc = np.zeros((n_groups, 3))  # the pixel's composited colour per group
-        if has_maps:
+        if with_maps and has_maps:  # (a constant first: the other variant has no look-up code)
             # The row's covered pixels first: each winner's depth and barycentrics (read back
             # below), its world point (as winner_surface) and its visibility per light, in
             # runs over the row (shadow_kernels.nearest_run: tight loops of divisions), or
@@ -1427,11 +1433,16 @@ def _plain_kernel() -> object:  # a numba dispatcher
                     o_groups[g, row, col, ch] = 0.0 + np.float32(g_acc[g, ch])
         return n_row
 
+    variant = "maps" if with_maps else "plain"
+    plain_row.__qualname__ += f".{variant}"  # each variant under its own name in the cache
+    plain_row = numba.njit(cache=True, error_model="numpy")(plain_row)
     # a module global, not a closure variable (as _point_terms: the disk cache's key)
-    global _plain_row
-    _plain_row = plain_row
+    global _plain_row_maps, _plain_row_plain
+    if with_maps:
+        _plain_row_maps = plain_row
+    else:
+        _plain_row_plain = plain_row
 
-    @numba.njit(cache=True, nogil=True)
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
         source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
@@ -1444,7 +1455,7 @@ def _plain_kernel() -> object:  # a numba dispatcher
         # no write races. Returns the number of covered pixels.
         covered = 0
         for i_row in range(row_order.shape[0]):
-            covered += _plain_row(
+            covered += (_plain_row_maps if with_maps else _plain_row_plain)(
                 row_order[i_row], width, from_winners, index, tri, bary, frag_depth, frag_front,
                 source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
                 geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
@@ -1453,10 +1464,11 @@ def _plain_kernel() -> object:  # a numba dispatcher
             )  # fmt: skip
         return covered
 
-    return plain
+    plain.__qualname__ += f".{variant}"
+    return numba.njit(cache=True, nogil=True)(plain)
 
 
-def _run_plain(*args: object) -> int:
+def _run_plain(*args: object, with_maps: bool = False) -> int:
     """Run the fused kernel: the frame's rows in shares on threads
     (:func:`compositing._threads.run_shares`; the kernel releases the GIL).
 
@@ -1469,7 +1481,7 @@ def _run_plain(*args: object) -> int:
 
     from compositing._threads import run_shares
 
-    kernel = _plain_kernel()
+    kernel = _plain_kernel(with_maps)
     width, height, row_order, *rest = args
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
@@ -1679,6 +1691,7 @@ def shade_plain_winners_compiled(
             two_sided, geometry, materials, lights, flags, frequencies, _fog_scalars(fog),
             visibility is not None or maps is not None, vis, vis_mean, rank, stack, world, 0, _NO_INDEX, 0, 0,
             *out, *_group_args(groups, len(lights[0]), setup.height, setup.width, len(materials[0])),
+            with_maps=maps is not None,
         )
     )  # fmt: skip
 
