@@ -1075,18 +1075,15 @@ def resolve_frame_compiled(
 
 #: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
 _point_terms: object = None
-_plain_row_maps: object = None
-_plain_row_plain: object = None
+_plain_row: object = None
+_map_row: object = None
 
 
-@functools.lru_cache(maxsize=2)
-def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
-    """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself.
-
-    Two variants, so that a frame without shadow maps does not compile the shadow-map look-ups
-    (``shadow_kernels.nearest_run`` and ``stacked_visibility``, about 4 s of compilation): the
-    branch on the constant ``with_maps`` is removed before numba types the function, and the
-    variants are cached apart (their names and closure values differ)."""
+@functools.lru_cache(maxsize=1)
+def _row_kernels() -> None:
+    """Compile-on-demand dispatchers of the fused frame kernel's rows, set as module globals:
+    ``_plain_row`` (a row's shading, resolve and writes) and ``_map_row`` (a row's shadow-map
+    look-ups, compiled only when a frame has shadow maps)."""
     import hashlib
     import math
 
@@ -1131,6 +1128,7 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
         geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
         maps, world, n_opaque, offsets, max_layers, max_list,
         o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow, group_of, group_base, o_groups,
+        r_bary, r_vis,
     ):  # fmt: skip  # pragma: no cover - compiled
         # Per pixel, its visible fragments: ``index[pixel]`` is the z-buffer's winning
         # sub-triangle (from_winners: barycentrics and depth as ``finish`` computes them) or the
@@ -1157,69 +1155,20 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
         local_viewer, blinn, gl_compat, separate = flags
         mode_of, vertex_terms, winding, view_t = frequencies
         fog_mode, fog_radial, density, start, end, cr, cg, cb = fog
-        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
-        # shadow maps looked up here (opaque winners only, no normal offset): each pixel's world
-        # point as winner_surface computes it, its visibility per light as
-        # shadow_kernels.visibility_at
+        m_first = maps[3]  # one entry per lit light with shadow maps (none: empty)
+        # shadow maps (``r_bary``, ``r_vis``: the row's covered pixels' depth and barycentrics
+        # and their visibility per light, found by map_row before this call)
         n_lit = m_first.shape[0]
         has_maps = n_lit > 0
-        no_faces = np.zeros(0, np.int8)
-        scratch = width if has_maps else 0
         lists = offsets.shape[0] > 0
         row_stamp = np.zeros(0, np.int64)
         row_stamp[:0] = lighting_stamp  # (a reference that keeps the stamp in the cache key)
         order = np.empty(max(max_list, 1), np.int64)  # scratch of the row's thread
-        r_bary = np.empty((scratch, 4))  # maps: the row's winners (depth, b0, b1, b2) ...
-        r_pts = np.empty((scratch, 3))  # ... world points and visibilities
-        r_vis = np.empty((scratch, max(n_lit, 1)))
-        r_vis3 = r_vis.reshape((scratch, max(n_lit, 1), 1))
-        s_qx = np.empty(scratch)
-        s_qy = np.empty(scratch)
-        s_qz = np.empty(scratch)
-        s_cw = np.empty(scratch)
-        s_face = np.zeros(scratch, np.int64)
+        r_vis3 = r_vis.reshape((r_vis.shape[0], r_vis.shape[1], 1))
         j_cov = 0  # the next covered pixel of the row (maps)
         n_groups = o_groups.shape[0]
         g_frag = np.zeros((n_groups, 3))  # a fragment's colour per group
         g_acc = np.zeros((n_groups, 3))  # the pixel's composited colour per group
-        if with_maps and has_maps:  # (a constant first: the other variant has no look-up code)
-            # The row's covered pixels first: each winner's depth and barycentrics (read back
-            # below), its world point (as winner_surface) and its visibility per light, in
-            # runs over the row (shadow_kernels.nearest_run: tight loops of divisions), or
-            # per point (stacked_visibility: the PCF kernels).
-            n_cov = 0
-            for col in range(width):
-                o = index[row * width + col]
-                if o < 0:
-                    continue
-                depth, b0, b1, b2 = _winner_point(
-                    o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
-                )
-                r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
-                src = source[o]
-                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
-                for k in range(3):
-                    r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
-                n_cov += 1
-            for i_light in range(n_lit):
-                f0 = m_first[i_light]
-                if f0 < 0:
-                    for j in range(n_cov):
-                        r_vis[j, i_light] = 1.0
-                    continue
-                cube = 1 if m_faces[i_light] == 6 else 0
-                if m_kernel[i_light] == 0:
-                    _nearest_run(
-                        r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
-                        r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
-                    )  # fmt: skip
-                    continue
-                for j in range(n_cov):
-                    r_vis[j, i_light] = _stacked_visibility(
-                        r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
-                        m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
-                        m_rects, m_miss,
-                    )  # fmt: skip
         n_row = 0
         cy = row + 0.5
         for col in range(width):
@@ -1433,15 +1382,73 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
                     o_groups[g, row, col, ch] = 0.0 + np.float32(g_acc[g, ch])
         return n_row
 
-    variant = "maps" if with_maps else "plain"
-    plain_row.__qualname__ += f".{variant}"  # each variant under its own name in the cache
     plain_row = numba.njit(cache=True, error_model="numpy")(plain_row)
-    # a module global, not a closure variable (as _point_terms: the disk cache's key)
-    global _plain_row_maps, _plain_row_plain
-    if with_maps:
-        _plain_row_maps = plain_row
-    else:
-        _plain_row_plain = plain_row
+    # module globals, not closure variables (as _point_terms: the disk cache's key)
+    global _plain_row, _map_row
+    _plain_row = plain_row
+
+    @numba.njit(cache=True, error_model="numpy")
+    def map_row(
+        row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source, triangles, world, maps,
+        r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        # The row's covered pixels first: each winner's depth and barycentrics (read back by
+        # plain_row), its world point (as winner_surface) and its visibility per light
+        # (shadow_kernels.visibility_at, opaque winners only, no normal offset), in runs over the
+        # row (shadow_kernels.nearest_run: tight loops of divisions), or per point
+        # (stacked_visibility: the PCF kernels). Compiled only for frames with shadow maps.
+        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
+        n_lit = m_first.shape[0]
+        no_faces = np.zeros(0, np.int8)
+        n_cov = 0
+        for col in range(width):
+            o = index[row * width + col]
+            if o < 0:
+                continue
+            depth, b0, b1, b2 = _winner_point(
+                o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
+            )
+            r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
+            src = source[o]
+            v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+            for k in range(3):
+                r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
+            n_cov += 1
+        for i_light in range(n_lit):
+            f0 = m_first[i_light]
+            if f0 < 0:
+                for j in range(n_cov):
+                    r_vis[j, i_light] = 1.0
+                continue
+            cube = 1 if m_faces[i_light] == 6 else 0
+            if m_kernel[i_light] == 0:
+                _nearest_run(
+                    r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
+                    r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
+                )  # fmt: skip
+                continue
+            for j in range(n_cov):
+                r_vis[j, i_light] = _stacked_visibility(
+                    r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
+                    m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
+                    m_rects, m_miss,
+                )  # fmt: skip
+
+    _map_row = map_row
+
+
+@functools.lru_cache(maxsize=2)
+def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
+    """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself.
+
+    Two variants of the short loop over a share of rows, so that a frame without shadow maps
+    does not compile the shadow-map look-ups (``map_row``, ``shadow_kernels.nearest_run`` and
+    ``stacked_visibility``, about 5 s of compilation): the branch on the constant ``with_maps``
+    is removed before numba types the function, and the variants are cached apart (their names
+    and closure values differ). Both call the same row function (compiled once)."""
+    import numba
+
+    _row_kernels()
 
     def plain(
         width, height, row_order, from_winners, index, tri, bary, frag_depth, frag_front,
@@ -1452,18 +1459,38 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
     ):  # fmt: skip  # pragma: no cover - compiled
         # The rows ``row_order`` (a share of the frame's: compositing._threads runs the shares on
         # threads, the GIL released); each row is written by one call of plain_row, so there are
-        # no write races. Returns the number of covered pixels.
+        # no write races. Returns the number of covered pixels. ``with_maps`` (a constant: the
+        # branch is removed before typing) — the variant that looks the shadow maps up first.
+        n_lit = maps[3].shape[0]
+        scratch = width if with_maps and n_lit > 0 else 0
+        r_bary = np.empty((scratch, 4))  # the row's winners (depth, b0, b1, b2) ...
+        r_pts = np.empty((scratch, 3))  # ... world points and visibilities
+        r_vis = np.empty((scratch, max(n_lit, 1)))
+        s_qx = np.empty(scratch)
+        s_qy = np.empty(scratch)
+        s_qz = np.empty(scratch)
+        s_cw = np.empty(scratch)
+        s_face = np.zeros(scratch, np.int64)
         covered = 0
         for i_row in range(row_order.shape[0]):
-            covered += (_plain_row_maps if with_maps else _plain_row_plain)(
-                row_order[i_row], width, from_winners, index, tri, bary, frag_depth, frag_front,
+            row = row_order[i_row]
+            if with_maps:
+                if n_lit > 0:
+                    _map_row(
+                        row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source,
+                        geometry[0], world, maps, r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
+                    )  # fmt: skip
+            covered += _plain_row(
+                row, width, from_winners, index, tri, bary, frag_depth, frag_front,
                 source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
                 geometry, materials, lights, flags, frequencies, fog, has_vis, vis, vis_mean, vis_index,
                 maps, world, n_opaque, offsets, max_layers, max_list,
                 o_rgba, o_amb, o_dif, o_spe, o_nrm, o_depth, o_shadow, group_of, group_base, o_groups,
+                r_bary, r_vis,
             )  # fmt: skip
         return covered
 
+    variant = "maps" if with_maps else "plain"
     plain.__qualname__ += f".{variant}"
     return numba.njit(cache=True, nogil=True)(plain)
 
