@@ -405,6 +405,7 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
 
             request = cryptomatte_request(depsgraph.view_layer, converted)
             groups = light_groups_request(depsgraph.view_layer, converted)
+            self._first_image_while_compiling(converted, progress, layer)
             result = render_converted(converted, progress, request, groups)
             deep_path = None
             if result.deep is not None:
@@ -439,6 +440,23 @@ class BlinnPhongRenderEngine(bpy.types.RenderEngine):
             print(f"Blinn-Phong: warning: {warning}", file=sys.stderr, flush=True)
         for note in notes:
             self.report({"WARNING"}, note)
+
+    def _first_image_while_compiling(
+        self, converted: convert.ConvertedScene, progress: Any, layer: str
+    ) -> None:
+        """While the kernels compile in the background (:func:`pipeline.frame_engine`), frames
+        render with the numpy engine, which is slow at several samples per pixel (a 1080p frame:
+        3.7 s at one sample, 13.7 s at four on the 2-core VM). Show a one-sample Combined image
+        first, as a progressive render would; the full frame then replaces it."""
+        engine, note = pipeline.frame_engine(converted.options.engine)
+        if engine != "NUMPY" or note is None or converted.options.samples_per_axis <= 1:
+            return
+        self.update_stats("", "Blinn-Phong: a first image at one sample while the kernels compile")
+        quick = dataclasses.replace(
+            converted, options=dataclasses.replace(converted.options, samples_per_axis=1)
+        )
+        self._write(converted, render_converted(quick, progress), layer, combined_only=True)
+        LAST_RENDER["first_image"] = True
 
     def _keep_deep(
         self, scene: bpy.types.Scene, converted: convert.ConvertedScene, deep: DeepImage

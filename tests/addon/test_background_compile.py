@@ -16,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("numba")
@@ -80,3 +81,74 @@ def test_without_a_user_interface_frames_compile_in_process() -> None:
     assert pipeline.BACKGROUND_COMPILE is False  # bpy.app.background, the batch, tests
     assert pipeline.frame_engine("AUTO") == ("AUTO", None)
     assert pipeline.frame_engine("NUMPY") == ("NUMPY", None)
+
+
+F12 = """
+import json, sys, time
+import bpy
+from addon import compat, engine, pipeline, properties, render_ui
+
+bpy.ops.wm.read_factory_settings(use_empty=True)
+properties.register()
+engine.register()
+render_ui.register()
+pipeline.BACKGROUND_COMPILE = True  # as with Blender's interface (bpy runs in background mode)
+scene = bpy.context.scene
+bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 0.5))
+bpy.ops.mesh.primitive_plane_add(size=8.0)
+cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+cam.location = (0.0, -6.0, 3.0)
+cam.rotation_euler = (1.1, 0.0, 0.0)
+scene.collection.objects.link(cam)
+scene.camera = cam
+sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+scene.collection.objects.link(sun)
+scene.render.engine = "BLINN_PHONG"
+scene.render.film_transparent = True
+scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 40, 30, 100
+scene.blinn_phong.samples_per_axis = 2
+scene.blinn_phong.shadows = "NONE"
+compat.set_image_format(scene.render.image_settings, "OPEN_EXR_MULTILAYER", "32")
+out = {}
+for tag in ("while_compiling", "compiled"):
+    scene.render.filepath = f"{sys.argv[1]}/{tag}.exr"
+    bpy.ops.render.render(write_still=True)
+    out[tag] = {k: engine.LAST_RENDER.get(k) for k in ("ok", "status", "first_image")}
+    out[tag]["engine"] = engine.LAST_RENDER["choices"]["engine"]
+    if tag == "while_compiling":
+        out["exit"] = pipeline._warmup["process"].wait(timeout=900)
+scene.render.engine = "CYCLES"
+render_ui.unregister()
+engine.unregister()
+properties.unregister()
+emit(out)
+"""
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_f12_shows_a_one_sample_image_first_then_the_full_frame(tmp_path: Path) -> None:
+    """While the kernels compile elsewhere, F12 at 2×2 samples writes a one-sample Combined first
+    (a progressive first image) and then the full frame with every pass; the saved frame equals
+    the compiled engine's render of the same scene once the kernels are in (the engines agree to
+    float rounding)."""
+    from addon_testing import run_bpy
+
+    from tests.addon.test_addon_cryptomatte import _passes
+
+    env = {
+        "BLINN_PHONG_KERNEL_CACHE": str(tmp_path / "kernels"),
+        "BLINN_PHONG_WARMUP_CASES": "plain 4 samples",
+    }
+    got = run_bpy(F12, tmp_path, args=(str(tmp_path),), timeout=900, env=env)
+    first, second = got["while_compiling"], got["compiled"]
+    assert first["ok"] and first["first_image"] and first["engine"] == "numpy"
+    assert "compiling in the background" in first["status"]
+    assert got["exit"] == 0
+    assert second["ok"] and not second["first_image"] and second["engine"] == "numba"
+    numpy_frame, _, _ = _passes(tmp_path / "while_compiling.exr")
+    numba_frame, _, _ = _passes(tmp_path / "compiled.exr")
+    assert {"ViewLayer.Depth", "ViewLayer.Shadow"} <= set(numpy_frame)  # the full frame's passes
+    np.testing.assert_allclose(
+        numpy_frame["ViewLayer.Combined"], numba_frame["ViewLayer.Combined"], atol=1e-6
+    )
