@@ -120,6 +120,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import choice_error
+from ._numba import use_compiled
 from ._scratch import carve, carved_bytes
 from .scene import Camera, DirectionalLight, PointLight, SpotLight
 
@@ -138,7 +139,6 @@ __all__ = [
 
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
-_ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 10_000  # fewer receivers are counted on one thread (parallel pays from about 10k)
 _PARALLEL_FACES = 10_000  # fewer volume triangles are set up on one thread
@@ -1507,18 +1507,6 @@ def _threads() -> int:
     return max(1, int(numba.get_num_threads()))
 
 
-def _use_numba(engine: str) -> bool:
-    if engine not in _ENGINES:
-        raise choice_error("engine", engine, _ENGINES)
-    if engine == "numpy":
-        return False
-    from .fast import numba_available
-
-    if engine == "numba" and not numba_available():
-        raise ValueError("engine: 'numba' was asked for but numba cannot be imported")
-    return numba_available()
-
-
 def stencil_counts(
     volume_triangles: np.ndarray,
     view: np.ndarray,
@@ -1552,7 +1540,7 @@ def stencil_counts(
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     if vp.shape != (4, 4) or not np.all(np.isfinite(vp)):
         raise ValueError(f"view/projection: expected finite 4×4 matrices, got product shape {vp.shape}")
-    numba_path = _use_numba(engine)
+    numba_path = use_compiled(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
     rec = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
@@ -1919,12 +1907,12 @@ def shadow_volume_visibility(
     light_vec, directional = _light(light)
     if stencil not in (*STENCIL_METHODS, "auto"):
         raise choice_error("stencil", stencil, STENCIL_METHODS, also="'auto' or ")
-    _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
+    use_compiled(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
         _points("points", p)
         _points("normals", n)
         return np.ones(len(p))
-    numba_path = _use_numba(engine)
+    numba_path = use_compiled(engine)
     q = None
     if camera is None:
         # the default camera is built from the points: refuse non-finite ones by their own name

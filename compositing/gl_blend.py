@@ -51,9 +51,10 @@ from typing import Final
 
 import numpy as np
 
+from ._engine import ENGINES, use_compiled
 from ._gl_exprs import GL_EQUATION_EXPRS, GL_FACTOR_EXPRS, exact_factor, uses_factors
 from .factors import ALL_OPERATORS, evaluate_in
-from .operators import _fused_available, resolve_operator
+from .operators import resolve_operator
 from .validate import as_rgba, broadcast_shapes, check_finite
 
 __all__ = [
@@ -101,7 +102,7 @@ GL_BLEND_TARGETS: Final[tuple[str, ...]] = ("float32", "unorm8")
 
 #: Engines :func:`gl_blend` accepts: the compiled blend stage (``"numba"``, generated from the
 #: table below) and the numpy reference; ``"auto"`` takes the compiled one when numba is installed.
-GL_BLEND_ENGINES: Final[tuple[str, ...]] = ("auto", "numpy", "numba")
+GL_BLEND_ENGINES: Final[tuple[str, ...]] = ENGINES
 
 #: ``engine="auto"`` evaluates fewer pixels than this with numpy: a few colours are not worth
 #: the compilation of the generic kernel (1–2 s once per process); both engines agree.
@@ -245,8 +246,7 @@ def gl_blend(
     )
     if not isinstance(target, str) or target.lower() not in GL_BLEND_TARGETS:
         raise ValueError(f"target must be one of {', '.join(GL_BLEND_TARGETS)}, got {target!r}")
-    if engine not in GL_BLEND_ENGINES:
-        raise ValueError(f"engine: expected one of {GL_BLEND_ENGINES}, got {engine!r}")
+    compiled = use_compiled(engine)
     unorm8 = target.lower() == "unorm8"
 
     # Any finite value is allowed, alpha included: a float framebuffer holds whatever it is given.
@@ -262,9 +262,7 @@ def gl_blend(
     rgb_state, alpha_state = (sf, df, eq), (sfa, dfa, eqa)
 
     pixels = int(np.prod(shape[:-1]))
-    use_fused = engine == "numba" or (
-        engine == "auto" and pixels >= AUTO_COMPILED_MIN_PIXELS and _fused_available()
-    )
+    use_fused = compiled and (engine == "numba" or pixels >= AUTO_COMPILED_MIN_PIXELS)
     if use_fused:
         return _gl_blend_fused(s, d, constant_arr, rgb_state, alpha_state, shape, dtype, unorm8, codes)
 
