@@ -299,41 +299,12 @@ _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 @functools.lru_cache(maxsize=1)
 def _hash_kernels() -> tuple[object, object, object, object]:
-    """Compiled hash-table welding, edge pairing (linear probing) and union-find (same results as
-    the numpy sorts and pointer jumping), and the content digest of :func:`_digest`."""
+    """Compiled hash-table welding (:func:`blinn_phong._hashing.weld_rows`), edge pairing (linear
+    probing) and union-find (same results as the numpy sorts and pointer jumping), and the
+    content digest of :func:`_digest`."""
     import numba
 
-    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
-
-    @numba.njit(cache=True)
-    def weld(bits):  # pragma: no cover - compiled
-        m = bits.shape[0]
-        size = 1
-        while size < 2 * m:
-            size *= 2
-        table = np.full(size, -1, np.int64)
-        inverse = np.empty(m, np.int64)
-        first = np.empty(m, np.int64)
-        n_unique = 0
-        for r in range(m):
-            h = np.uint64(0)
-            for c in range(3):
-                h = vh.mix(bits[r, c] ^ h)
-            slot = np.int64(h & np.uint64(size - 1))
-            while True:
-                u = table[slot]
-                if u < 0:
-                    table[slot] = n_unique
-                    first[n_unique] = r
-                    inverse[r] = n_unique
-                    n_unique += 1
-                    break
-                q = first[u]
-                if bits[q, 0] == bits[r, 0] and bits[q, 1] == bits[r, 1] and bits[q, 2] == bits[r, 2]:
-                    inverse[r] = u
-                    break
-                slot = (slot + 1) & (size - 1)
-        return first[:n_unique].copy(), inverse
+    from blinn_phong import _hashing as hx  # module-level helpers: numba caches the callers
 
     @numba.njit(cache=True)
     def pair(key, twin):  # pragma: no cover - compiled
@@ -346,7 +317,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         count = np.zeros(m, np.int64)  # indexed by the first occurrence
         first_of = np.empty(m, np.int64)
         for e in range(m):
-            slot = np.int64(vh.mix(np.uint64(key[e])) & np.uint64(size - 1))
+            slot = np.int64(hx.mix(np.uint64(key[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -364,7 +335,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         twin_first = np.full(m, -1, np.int64)
         for e in range(m):
             own[e] = count[first_of[e]]
-            slot = np.int64(vh.mix(np.uint64(twin[e])) & np.uint64(size - 1))
+            slot = np.int64(hx.mix(np.uint64(twin[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -400,20 +371,20 @@ def _hash_kernels() -> tuple[object, object, object, object]:
     def digest(bits):  # pragma: no cover - compiled
         out = np.empty(8, np.uint64)
         for lane in range(8):
-            out[lane] = vh.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
+            out[lane] = hx.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
         m = bits.shape[0]
         full = m - m % 4
         for i in range(0, full, 4):
             for lane in range(4):
                 v = bits[i + lane]
-                out[lane] = vh.mix(out[lane] ^ v)
-                out[lane + 4] = vh.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
+                out[lane] = hx.mix(out[lane] ^ v)
+                out[lane + 4] = hx.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
         for i in range(full, m):
-            out[0] = vh.mix(out[0] ^ bits[i])
-            out[4] = vh.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
+            out[0] = hx.mix(out[0] ^ bits[i])
+            out[4] = hx.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
         return out
 
-    return weld, pair, union_find, digest
+    return hx.weld_rows, pair, union_find, digest
 
 
 @functools.lru_cache(maxsize=1)
@@ -513,10 +484,7 @@ def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         representative, inverse = _hash_kernels()[0](bits)
         return flat[representative], inverse
 
-    def mix(z: np.ndarray) -> np.ndarray:  # splitmix64's finaliser (wrapping uint64 arithmetic)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
+    from ._hashing import splitmix64 as mix
 
     digest = mix(mix(mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
     order = np.argsort(digest, kind="stable")  # radix sort for integers
