@@ -255,9 +255,9 @@ def textured_material(
     changes: dict[str, object] = {"base_color_texture": texture}
     settings = getattr(blender_material, "blinn_phong", None)
     if base and (settings is None or settings.source != "CUSTOM"):
-        from . import convert, mapping  # the same Principled values, with a white base colour
+        from . import mapping, principled  # the same Principled values, with a white base colour
 
-        inputs, _ = convert.principled_inputs(blender_material)
+        inputs, _ = principled.principled_inputs(blender_material)
         inputs["base_color"] = (1.0, 1.0, 1.0)
         values = mapping.blinn_phong_from_principled(**inputs)
         changes.update(ambient=values["ambient"], diffuse=values["diffuse"], specular=values["specular"])

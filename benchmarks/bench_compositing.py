@@ -38,7 +38,7 @@ import OpenImageIO as oiio  # noqa: N813
 
 from benchmarks._util import machine_info, markdown_table, time_interleaved, write_json
 from compositing import ALL_OPERATORS, composite
-from compositing.operators import _fused_available
+from compositing._engine import numba_available
 
 __all__ = ["main", "run"]
 
@@ -249,7 +249,7 @@ def run(repeat: int = 7, quick: bool = False) -> dict:
     machine["load_average_1min_after"] = machine_info().get("load_average_1min")
     return {
         "benchmark": "compositing.composite vs OpenImageIO ImageBufAlgo.over (float32 RGBA)",
-        "engine": "numba fused" if _fused_available() else "numpy",
+        "engine": "numba fused" if numba_available() else "numpy",
         "repeat": repeat,
         "oiio_version": oiio.VERSION_STRING,
         "numpy_version": np.__version__,

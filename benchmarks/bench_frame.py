@@ -42,8 +42,9 @@ already in ``--out`` (marked ``scaling_measured: false``). ``--quick`` writes
 ``frame_quick.json`` instead, so a quick run never replaces the full measurement
 (``python -m benchmarks --only frame`` runs this module; ``--quick`` passes on).
 
-Writes ``frame.json`` to ``--out``; :func:`draw` makes ``frame_scaling.png``
-(:func:`benchmarks.charts.draw_all` calls it when ``frame.json`` is in the results directory).
+Writes ``frame.json`` to ``--out``; :func:`benchmarks.charts.frame_scaling_chart` makes
+``frame_scaling.png`` from it (``--charts``, and :func:`benchmarks.charts.draw_all` when
+``frame.json`` is in the results directory).
 """
 
 from __future__ import annotations
@@ -60,13 +61,12 @@ from pathlib import Path
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks._util import machine_info, markdown_table, save_figure, time_interleaved, write_json
+from benchmarks._util import machine_info, markdown_table, time_interleaved, write_json
 from blinn_phong.primitives import grid_plane, uv_sphere
 
 __all__ = [
     "CASES",
     "SCALING_CASES",
-    "draw",
     "issue_scene",
     "main",
     "mesa_peer",
@@ -383,124 +383,6 @@ def run(
     return data
 
 
-#: Line style per scaling case: (colour, marker, dash).
-_STYLE = {
-    "plain": ("black", "o", "-"),
-    "default": ("tab:gray", "x", "--"),
-    "shadow_map": ("tab:blue", "s", "-"),
-    "ray_traced": ("tab:orange", "^", "-"),
-    "shadow_volume": ("tab:green", "v", "-"),
-    "a_buffer": ("tab:red", "D", "-"),
-    "draw_last": ("tab:purple", "<", ":"),
-    "weighted_blended": ("tab:brown", ">", ":"),
-    "fog": ("tab:cyan", "P", "--"),
-}
-
-
-def draw(data: dict, out_dir: str | Path) -> list[Path]:
-    """``frame_scaling.png``: time and peak RSS against pixels and against triangles, one line per effect,
-    and the A-buffer's fragments (rasterized, kept) and bytes against pixels."""
-    from benchmarks.charts import DPI, plt
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
-    scaling = data["scaling"]
-    cases = [c for c in _STYLE if any(p["case"] == c for p in scaling["pixels"] + scaling["triangles"])]
-    cases += sorted({p["case"] for p in scaling["pixels"]} - set(cases))
-    for col, key in enumerate(("pixels", "triangles")):
-        for case in cases:
-            mine = sorted((p for p in scaling[key] if p["case"] == case), key=lambda p: p[key])
-            if not mine:
-                continue
-            colour, marker, dash = _STYLE.get(case, (None, ".", "-"))
-            x = [p[key] for p in mine]
-            style = {"color": colour, "marker": marker, "linestyle": dash, "label": case, "markersize": 4}
-            axes[0, col].plot(x, [p["seconds"] for p in mine], **style)
-            axes[1, col].plot(x, [p["peak_rss_bytes"] / 1e9 for p in mine], **style)
-        sizes = sorted({(p["width"], p["height"]) for p in scaling[key]})
-        fixed = (
-            f"{max((p['triangles'] for p in scaling[key]), default=0):,} triangles"
-            if key == "pixels"
-            else "×".join(map(str, sizes[0]))
-            if sizes
-            else ""
-        )
-        for row, label in ((0, "seconds, one render (wall)"), (1, "peak RSS, GB (10⁹ bytes)")):
-            ax = axes[row, col]
-            ax.set_xscale("log")
-            ax.set_xlabel(f"{key} ({fixed})", fontsize=8)
-            ax.set_ylabel(label, fontsize=8)
-            ax.grid(True, which="both", alpha=0.25)
-            ax.tick_params(labelsize=7)
-        axes[0, col].set_yscale("log")
-        axes[1, col].axhline(2.0, color="red", linewidth=0.8, alpha=0.5)
-    census = sorted(
-        (p for p in scaling["pixels"] if p["case"] == "a_buffer" and "fragments" in p),
-        key=lambda p: p["pixels"],
-    )
-    ax = axes[0, 2]
-    if census:
-        x = [p["pixels"] for p in census]
-        for field, label, style in (
-            ("rasterized", "rasterized, all meshes", "k-o"),
-            ("rasterized_transparent", "rasterized, transparent sphere", "r--D"),
-            ("kept_opaque", "kept: nearest opaque", "b-s"),
-            ("kept_transparent", "kept: transparent in front", "r-D"),
-        ):
-            ax.plot(x, [p["fragments"][field] for p in census], style, label=label, markersize=4)
-        ax.set_yscale("log")
-    ax.set_title("A-buffer: fragments rasterized vs kept", fontsize=9)
-    ax.set_ylabel("fragments", fontsize=8)
-    ax = axes[1, 2]
-    if census:
-        ax.plot(
-            x,
-            [p["fragments"]["rasterized_bytes"] / 1e9 for p in census],
-            "k-o",
-            label="all rasterized fragments (not built)",
-            markersize=4,
-        )
-        ax.plot(
-            x,
-            [p["fragments"]["kept_bytes"] / 1e9 for p in census],
-            "r-D",
-            label="kept fragments + per-sample lists",
-            markersize=4,
-        )
-        plain = {p["pixels"]: p["peak_rss_bytes"] for p in scaling["pixels"] if p["case"] == "plain"}
-        extra = [
-            (p["pixels"], p["peak_rss_bytes"] - plain[p["pixels"]]) for p in census if p["pixels"] in plain
-        ]
-        ax.plot(
-            [e[0] for e in extra],
-            [e[1] / 1e9 for e in extra],
-            "r:",
-            label="peak RSS: A-buffer frame − plain frame",
-        )
-    ax.set_title("A-buffer: bytes", fontsize=9)
-    ax.set_ylabel("GB", fontsize=8)
-    for ax in axes[:, 2]:
-        ax.set_xscale("log")
-        ax.set_xlabel("pixels", fontsize=8)
-        ax.grid(True, which="both", alpha=0.25)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=7)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
-    fig.suptitle(
-        "Frame pipeline scaling per effect (two spheres over a plane, 2 lights; A-buffer/draw-last/weighted "
-        "blended: one sphere at opacity 0.5); red line: 2 GB\n"
-        "times: one render per point, each series in its own process on a shared machine — compare slopes, "
-        "and ratios only within the interleaved table",
-        fontsize=9,
-    )
-    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
-    path = save_figure(fig, out / "frame_scaling.png", dpi=DPI)  # atomic: a failed save keeps the old chart
-    plt.close(fig)
-    return [path]
-
-
 def main(argv: list[str] | None = None) -> None:
     """Command-line entry point (see the module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -549,7 +431,9 @@ def main(argv: list[str] | None = None) -> None:
                 f"wall {row['ratio_to_mesa']:.2f}×, CPU {row['cpu_ratio_to_mesa']:.2f}×"
             )
     if args.charts is not None:
-        for path in draw(data, args.charts / "charts"):
+        from benchmarks.charts import frame_scaling_chart  # matplotlib only when charts are asked for
+
+        for path in frame_scaling_chart(data, args.charts / "charts"):
             print(f"chart {path}")
 
 

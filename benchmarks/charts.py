@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 
 from benchmarks._util import save_figure
 
-__all__ = ["EXACT_FLOOR", "draw_all", "pareto_front", "tradeoff_chart"]
+__all__ = ["EXACT_FLOOR", "draw_all", "frame_scaling_chart", "pareto_front", "tradeoff_chart"]
 
 #: Where an error of exactly 0 is drawn on the log-scale error axes (8-bit steps).
 EXACT_FLOOR = 1e-3
@@ -402,6 +402,123 @@ def peers_chart(results: dict[str, dict], results_dir: Path | None, out_dir: Pat
     return [out_dir / "peers.png"]
 
 
+#: Line style per scaling case: (colour, marker, dash).
+_STYLE = {
+    "plain": ("black", "o", "-"),
+    "default": ("tab:gray", "x", "--"),
+    "shadow_map": ("tab:blue", "s", "-"),
+    "ray_traced": ("tab:orange", "^", "-"),
+    "shadow_volume": ("tab:green", "v", "-"),
+    "a_buffer": ("tab:red", "D", "-"),
+    "draw_last": ("tab:purple", "<", ":"),
+    "weighted_blended": ("tab:brown", ">", ":"),
+    "fog": ("tab:cyan", "P", "--"),
+}
+
+
+def frame_scaling_chart(data: dict, out_dir: str | Path) -> list[Path]:
+    """``frame_scaling.png`` from :mod:`benchmarks.bench_frame`'s ``frame.json``: time and peak RSS
+    against pixels and against triangles, one line per effect, and the A-buffer's fragments
+    (rasterized, kept) and bytes against pixels."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
+    scaling = data["scaling"]
+    cases = [c for c in _STYLE if any(p["case"] == c for p in scaling["pixels"] + scaling["triangles"])]
+    cases += sorted({p["case"] for p in scaling["pixels"]} - set(cases))
+    for col, key in enumerate(("pixels", "triangles")):
+        for case in cases:
+            mine = sorted((p for p in scaling[key] if p["case"] == case), key=lambda p: p[key])
+            if not mine:
+                continue
+            colour, marker, dash = _STYLE.get(case, (None, ".", "-"))
+            x = [p[key] for p in mine]
+            style = {"color": colour, "marker": marker, "linestyle": dash, "label": case, "markersize": 4}
+            axes[0, col].plot(x, [p["seconds"] for p in mine], **style)
+            axes[1, col].plot(x, [p["peak_rss_bytes"] / 1e9 for p in mine], **style)
+        sizes = sorted({(p["width"], p["height"]) for p in scaling[key]})
+        fixed = (
+            f"{max((p['triangles'] for p in scaling[key]), default=0):,} triangles"
+            if key == "pixels"
+            else "×".join(map(str, sizes[0]))
+            if sizes
+            else ""
+        )
+        for row, label in ((0, "seconds, one render (wall)"), (1, "peak RSS, GB (10⁹ bytes)")):
+            ax = axes[row, col]
+            ax.set_xscale("log")
+            ax.set_xlabel(f"{key} ({fixed})", fontsize=8)
+            ax.set_ylabel(label, fontsize=8)
+            ax.grid(True, which="both", alpha=0.25)
+            ax.tick_params(labelsize=7)
+        axes[0, col].set_yscale("log")
+        axes[1, col].axhline(2.0, color="red", linewidth=0.8, alpha=0.5)
+    census = sorted(
+        (p for p in scaling["pixels"] if p["case"] == "a_buffer" and "fragments" in p),
+        key=lambda p: p["pixels"],
+    )
+    ax = axes[0, 2]
+    if census:
+        x = [p["pixels"] for p in census]
+        for field, label, style in (
+            ("rasterized", "rasterized, all meshes", "k-o"),
+            ("rasterized_transparent", "rasterized, transparent sphere", "r--D"),
+            ("kept_opaque", "kept: nearest opaque", "b-s"),
+            ("kept_transparent", "kept: transparent in front", "r-D"),
+        ):
+            ax.plot(x, [p["fragments"][field] for p in census], style, label=label, markersize=4)
+        ax.set_yscale("log")
+    ax.set_title("A-buffer: fragments rasterized vs kept", fontsize=9)
+    ax.set_ylabel("fragments", fontsize=8)
+    ax = axes[1, 2]
+    if census:
+        ax.plot(
+            x,
+            [p["fragments"]["rasterized_bytes"] / 1e9 for p in census],
+            "k-o",
+            label="all rasterized fragments (not built)",
+            markersize=4,
+        )
+        ax.plot(
+            x,
+            [p["fragments"]["kept_bytes"] / 1e9 for p in census],
+            "r-D",
+            label="kept fragments + per-sample lists",
+            markersize=4,
+        )
+        plain = {p["pixels"]: p["peak_rss_bytes"] for p in scaling["pixels"] if p["case"] == "plain"}
+        extra = [
+            (p["pixels"], p["peak_rss_bytes"] - plain[p["pixels"]]) for p in census if p["pixels"] in plain
+        ]
+        ax.plot(
+            [e[0] for e in extra],
+            [e[1] / 1e9 for e in extra],
+            "r:",
+            label="peak RSS: A-buffer frame − plain frame",
+        )
+    ax.set_title("A-buffer: bytes", fontsize=9)
+    ax.set_ylabel("GB", fontsize=8)
+    for ax in axes[:, 2]:
+        ax.set_xscale("log")
+        ax.set_xlabel("pixels", fontsize=8)
+        ax.grid(True, which="both", alpha=0.25)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.suptitle(
+        "Frame pipeline scaling per effect (two spheres over a plane, 2 lights; A-buffer/draw-last/weighted "
+        "blended: one sphere at opacity 0.5); red line: 2 GB\n"
+        "times: one render per point, each series in its own process on a shared machine — compare slopes, "
+        "and ratios only within the interleaved table",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0.04, 1, 0.97))
+    path = save_figure(fig, out / "frame_scaling.png", dpi=DPI)  # atomic: a failed save keeps the old chart
+    plt.close(fig)
+    return [path]
+
+
 _DRAW: dict[str, Callable[[dict, Path], list[Path]]] = {
     "shading": _shading,
     "antialiasing": _antialiasing,
@@ -428,7 +545,5 @@ def draw_all(results: dict[str, dict], out_dir: Path, results_dir: Path | None =
     if frames:  # benchmarks.bench_frame (the full measurement when there is one)
         import json
 
-        from benchmarks.bench_frame import draw
-
-        paths += draw(json.loads(frames[0].read_text()), Path(out_dir))
+        paths += frame_scaling_chart(json.loads(frames[0].read_text()), Path(out_dir))
     return paths

@@ -5,7 +5,7 @@ the numpy reference in :mod:`blinn_phong.mesh_facts`, with the same arithmetic o
 operation: ``object_arrays`` (used vertices, triangles with an area, the coordinate tolerance,
 planarity, flat normals), ``rows`` (out-neighbours per vertex by a counting sort of the
 directed edges), ``paired`` (every directed edge once, its twin once), ``weld`` (a hash table
-over integer cells), ``convex`` (tests (1)–(3) of
+over integer cells, :func:`blinn_phong._hashing.weld_rows`), ``convex`` (tests (1)–(3) of
 :func:`blinn_phong.mesh_facts._convex_surface`) and ``world_bounds``.
 
 The functions live at module level, not in a closure: numba's disk cache keys a closure's
@@ -19,6 +19,8 @@ import math
 
 import numba
 import numpy as np
+
+from blinn_phong._hashing import weld_rows
 
 __all__ = ["convex", "object_arrays", "paired", "rows", "weld", "world_bounds"]
 
@@ -167,43 +169,11 @@ def paired(start, dst):  # pragma: no cover - compiled
     return 2 * pairs == dst.shape[0]
 
 
-@numba.njit(inline="always", cache=True)
-def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
 @numba.njit(cache=True)
 def weld(cells, points):  # pragma: no cover - compiled
-    m = cells.shape[0]
-    size = 1
-    while size < 2 * m:
-        size *= 2
-    table = np.full(size, -1, np.int64)
-    label = np.empty(m, np.int64)
-    first = np.empty(m, np.int64)
-    n = 0
-    for r in range(m):
-        h = np.uint64(0)
-        for c in range(3):
-            h = mix(np.uint64(cells[r, c]) ^ h)
-        slot = np.int64(h & np.uint64(size - 1))
-        while True:
-            u = table[slot]
-            if u < 0:
-                table[slot] = n
-                first[n] = r
-                label[r] = n
-                n += 1
-                break
-            q = first[u]
-            if cells[q, 0] == cells[r, 0] and cells[q, 1] == cells[r, 1] and cells[q, 2] == cells[r, 2]:
-                label[r] = u
-                break
-            slot = (slot + 1) & (size - 1)
-    welded = np.zeros((n, 3))
-    for r in range(m):  # the last vertex of a cell gives its position, as numpy's assignment
+    first, label = weld_rows(cells)  # the hash table over the cells
+    welded = np.zeros((first.shape[0], 3))
+    for r in range(cells.shape[0]):  # the last vertex of a cell gives its position, as numpy's assignment
         for c in range(3):
             welded[label[r], c] = points[r, c]
     return label, welded

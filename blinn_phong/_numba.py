@@ -1,17 +1,11 @@
-"""Whether the compiled (numba) engine can be used: a leaf module every engine may import."""
+"""Whether the compiled (numba) engine can be used: a leaf module every engine may import.
+
+The ``engine`` argument's values (:data:`ENGINES`) and their resolution (:func:`use_compiled`) are
+declared once, in :mod:`compositing._engine`, for both packages; this module re-exports them.
+"""
 
 from __future__ import annotations
 
-import functools
+from compositing._engine import ENGINES, numba_available, use_compiled
 
-__all__ = ["numba_available"]
-
-
-@functools.lru_cache(maxsize=1)
-def numba_available() -> bool:
-    """True when numba imports (the compiled path can be used)."""
-    try:
-        import numba  # noqa: F401
-    except Exception:
-        return False
-    return True
+__all__ = ["ENGINES", "numba_available", "use_compiled"]

@@ -3,7 +3,7 @@
 numba keys a cached kernel on the values it closes over; a kernel closing over another compiled
 function (a dispatcher, pickled with a per-process identity) misses the disk cache and is
 compiled again in every new process. The kernels reach these helpers through this module
-instead (``vh.mix``), so they load from the cache. Imported only where numba is installed.
+instead (``vh.edge_box``), so they load from the cache. Imported only where numba is installed.
 """
 
 from __future__ import annotations
@@ -18,18 +18,10 @@ __all__ = [
     "edge_span",
     "finite_input",
     "matrix_entries",
-    "mix",
     "plane_gap",
     "project_point",
     "tile_fit",
 ]
-
-
-@numba.njit(inline="always", cache=True)
-def mix(z):  # pragma: no cover - compiled; splitmix64's finaliser (wrapping uint64 arithmetic)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
 
 
 @numba.njit(inline="always", cache=True)

@@ -18,17 +18,54 @@ which is the specification's straight-alpha formula multiplied through by ``α``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from blinn_phong._checks import choice_error, number, real_array
+from blinn_phong._checks import choice_error, colour3, number, real_array
 
-__all__ = ["FOG_MODES", "apply_fog", "eye_distance", "fog_factor"]
+__all__ = ["FOG_MODES", "Fog", "apply_fog", "eye_distance", "fog_factor"]
 
 FogMode = Literal["linear", "exp", "exp2"]
 #: The three OpenGL fog modes.
 FOG_MODES: tuple[str, ...] = ("linear", "exp", "exp2")
+
+
+@dataclass(frozen=True)
+class Fog:
+    """Fog by eye distance (OpenGL 2.1 §3.10), passed to ``render(fog=...)``.
+
+    Attributes:
+        mode: ``"linear"`` — ``f = (end − c)/(end − start)``; ``"exp"`` — ``f = e^(−density·c)``;
+            ``"exp2"`` — ``f = e^(−(density·c)²)``; f clamped to [0, 1] (:func:`blinn_phong.fog.fog_factor`).
+        color: linear RGB fog colour ``C_f``.
+        density: for ``exp``/``exp2``, per world unit, ≥ 0.
+        start: for ``linear``, eye distance where fog begins.
+        end: for ``linear``, eye distance of full fog (≠ start).
+        distance: ``"plane"`` — ``c = |z_eye|`` (OpenGL's usual); ``"radial"`` — ``c = ‖p_eye‖``.
+
+    Defaults are OpenGL's (GL_EXP, density 1, start 0, end 1, colour black).
+    """
+
+    mode: str = "exp"
+    color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    density: float = 1.0
+    start: float = 0.0
+    end: float = 1.0
+    distance: str = "plane"
+
+    def __post_init__(self) -> None:
+        if self.mode not in FOG_MODES:
+            raise choice_error("Fog.mode", self.mode, FOG_MODES)
+        object.__setattr__(self, "color", colour3(self.color, "Fog.color"))
+        object.__setattr__(self, "density", number(self.density, "Fog.density", low=0.0))
+        object.__setattr__(self, "start", number(self.start, "Fog.start"))
+        object.__setattr__(self, "end", number(self.end, "Fog.end"))
+        if self.mode == "linear" and self.start == self.end:
+            raise ValueError(f"Fog.end: linear fog needs end != start, got start = end = {self.start}")
+        if self.distance not in ("plane", "radial"):
+            raise choice_error("Fog.distance", self.distance, ("plane", "radial"))
 
 
 def eye_distance(eye_positions: np.ndarray, mode: Literal["plane", "radial"] = "plane") -> np.ndarray:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from blinn_phong._checks import choice_error, colour3, number
-from blinn_phong.fog import FOG_MODES
+from blinn_phong._checks import choice_error, number
+from blinn_phong.fog import Fog
 from blinn_phong.mesh_facts import point_triangle_distances
 from blinn_phong.oit import TRANSPARENCY_METHODS
 from blinn_phong.planner import Choice, Plan, coloured_shadow_reason, embree_available, plan
@@ -111,42 +111,6 @@ class ShadowOptions:
             raise ValueError(f"ShadowOptions.samples: expected an integer >= 1, got {self.samples!r}")
         object.__setattr__(self, "radius", number(self.radius, "ShadowOptions.radius", low=0.0))
         object.__setattr__(self, "offset", number(self.offset, "ShadowOptions.offset", low=0.0))
-
-
-@dataclass(frozen=True)
-class Fog:
-    """Fog by eye distance (OpenGL 2.1 §3.10), passed to ``render(fog=...)``.
-
-    Attributes:
-        mode: ``"linear"`` — ``f = (end − c)/(end − start)``; ``"exp"`` — ``f = e^(−density·c)``;
-            ``"exp2"`` — ``f = e^(−(density·c)²)``; f clamped to [0, 1] (:func:`blinn_phong.fog.fog_factor`).
-        color: linear RGB fog colour ``C_f``.
-        density: for ``exp``/``exp2``, per world unit, ≥ 0.
-        start: for ``linear``, eye distance where fog begins.
-        end: for ``linear``, eye distance of full fog (≠ start).
-        distance: ``"plane"`` — ``c = |z_eye|`` (OpenGL's usual); ``"radial"`` — ``c = ‖p_eye‖``.
-
-    Defaults are OpenGL's (GL_EXP, density 1, start 0, end 1, colour black).
-    """
-
-    mode: str = "exp"
-    color: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    density: float = 1.0
-    start: float = 0.0
-    end: float = 1.0
-    distance: str = "plane"
-
-    def __post_init__(self) -> None:
-        if self.mode not in FOG_MODES:
-            raise choice_error("Fog.mode", self.mode, FOG_MODES)
-        object.__setattr__(self, "color", colour3(self.color, "Fog.color"))
-        object.__setattr__(self, "density", number(self.density, "Fog.density", low=0.0))
-        object.__setattr__(self, "start", number(self.start, "Fog.start"))
-        object.__setattr__(self, "end", number(self.end, "Fog.end"))
-        if self.mode == "linear" and self.start == self.end:
-            raise ValueError(f"Fog.end: linear fog needs end != start, got start = end = {self.start}")
-        if self.distance not in ("plane", "radial"):
-            raise choice_error("Fog.distance", self.distance, ("plane", "radial"))
 
 
 # --------------------------------------------------------------------------- choices

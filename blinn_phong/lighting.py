@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from blinn_phong._checks import float_array
+from blinn_phong._numba import use_compiled
 from blinn_phong.normals import normalize
 from blinn_phong.scene import (
     AmbientLight,
@@ -251,18 +252,11 @@ def shade(
     n_lights = len(lights)
     if visibility is not None:
         vis = _visibility(visibility, count, n_lights)
-    if engine not in ("numpy", "numba", "auto"):
-        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
-    if engine != "numpy" and not per_light:
-        from blinn_phong._numba import numba_available
-
-        if numba_available():
-            ids = np.zeros(count, np.int64)
-            return _shade_compiled(
-                p, n, ids, [material], lights, global_ambient, model, None if visibility is None else vis
-            )
-        if engine == "numba":
-            raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    if use_compiled(engine) and not per_light:
+        ids = np.zeros(count, np.int64)
+        return _shade_compiled(
+            p, n, ids, [material], lights, global_ambient, model, None if visibility is None else vis
+        )
     a_cm = np.asarray(material.ambient)
     d_cm = np.asarray(material.diffuse)
     s_cm = np.asarray(material.specular)
@@ -338,17 +332,9 @@ def shade_many(
         raise ValueError(
             f"material_ids: expected indices in [0, {len(materials) - 1}], got [{ids.min()}, {ids.max()}]"
         )
-    if engine not in ("numpy", "numba", "auto"):
-        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
-    if engine != "numpy":
-        from blinn_phong._numba import numba_available
-
-        if numba_available():
-            return _shade_compiled(
-                p, n, ids.astype(np.int64), list(materials), lights, global_ambient, model, vis
-            )
-        if engine == "numba":
-            raise ValueError("engine: 'numba' requested but numba cannot be imported")
+    if use_compiled(engine):
+        ids64 = ids.astype(np.int64)
+        return _shade_compiled(p, n, ids64, list(materials), lights, global_ambient, model, vis)
     out = {k: np.zeros((len(p), 3)) for k in ("ambient", "diffuse", "specular")}
     alpha = np.zeros(len(p))
     for mid in np.unique(ids):

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from blinn_phong._numba import use_compiled
 from blinn_phong.fast import (
     nearest_winners_compiled,
     setup_triangles_compiled,
@@ -67,7 +68,7 @@ from blinn_phong.scene import AmbientLight, Camera, DirectionalLight, Scene, Spo
 from blinn_phong.shading import fused_shading_applies, plain_tables, shade_fragments
 from blinn_phong.shadows import caster_transmittance, light_visibility, trusted_arrays
 from blinn_phong.texturing import texture_fragments
-from blinn_phong.visibility import FrameFragments, frame_fragments, use_compiled
+from blinn_phong.visibility import FrameFragments, frame_fragments
 
 if TYPE_CHECKING:
     from blinn_phong.deep_fragments import DeepFragments

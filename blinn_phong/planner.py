@@ -1187,7 +1187,7 @@ def plan(
         raise ValueError(f"tolerance: expected a finite number of 8-bit steps >= 0, got {tolerance!r}")
     tolerance = float(tolerance)
     if fog is not None:
-        from .frame import Fog
+        from .fog import Fog
 
         if not isinstance(fog, Fog):
             raise TypeError(f"fog: expected a blinn_phong.Fog or None, got {type(fog).__name__}")

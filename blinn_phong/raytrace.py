@@ -45,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 from embreex import mesh_construction, rtcore_scene
 
+from ._numba import use_compiled
+
 __all__ = [
     "OFFSET_ULPS",
     "Hits",
@@ -376,11 +378,9 @@ def _hard_shadow(
     engine: str,
 ) -> np.ndarray:
     """Visibility (1 lit, 0 shadowed) of points for one hard light: one batched occlusion query."""
-    if engine not in ("auto", "numpy", "numba"):
-        raise ValueError(f"engine must be 'auto', 'numpy' or 'numba', got {engine!r}")
-    kernel = None if engine == "numpy" else _hard_rays_kernel()
+    kernel = _hard_rays_kernel() if use_compiled(engine) else None
     if engine == "numba" and kernel is None:
-        raise ValueError("engine: 'numba' requested but numba cannot be imported")
+        raise ValueError("engine: 'numba' requested but blinn_phong.shadow_kernels cannot be imported")
     if offset < 0 or not np.isfinite(offset):
         raise ValueError(f"offset must be a finite number >= 0, got {offset!r}")
     if kernel is None:
@@ -605,8 +605,7 @@ def area_light_visibility(
     Returns:
         (n,) float64 visibility in [0, 1], multiples of ``1/m²``.
     """
-    if engine not in ("auto", "numpy", "numba"):
-        raise ValueError(f"engine must be 'auto', 'numpy' or 'numba', got {engine!r}")
+    compiled = use_compiled(engine)
     p = _points("points", points)
     n = _points("normals", normals)
     if n.shape != p.shape:
@@ -622,9 +621,9 @@ def area_light_visibility(
     centre = c0 + 0.5 * eu + 0.5 * ev
     eff = _effective_offset(p, scene.centre, offset)
     o = _offset_origins(p, n, centre - p, eff)
-    kernel = None if engine == "numpy" else _area_rays_kernel()
+    kernel = _area_rays_kernel() if compiled else None
     if engine == "numba" and kernel is None:
-        raise ValueError("engine: 'numba' requested but numba cannot be imported")
+        raise ValueError("engine: 'numba' requested but blinn_phong.shadow_kernels cannot be imported")
     o32 = (o - scene.centre).astype(np.float32)  # the same origins for every sample
     d32 = np.empty((len(p), 3), np.float32)
     t32 = np.empty(len(p), np.float32)

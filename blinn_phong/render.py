@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from blinn_phong._feedback import start_feedback
+from blinn_phong._numba import use_compiled
 from blinn_phong.frame import Fog, frame_plan, scene_with_planned_shading
 from blinn_phong.id_passes import Cryptomatte
 from blinn_phong.light_groups import LightGroups
@@ -235,8 +236,7 @@ def render(
 
     if shading != "auto":
         shading = _check_shading(shading)
-    if engine not in ("numpy", "numba", "auto"):
-        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
+    use_compiled(engine)  # checked before the scene: a bad name is named first
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a blinn_phong.Scene, got {type(scene).__name__}")
     if cryptomatte is not None:

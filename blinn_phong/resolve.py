@@ -24,10 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from blinn_phong._numba import use_compiled
 from blinn_phong.fast import (
     RESOLVE_CODES,
     fragment_colours_compiled,
-    numba_available,
     resolve_frame_compiled,
     resolve_plain_compiled,
     scatter_samples_compiled,
@@ -91,7 +91,7 @@ def _scatter_samples(
     n_keys: int, keys: np.ndarray, shaded: FragmentShading, depth: np.ndarray, engine: str
 ) -> tuple[np.ndarray, ...]:
     """Float32 per-sample buffers: premultiplied rgba, ambient, diffuse, specular; normal; depth (1 empty)."""
-    if engine != "numpy" and numba_available():
+    if use_compiled(engine):
         return scatter_samples_compiled(
             n_keys,
             keys,
@@ -274,7 +274,7 @@ def fragment_colours(
     f = fragments.fragments
     materials, _ = side_tables(prepared.scene)
     side = fragment_side(prepared, f.triangle, f.front_facing)
-    if engine != "numpy" and numba_available():
+    if use_compiled(engine):
         kg = np.zeros((len(materials), 4))
         for i, m in enumerate(materials):
             if m.kay_greenberg is not None:
@@ -398,7 +398,7 @@ def resolve_frame(
     n_op = fragments.n_opaque
     vis_mean = None if visibility is None else shadow_pass_values(visibility)
     if rgba is None:
-        compiled = engine != "numpy" and numba_available()
+        compiled = use_compiled(engine)
         if compiled and samples == 1 and (method == "zbuffer" or not fragments.n_transparent):
             if out is None:
                 names = ("ambient", "diffuse", "specular") + (() if vis_mean is None else ("shadow",))
@@ -427,7 +427,7 @@ def resolve_frame(
     sorted_drawing = fragments.n_transparent and method in ("draw_last", "sort_objects", "sort_triangles")
     # the centroids' eye distances order the sorted-drawing methods only (a gather of every triangle)
     tri_dist = -prepared.face_eye_centroid[:, 2] if sorted_drawing else np.zeros(len(prepared.triangles))
-    if engine != "numpy" and numba_available():
+    if use_compiled(engine):
         code, max_layers = RESOLVE_CODES["zbuffer"], 0
         n = len(f)
         if fragments.n_transparent and method != "zbuffer":

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from blinn_phong._checks import choice_error
-from blinn_phong.fast import PlainTables, numba_available, surface_at_fragments_compiled
+from blinn_phong._numba import use_compiled
+from blinn_phong.fast import PlainTables, surface_at_fragments_compiled
 from blinn_phong.lighting import ShadingTerms, gl_clamp, light_tables, material_tables, shade, shade_many
 from blinn_phong.normals import normalize
 from blinn_phong.prepared import PreparedScene
@@ -301,7 +302,7 @@ def surface_at_fragments(
     eye-space normal is negated (back faces under two-sided lighting). Zero-length
     normals stay zero.
     """
-    if engine != "numpy" and numba_available():
+    if use_compiled(engine):
         return surface_at_fragments_compiled(
             fragments.triangle,
             fragments.bary,

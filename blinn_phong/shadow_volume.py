@@ -120,6 +120,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import choice_error
+from ._numba import use_compiled
 from ._scratch import carve, carved_bytes
 from .scene import Camera, DirectionalLight, PointLight, SpotLight
 
@@ -138,7 +139,6 @@ __all__ = [
 
 #: Counting methods: ``zpass`` (Heidmann 1991) and ``zfail`` (Everitt & Kilgard 2002).
 STENCIL_METHODS: tuple[str, ...] = ("zfail", "zpass")
-_ENGINES = ("auto", "numba", "numpy")
 _TILE_POINTS = 32  # receivers per screen tile, on average (16–128 measured: 32 is fastest)
 _PARALLEL_RECEIVERS = 10_000  # fewer receivers are counted on one thread (parallel pays from about 10k)
 _PARALLEL_FACES = 10_000  # fewer volume triangles are set up on one thread
@@ -299,41 +299,12 @@ _TOPOLOGY_CACHE: dict[bytes, Topology] = {}
 
 @functools.lru_cache(maxsize=1)
 def _hash_kernels() -> tuple[object, object, object, object]:
-    """Compiled hash-table welding, edge pairing (linear probing) and union-find (same results as
-    the numpy sorts and pointer jumping), and the content digest of :func:`_digest`."""
+    """Compiled hash-table welding (:func:`blinn_phong._hashing.weld_rows`), edge pairing (linear
+    probing) and union-find (same results as the numpy sorts and pointer jumping), and the
+    content digest of :func:`_digest`."""
     import numba
 
-    from blinn_phong import _volume_helpers as vh  # module-level helpers: numba caches the callers
-
-    @numba.njit(cache=True)
-    def weld(bits):  # pragma: no cover - compiled
-        m = bits.shape[0]
-        size = 1
-        while size < 2 * m:
-            size *= 2
-        table = np.full(size, -1, np.int64)
-        inverse = np.empty(m, np.int64)
-        first = np.empty(m, np.int64)
-        n_unique = 0
-        for r in range(m):
-            h = np.uint64(0)
-            for c in range(3):
-                h = vh.mix(bits[r, c] ^ h)
-            slot = np.int64(h & np.uint64(size - 1))
-            while True:
-                u = table[slot]
-                if u < 0:
-                    table[slot] = n_unique
-                    first[n_unique] = r
-                    inverse[r] = n_unique
-                    n_unique += 1
-                    break
-                q = first[u]
-                if bits[q, 0] == bits[r, 0] and bits[q, 1] == bits[r, 1] and bits[q, 2] == bits[r, 2]:
-                    inverse[r] = u
-                    break
-                slot = (slot + 1) & (size - 1)
-        return first[:n_unique].copy(), inverse
+    from blinn_phong import _hashing as hx  # module-level helpers: numba caches the callers
 
     @numba.njit(cache=True)
     def pair(key, twin):  # pragma: no cover - compiled
@@ -346,7 +317,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         count = np.zeros(m, np.int64)  # indexed by the first occurrence
         first_of = np.empty(m, np.int64)
         for e in range(m):
-            slot = np.int64(vh.mix(np.uint64(key[e])) & np.uint64(size - 1))
+            slot = np.int64(hx.mix(np.uint64(key[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -364,7 +335,7 @@ def _hash_kernels() -> tuple[object, object, object, object]:
         twin_first = np.full(m, -1, np.int64)
         for e in range(m):
             own[e] = count[first_of[e]]
-            slot = np.int64(vh.mix(np.uint64(twin[e])) & np.uint64(size - 1))
+            slot = np.int64(hx.mix(np.uint64(twin[e])) & np.uint64(size - 1))
             while True:
                 f = table[slot]
                 if f < 0:
@@ -400,20 +371,20 @@ def _hash_kernels() -> tuple[object, object, object, object]:
     def digest(bits):  # pragma: no cover - compiled
         out = np.empty(8, np.uint64)
         for lane in range(8):
-            out[lane] = vh.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
+            out[lane] = hx.mix(np.uint64(lane + 1) * np.uint64(0x9E3779B97F4A7C15))
         m = bits.shape[0]
         full = m - m % 4
         for i in range(0, full, 4):
             for lane in range(4):
                 v = bits[i + lane]
-                out[lane] = vh.mix(out[lane] ^ v)
-                out[lane + 4] = vh.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
+                out[lane] = hx.mix(out[lane] ^ v)
+                out[lane + 4] = hx.mix((out[lane + 4] + v) * np.uint64(0xD6E8FEB86659FD93))
         for i in range(full, m):
-            out[0] = vh.mix(out[0] ^ bits[i])
-            out[4] = vh.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
+            out[0] = hx.mix(out[0] ^ bits[i])
+            out[4] = hx.mix((out[4] + bits[i]) * np.uint64(0xD6E8FEB86659FD93))
         return out
 
-    return weld, pair, union_find, digest
+    return hx.weld_rows, pair, union_find, digest
 
 
 @functools.lru_cache(maxsize=1)
@@ -513,10 +484,7 @@ def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         representative, inverse = _hash_kernels()[0](bits)
         return flat[representative], inverse
 
-    def mix(z: np.ndarray) -> np.ndarray:  # splitmix64's finaliser (wrapping uint64 arithmetic)
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        return z ^ (z >> np.uint64(31))
+    from ._hashing import splitmix64 as mix
 
     digest = mix(mix(mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
     order = np.argsort(digest, kind="stable")  # radix sort for integers
@@ -1507,18 +1475,6 @@ def _threads() -> int:
     return max(1, int(numba.get_num_threads()))
 
 
-def _use_numba(engine: str) -> bool:
-    if engine not in _ENGINES:
-        raise choice_error("engine", engine, _ENGINES)
-    if engine == "numpy":
-        return False
-    from .fast import numba_available
-
-    if engine == "numba" and not numba_available():
-        raise ValueError("engine: 'numba' was asked for but numba cannot be imported")
-    return numba_available()
-
-
 def stencil_counts(
     volume_triangles: np.ndarray,
     view: np.ndarray,
@@ -1552,7 +1508,7 @@ def stencil_counts(
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     if vp.shape != (4, 4) or not np.all(np.isfinite(vp)):
         raise ValueError(f"view/projection: expected finite 4×4 matrices, got product shape {vp.shape}")
-    numba_path = _use_numba(engine)
+    numba_path = use_compiled(engine)
     if len(p) == 0:
         return np.zeros(0, np.int64)
     rec = _projected(p, p, np.zeros(3), False, 0.0, False, vp, numba_path)
@@ -1919,12 +1875,12 @@ def shadow_volume_visibility(
     light_vec, directional = _light(light)
     if stencil not in (*STENCIL_METHODS, "auto"):
         raise choice_error("stencil", stencil, STENCIL_METHODS, also="'auto' or ")
-    _use_numba(engine)  # checked here too: an empty scene must not accept a bad name
+    use_compiled(engine)  # checked here too: an empty scene must not accept a bad name
     if len(p) == 0 or len(tris) == 0:
         _points("points", p)
         _points("normals", n)
         return np.ones(len(p))
-    numba_path = _use_numba(engine)
+    numba_path = use_compiled(engine)
     q = None
     if camera is None:
         # the default camera is built from the points: refuse non-finite ones by their own name

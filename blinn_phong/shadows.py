@@ -43,14 +43,13 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import functools
 import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import choice_error
+from ._numba import ENGINES, numba_available, use_compiled
 from .raster import rasterize
 from .scene import DirectionalLight, PointLight, SpotLight, look_at, orthographic_matrix, perspective_matrix
 
@@ -78,33 +77,6 @@ __all__ = [
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
 PCF_KERNELS: tuple[str, ...] = ("nearest", "bilinear", "box3", "box5", "box7")
-#: ``engine`` values: the numpy reference, the compiled twins of
-#: :mod:`blinn_phong.shadow_kernels`, or ``auto`` (compiled when numba imports).
-ENGINES: tuple[str, ...] = ("auto", "numpy", "numba")
-
-
-@functools.lru_cache(maxsize=1)
-def _numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except Exception:
-        return False
-    return True
-
-
-def _compiled(engine: str) -> bool:
-    """True when ``engine`` selects the compiled kernels; raises for an unknown engine."""
-    if engine not in ENGINES:
-        raise choice_error("engine", engine, ENGINES)
-    if engine == "numpy":
-        return False
-    if _numba_available():
-        return True
-    if engine == "numba":
-        raise ValueError("engine: 'numba' requested but numba cannot be imported")
-    return False
-
-
 @dataclass(frozen=True, eq=False)
 class ShadowMap:
     """Depth seen from a light.
@@ -217,7 +189,7 @@ def render_shadow_map(
         raise ValueError(f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}")
     res = int(resolution)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
-    if _compiled(engine):
+    if use_compiled(engine):
         from .shadow_kernels import depth_map_compiled
 
         depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
@@ -282,7 +254,7 @@ def shadow_visibility(
     """
     p = _points("points", points)
     n = _lookup_normals(p, normals, normal_offset, kernel)
-    if _compiled(engine):
+    if use_compiled(engine):
         from .shadow_kernels import lookup_compiled
 
         vp = shadow_map.projection @ shadow_map.view
@@ -335,7 +307,7 @@ def shadow_visibility(
 
 
 def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
-    if _numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
+    if numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
         from .shadow_kernels import corner_bounds  # the same minimum and maximum, in one pass
 
         lo, hi = corner_bounds(world_triangles)
@@ -392,7 +364,7 @@ def light_shadow_maps(
     cameras = light_cameras(light, tris)
     if (
         len(cameras) == 6
-        and _compiled(engine)
+        and use_compiled(engine)
         and isinstance(resolution, int | np.integer)
         and resolution >= 1
     ):
@@ -493,7 +465,7 @@ def shadow_map_visibility(
         )
     if len(maps) != 6 or isinstance(light, DirectionalLight):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
-    if _compiled(engine):
+    if use_compiled(engine):
         n = _lookup_normals(p, normals, normal_offset, kernel)
         from .shadow_kernels import lookup_compiled
 
@@ -948,7 +920,7 @@ def _light_visibility_checked(
 
         return shadow_volume_visibility(light, tris, p, normals, **volume_options)  # type: ignore[arg-type]
     if method == "shadow_map":
-        if _compiled(engine):
+        if use_compiled(engine):
             return _receiver_visibility(
                 light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, normal_offset
             )

@@ -37,7 +37,7 @@ import weakref
 
 import numpy as np
 
-from blinn_phong.fast import numba_available
+from blinn_phong._numba import use_compiled
 from blinn_phong.prepared import PreparedScene
 from blinn_phong.raster import Fragments, interpolate
 from blinn_phong.shading import FragmentShading
@@ -80,7 +80,7 @@ def texture_fragments(
     back = ~fragments.front_facing if scene.light_model.two_sided else np.zeros(len(fragments), bool)
     side = 2 * prepared.triangle_mesh[fragments.triangle] + back
     separate = scene.light_model.separate_specular or not gl_compat
-    if engine != "numpy" and numba_available():
+    if use_compiled(engine):
         return _texture_compiled(prepared, fragments, shaded, side, materials, gl_compat, separate)
     rgb = shaded.rgb.copy()
     ambient = shaded.ambient.copy()

@@ -29,12 +29,8 @@ from functools import cached_property
 
 import numpy as np
 
-from blinn_phong.fast import (
-    frame_fragments_compiled,
-    numba_available,
-    setup_triangles_compiled,
-    visible_fragments_compiled,
-)
+from blinn_phong._numba import ENGINES, use_compiled
+from blinn_phong.fast import frame_fragments_compiled, setup_triangles_compiled, visible_fragments_compiled
 from blinn_phong.raster import Fragments, rasterize, resolve_nearest
 
 __all__ = [
@@ -45,26 +41,6 @@ __all__ = [
     "use_compiled",
     "visible_fragments",
 ]
-
-#: Engines of the frame stages: the numpy reference, the compiled one, or numba when it imports.
-ENGINES: tuple[str, ...] = ("numpy", "numba", "auto")
-
-
-def use_compiled(engine: str) -> bool:
-    """True when ``engine`` selects the compiled stages (``"numba"``, or ``"auto"`` with numba importable).
-
-    Raises ValueError for an unknown engine, or ``"numba"`` when numba cannot be imported.
-    """
-    if engine not in ENGINES:
-        raise ValueError(f"engine: expected 'numpy', 'numba' or 'auto', got {engine!r}")
-    if engine == "numpy":
-        return False
-    if numba_available():
-        return True
-    if engine == "numba":
-        raise ValueError("engine: 'numba' requested but numba cannot be imported")
-    return False
-
 
 def visible_fragments(
     clip_xyzw: np.ndarray,

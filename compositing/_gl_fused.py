@@ -1,7 +1,7 @@
 """The compiled OpenGL blend stage: one fused, multi-threaded pass per call, generated from the table.
 
 The kernel source is generated from the factor and equation expression trees of
-:mod:`compositing.gl_blend` (``GL_FACTOR_EXPRS``, ``GL_EQUATION_EXPRS``); no formula is
+:mod:`compositing._gl_exprs` (``GL_FACTOR_EXPRS``, ``GL_EQUATION_EXPRS``); no formula is
 written here. Two kinds of kernel are generated:
 
 * a *specialised* kernel per blend state (the six names), in which the factor and equation
@@ -39,9 +39,9 @@ import functools
 import numpy as np
 
 from ._fused import MIN_PIXELS_PER_THREAD, run_ranges
+from ._gl_exprs import GL_EQUATION_EXPRS, GL_FACTOR_EXPRS, exact_factor, uses_factors
 from ._kernel_cache import compile_kernel
 from .factors import Expr
-from .gl_blend import GL_EQUATION_EXPRS, GL_FACTOR_EXPRS, exact_factor, uses_factors
 
 __all__ = ["SPECIALISE_MIN_PIXELS", "generic_source", "gl_blend_fused", "kernel_source"]
 

@@ -51,8 +51,10 @@ from typing import Final
 
 import numpy as np
 
-from .factors import ALL_OPERATORS, ONE, ZERO, Expr, evaluate_in, maximum, minimum
-from .operators import _fused_available, resolve_operator
+from ._engine import ENGINES, use_compiled
+from ._gl_exprs import GL_EQUATION_EXPRS, GL_FACTOR_EXPRS, exact_factor, uses_factors
+from .factors import ALL_OPERATORS, evaluate_in
+from .operators import resolve_operator
 from .validate import as_rgba, broadcast_shapes, check_finite
 
 __all__ = [
@@ -100,7 +102,7 @@ GL_BLEND_TARGETS: Final[tuple[str, ...]] = ("float32", "unorm8")
 
 #: Engines :func:`gl_blend` accepts: the compiled blend stage (``"numba"``, generated from the
 #: table below) and the numpy reference; ``"auto"`` takes the compiled one when numba is installed.
-GL_BLEND_ENGINES: Final[tuple[str, ...]] = ("auto", "numpy", "numba")
+GL_BLEND_ENGINES: Final[tuple[str, ...]] = ENGINES
 
 #: ``engine="auto"`` evaluates fewer pixels than this with numpy: a few colours are not worth
 #: the compilation of the generic kernel (1–2 s once per process); both engines agree.
@@ -142,67 +144,6 @@ def _quantise_unorm8(x: np.ndarray) -> np.ndarray:
     np.rint(q, out=q)
     q /= _UNORM8_MAX
     return q
-
-
-# --- The factor and equation table as expression trees: the single source of truth that the
-# --- numpy reference below evaluates and the compiled kernels (compositing._gl_fused) are
-# --- generated from. Variables: ``s``, ``d``, ``c`` the component being blended of the source,
-# --- destination and constant colour; ``sa``, ``da``, ``ca`` their alphas. For the alpha
-# --- component ``s`` is ``sa`` and so on.
-
-_S, _D, _C = (Expr("var", value=v) for v in ("s", "d", "c"))
-_SA, _DA, _CA = (Expr("var", value=v) for v in ("sa", "da", "ca"))
-
-#: Table 17.2 as ``name -> (RGB part, alpha part)``, each an expression over s, d, c, sa, da, ca.
-GL_FACTOR_EXPRS: Final[Mapping[str, tuple[Expr, Expr]]] = {
-    "ZERO": (ZERO, ZERO),
-    "ONE": (ONE, ONE),
-    "SRC_COLOR": (_S, _S),
-    "ONE_MINUS_SRC_COLOR": (1.0 - _S, 1.0 - _S),
-    "DST_COLOR": (_D, _D),
-    "ONE_MINUS_DST_COLOR": (1.0 - _D, 1.0 - _D),
-    "SRC_ALPHA": (_SA, _SA),
-    "ONE_MINUS_SRC_ALPHA": (1.0 - _SA, 1.0 - _SA),
-    "DST_ALPHA": (_DA, _DA),
-    "ONE_MINUS_DST_ALPHA": (1.0 - _DA, 1.0 - _DA),
-    "CONSTANT_COLOR": (_C, _C),
-    "ONE_MINUS_CONSTANT_COLOR": (1.0 - _C, 1.0 - _C),
-    "CONSTANT_ALPHA": (_CA, _CA),
-    "ONE_MINUS_CONSTANT_ALPHA": (1.0 - _CA, 1.0 - _CA),
-    "SRC_ALPHA_SATURATE": (minimum(_SA, 1.0 - _DA), ONE),
-}
-
-_SW, _DW = Expr("var", value="sw"), Expr("var", value="dw")
-
-#: Table 17.1 as expressions over ``sw = s·S``, ``dw = d·D`` (the weighted colours) and ``s``, ``d``.
-GL_EQUATION_EXPRS: Final[Mapping[str, Expr]] = {
-    "FUNC_ADD": _SW + _DW,
-    "FUNC_SUBTRACT": _SW - _DW,
-    "FUNC_REVERSE_SUBTRACT": _DW - _SW,
-    "MIN": minimum(_S, _D),
-    "MAX": maximum(_S, _D),
-}
-
-
-def uses_factors(equation: str) -> bool:
-    """True when the equation reads the weighted colours (FUNC_*), False for MIN/MAX."""
-    return _uses(GL_EQUATION_EXPRS[equation], ("sw", "dw"))
-
-
-def _uses(expr: Expr, names: tuple[str, ...]) -> bool:
-    if expr.op == "var":
-        return expr.value in names
-    return any(_uses(a, names) for a in expr.args)
-
-
-def exact_factor(name: str, part: int) -> float | None:
-    """0.0 or 1.0 when the factor's RGB (``part`` 0) or alpha (1) part is that constant, else None.
-
-    A product with an exact 0 or 1 is not computed (GL guarantees both are exact): ``x·1`` is
-    ``x`` and ``x·0`` is the constant 0, in every back end.
-    """
-    expr = GL_FACTOR_EXPRS[name][part]
-    return float(expr.value) if expr.is_const and float(expr.value) in (0.0, 1.0) else None  # type: ignore[arg-type]
 
 
 def _blend_part(
@@ -305,8 +246,7 @@ def gl_blend(
     )
     if not isinstance(target, str) or target.lower() not in GL_BLEND_TARGETS:
         raise ValueError(f"target must be one of {', '.join(GL_BLEND_TARGETS)}, got {target!r}")
-    if engine not in GL_BLEND_ENGINES:
-        raise ValueError(f"engine: expected one of {GL_BLEND_ENGINES}, got {engine!r}")
+    compiled = use_compiled(engine)
     unorm8 = target.lower() == "unorm8"
 
     # Any finite value is allowed, alpha included: a float framebuffer holds whatever it is given.
@@ -322,9 +262,7 @@ def gl_blend(
     rgb_state, alpha_state = (sf, df, eq), (sfa, dfa, eqa)
 
     pixels = int(np.prod(shape[:-1]))
-    use_fused = engine == "numba" or (
-        engine == "auto" and pixels >= AUTO_COMPILED_MIN_PIXELS and _fused_available()
-    )
+    use_fused = compiled and (engine == "numba" or pixels >= AUTO_COMPILED_MIN_PIXELS)
     if use_fused:
         return _gl_blend_fused(s, d, constant_arr, rgb_state, alpha_state, shape, dtype, unorm8, codes)
 

@@ -19,17 +19,14 @@ Two engines compute the same thing:
 from __future__ import annotations
 
 import difflib
-import functools
 
 import numpy as np
 
+from ._engine import ENGINES, use_compiled
 from .factors import ALL_OPERATORS, OperatorSpec, evaluate
 from .validate import as_rgba, broadcast_shapes, check_alpha_range, check_factor, check_finite
 
 __all__ = ["ENGINES", "composite", "resolve_operator"]
-
-#: Engines ``composite`` accepts.
-ENGINES = ("auto", "numpy", "numba")
 
 #: Below this many pixels ``engine="auto"`` stays with numpy (no compilation for small inputs).
 FUSED_MIN_PIXELS = 1 << 16
@@ -91,15 +88,6 @@ def _composite_numpy(
     return mixed
 
 
-@functools.cache
-def _fused_available() -> bool:
-    try:
-        from . import _fused  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 def composite(
     src: np.ndarray,
     dst: np.ndarray,
@@ -137,8 +125,7 @@ def composite(
         TypeError: integer or other non-float arrays.
     """
     spec = resolve_operator(op)
-    if engine not in ENGINES:
-        raise ValueError(f"engine: expected one of {ENGINES}, got {engine!r}")
+    compiled = use_compiled(engine)
     src = as_rgba(src, "src", check_values=False)
     dst = as_rgba(dst, "dst", check_values=False)
     shape = broadcast_shapes(src=src, dst=dst)
@@ -154,9 +141,7 @@ def composite(
         and dst.flags.c_contiguous
         and src.ndim >= 2
     )
-    use_fused = engine == "numba" or (
-        engine == "auto" and fusable and src.size // 4 >= FUSED_MIN_PIXELS and _fused_available()
-    )
+    use_fused = compiled and (engine == "numba" or (fusable and src.size // 4 >= FUSED_MIN_PIXELS))
     if use_fused:
         if not fusable:
             raise ValueError(

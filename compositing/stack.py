@@ -39,7 +39,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .operators import _fused_available, composite
+from ._engine import ENGINES, use_compiled
+from .operators import composite
 from .validate import as_rgba, check_alpha_range, check_finite
 
 __all__ = ["STACK_ENGINES", "STACK_ORDERS", "composite_stack", "composite_stack_front_to_back"]
@@ -47,8 +48,8 @@ __all__ = ["STACK_ENGINES", "STACK_ORDERS", "composite_stack", "composite_stack_
 #: Orders ``composite_stack`` accepts.
 STACK_ORDERS = ("back_to_front", "front_to_back")
 
-#: Engines ``composite_stack`` accepts.
-STACK_ENGINES = ("auto", "numpy", "numba")
+#: Engines ``composite_stack`` accepts (:data:`compositing._engine.ENGINES`).
+STACK_ENGINES = ENGINES
 
 _UNORM8_MAX = np.float32(255.0)
 
@@ -99,12 +100,6 @@ def _arrays(layers: Sequence[np.ndarray]) -> tuple[list[np.ndarray], tuple[int, 
                 f"(layers[0] to layers[{i - 1}] broadcast to {shape})"
             ) from None
     return arrays, shape, all(straight8)
-
-
-def _use_fused(engine: str) -> bool:
-    if engine not in STACK_ENGINES:
-        raise ValueError(f"engine: expected one of {STACK_ENGINES}, got {engine!r}")
-    return engine == "numba" or (engine == "auto" and _fused_available())
 
 
 def _fused(
@@ -166,7 +161,7 @@ def composite_stack_front_to_back(
     _check_layers(layers)
     if not 0.0 < opaque_threshold <= 1.0:
         raise ValueError(f"opaque_threshold: expected a number in (0, 1], got {opaque_threshold!r}")
-    if _use_fused(engine):
+    if use_compiled(engine):
         arrays, shape, straight8 = _arrays(layers)
         # 8-bit straight layers: the RGBA8 buffer's order (back to front from the frontmost
         # opaque layer of each tile) is the only one with that buffer's rounding.
@@ -220,7 +215,7 @@ def composite_stack(
         raise ValueError(f"order: expected one of {STACK_ORDERS}, got {order!r}")
     if order == "front_to_back":
         return composite_stack_front_to_back(layers, opaque_threshold=opaque_threshold, engine=engine)[0]
-    fused = _use_fused(engine)
+    fused = use_compiled(engine)
     arrays, shape, straight8 = _arrays(layers)
     if straight8 and not fused:
         return _straight8_numpy(arrays, shape)

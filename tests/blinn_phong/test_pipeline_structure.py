@@ -2,9 +2,10 @@
 
 The data flows scene → prepared → fragments → visibility → shading → resolve; a module may
 use an earlier stage but never a later one. Every ``import`` statement of every module of
-``blinn_phong`` (module level, inside functions and under ``TYPE_CHECKING`` alike) is read
-from the source with :mod:`ast`, and the graph they form must have no cycle (a topological
-order exists, Kahn 1962).
+``blinn_phong`` (module level, inside functions and under ``TYPE_CHECKING`` alike, absolute or
+relative) is read from the source with :mod:`ast`, and the graph they form must have no cycle (a
+topological order exists, Kahn 1962). ``tests/test_import_graph.py`` checks every package of the
+project the same way.
 """
 
 from __future__ import annotations
@@ -19,11 +20,16 @@ MODULES = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__")
 
 
 def imports_of(module: str) -> set[str]:
-    """The ``blinn_phong`` modules ``module`` imports anywhere in its source."""
+    """The ``blinn_phong`` modules ``module`` imports anywhere in its source, absolute or relative."""
     tree = ast.parse((PACKAGE / f"{module}.py").read_text())
     found: set[str] = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module:
+        if isinstance(node, ast.ImportFrom) and node.level == 1:  # ``from . import x``, ``from .x import y``
+            if node.module:
+                found.add(node.module.split(".")[0])
+            else:
+                found |= {alias.name for alias in node.names if alias.name in MODULES}
+        elif isinstance(node, ast.ImportFrom) and node.module:
             if node.module == "blinn_phong":
                 found |= {alias.name for alias in node.names if alias.name in MODULES}
             elif node.module.startswith("blinn_phong."):
