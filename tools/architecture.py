@@ -125,6 +125,27 @@ def circles(arrows: dict[str, set[str]]) -> list[list[str]]:
     return sorted(found)
 
 
+def cycle_path(arrows: dict[str, set[str]], circle: list[str]) -> list[str]:
+    """One shortest cycle through ``circle``'s first module (breadth first), as a path that ends
+    where it starts: ``[a, b, …, a]``."""
+    members = set(circle)
+    start = circle[0]
+    parent: dict[str, str] = {}
+    todo = [start]
+    while todo:
+        node = todo.pop(0)
+        for child in sorted(arrows[node] & members):
+            if child == start:
+                path = [node]
+                while path[-1] != start:
+                    path.append(parent[path[-1]])
+                return [start, *reversed(path[:-1]), start] if node != start else [start, start]
+            if child not in parent:
+                parent[child] = node
+                todo.append(child)
+    raise ValueError(f"no cycle through {start} in {circle}")
+
+
 def floors(arrows: dict[str, set[str]]) -> dict[str, int]:
     """Each module's floor: 0 for a module importing nothing of the project, else one more than
     the highest floor it imports (modules of one circle share the circle's floor)."""
