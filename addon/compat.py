@@ -303,3 +303,15 @@ def object_holdout(obj: bpy.types.Object, view_layer: object) -> bool:
         return bool(getter(view_layer=view_layer))
     except (RuntimeError, TypeError):
         return False
+
+
+def float_pixels_associated(image: bpy.types.Image) -> bool:
+    """Whether Cycles uses a float image's ``pixels`` as they are, alpha associated (4.2–5.0), or
+    associates them itself as it does a byte image's when the image's alpha mode is Straight
+    (5.2: a float texel (0.4, 0.2, 0.1, α 0.5) gives a Color output of 0.2, 0.1, 0.05 with the
+    Alpha output unlinked, where 5.0.1 gives 0.4, 0.2, 0.1; measured with Cycles 5.0.1 and
+    5.2.3, ``tests/blinn_phong/test_texture_vs_cycles.py``)."""
+    if bpy.app.version >= (5, 2, 0):
+        return str(getattr(image, "alpha_mode", "STRAIGHT")) != "STRAIGHT"
+    return True
+

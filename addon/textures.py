@@ -84,6 +84,8 @@ def find_image_texture(principled: bpy.types.Node) -> tuple[bpy.types.Node | Non
 
 def texture_from_node(node: bpy.types.Node, base: bool, alpha: bool, notes: list[str]) -> Texture:
     """The :class:`Texture` of an Image Texture node (module docstring for the conversions)."""
+    from . import compat  # (bpy: this module's other functions run without it)
+
     image = node.image
     width, height, channels = int(image.size[0]), int(image.size[1]), int(image.channels)
     pixels = np.empty(width * height * channels, np.float32)
@@ -91,6 +93,7 @@ def texture_from_node(node: bpy.types.Node, base: bool, alpha: bool, notes: list
     return texture_from_pixels(
         pixels.reshape(height, width, channels)[::-1],  # Blender's rows run bottom-up
         is_float=bool(image.is_float),
+        float_associated=compat.float_pixels_associated(image) if image.is_float else True,
         colorspace=str(image.colorspace_settings.name),
         alpha_mode=str(getattr(image, "alpha_mode", "STRAIGHT")),
         interpolation=str(node.interpolation),
@@ -109,6 +112,7 @@ def texture_from_pixels(
     is_float: bool,
     colorspace: str,
     alpha_mode: str,
+    float_associated: bool = True,
     interpolation: str,
     extension: str,
     base: bool,
@@ -125,6 +129,9 @@ def texture_from_pixels(
         is_float: ``Image.is_float`` (a float buffer: scene-linear, alpha associated).
         colorspace: ``Image.colorspace_settings.name`` (byte images).
         alpha_mode: ``Image.alpha_mode``: ``STRAIGHT``, ``PREMUL``, ``CHANNEL_PACKED`` or ``NONE``.
+        float_associated: a float image's values are used as they are, alpha associated (Blender
+            4.2–5.0); False: Cycles associates them as a straight byte image's
+            (:func:`addon.compat.float_pixels_associated`).
         interpolation: the node's ``interpolation`` (``Closest``, ``Linear``, ``Cubic``, ``Smart``).
         extension: the node's ``extension`` (``REPEAT``, ``EXTEND``, ``CLIP``, ``MIRROR``).
         base: the Color output feeds the Base Color.
@@ -149,7 +156,7 @@ def texture_from_pixels(
     rgba[..., :3] = pixels[..., :3] if channels >= 3 else pixels[..., :1]
     rgba[..., 3] = pixels[..., 3] if channels == 4 else (pixels[..., 1] if channels == 2 else 1.0)
     if is_float:
-        space, associated = "linear", True
+        space, associated = "linear", float_associated
     else:
         space = IMAGE_COLORSPACES.get(colorspace, "linear")
         if colorspace not in IMAGE_COLORSPACES:
@@ -169,7 +176,7 @@ def texture_from_pixels(
         colour[...] = 1.0  # white encodes to white in every supported space
     elif not alpha:
         if not associated and alpha_mode == "STRAIGHT":
-            colour *= rgba[..., 3:4]  # Cycles associates a straight byte image's stored values
+            colour *= rgba[..., 3:4]  # Cycles associates a straight image's stored values
         rgba[..., 3] = 1.0
     elif associated:
         a = rgba[..., 3:4]
