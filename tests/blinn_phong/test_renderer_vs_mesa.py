@@ -28,7 +28,6 @@ from renderer_scenes import (
 )
 
 import blinn_phong as bp
-from oracles.egl import EGLUnavailable, gl_context
 
 pytestmark = pytest.mark.mesa
 
@@ -36,15 +35,7 @@ SIZE = 128
 ENGINES = ["numpy", "numba"]  # the reference and the compiled fast path
 
 
-@pytest.fixture(scope="module")
-def gl() -> object:
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_lighting
-
-    return gl_lighting
+GL_ORACLE = "gl_lighting"  # the gl fixture (tests/conftest.py)
 
 
 def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 / 16.0) -> np.ndarray:

@@ -32,7 +32,6 @@ from test_renderer_vs_mesa import interior_mask, to_unorm8
 
 import blinn_phong as bp
 from blinn_phong.texture import Texture
-from oracles.egl import EGLUnavailable, gl_context
 
 pytestmark = pytest.mark.mesa
 
@@ -40,15 +39,7 @@ SIZE = 96
 TEXELS = 8
 
 
-@pytest.fixture(scope="module")
-def gl() -> object:
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_texture
-
-    return gl_texture
+GL_ORACLE = "gl_texture"  # the gl fixture (tests/conftest.py)
 
 
 def byte_image(seed: int, *, alpha: bool = False) -> np.ndarray:

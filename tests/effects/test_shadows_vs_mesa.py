@@ -23,22 +23,13 @@ import blinn_phong as bp
 from benchmarks.bench_shadows_mesa import away_from_shadow_edges, build_scene, to_unorm8
 from blinn_phong.raytrace import world_triangles
 from blinn_phong.shadows import light_shadow_maps
-from oracles.egl import EGLUnavailable, gl_context
 
 pytestmark = pytest.mark.mesa
 
 SIZE = 128
 
 
-@pytest.fixture(scope="module")
-def gl():
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_shadows
-
-    return gl_shadows
+GL_ORACLE = "gl_shadows"  # the gl fixture (tests/conftest.py)
 
 
 def two_spheres(lights) -> bp.Scene:
