@@ -28,6 +28,7 @@ from renderer_scenes import (
 )
 
 import blinn_phong as bp
+from oracles.gl_common import to_unorm8
 
 pytestmark = pytest.mark.mesa
 
@@ -66,11 +67,6 @@ def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 
         nearest_edge = np.minimum(nearest_edge, distance)
     mask[hit] = (nearest_edge >= margin) & (frags.depth[winner[hit]] > 1e-3)
     return mask.reshape(height, width)
-
-
-def to_unorm8(rgba: np.ndarray) -> np.ndarray:
-    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does."""
-    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
 
 
 def compare(ours: np.ndarray, theirs: np.ndarray, interior: np.ndarray) -> tuple[int, int, int]:

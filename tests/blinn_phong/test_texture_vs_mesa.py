@@ -28,10 +28,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import renderer_scenes
-from test_renderer_vs_mesa import interior_mask, to_unorm8
+from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
 from blinn_phong.texture import Texture
+from oracles.gl_common import to_unorm8
 
 pytestmark = pytest.mark.mesa
 
