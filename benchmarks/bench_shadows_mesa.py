@@ -38,59 +38,15 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._util import machine_info, markdown_table, write_json
+from oracles.gl_common import to_unorm8
+from testbeds.shadow_scenes import away_from_shadow_edges, two_spheres_over_ground
 
-__all__ = ["away_from_shadow_edges", "build_scene", "main", "run", "to_unorm8"]
+__all__ = ["main", "run"]
 
 RESOLUTION = 1024
 CONSTANT_BIAS = 1e-4
 SLOPE_BIAS = 2.0
 KERNEL = "nearest"
-
-
-def build_scene(
-    segments: int = 256, aspect: float = 16 / 9, lights: list | None = None, rings: int | None = None
-) -> object:  # a blinn_phong.Scene
-    """Two spheres of ``2·segments·(rings−1)`` triangles over a ground plane, lit by ``lights``.
-
-    ``rings`` defaults to ``segments // 2 + 1``; ``lights`` to a sun and a point light.
-    Also the scene of tests/effects/test_shadows_vs_mesa.py (with small spheres).
-    """
-    import blinn_phong as bp
-    from blinn_phong.primitives import grid_plane, uv_sphere
-
-    meshes = []
-    for x, colour in ((-1.2, (0.8, 0.3, 0.2)), (1.2, (0.2, 0.5, 0.8))):
-        p, t, n = uv_sphere(segments, segments // 2 + 1 if rings is None else rings)
-        transform = np.eye(4)
-        transform[:3, 3] = (x, 1.0, 0.0)
-        material = bp.Material(ambient=colour, diffuse=colour, specular=(0.5, 0.5, 0.5), shininess=32.0)
-        meshes.append(bp.Mesh(p, t, n, transform=transform, material=material))
-    p, t, n = grid_plane(8, 8, (12.0, 12.0))
-    floor = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)
-    meshes.append(bp.Mesh(p, t, n, transform=floor, material=bp.Material(diffuse=(0.6, 0.6, 0.6))))
-    if lights is None:
-        lights = [
-            bp.DirectionalLight((-0.5, -1.0, -0.4), (0.8, 0.8, 0.8)),
-            bp.PointLight((2.0, 4.0, 2.0), (0.6, 0.6, 0.6)),
-        ]
-    camera = bp.Camera.perspective(45.0, aspect, 0.5, 50.0, view=bp.look_at((0, 3, 8), (0, 0.5, 0)))
-    return bp.Scene(meshes, lights, camera, ambient=(0.1, 0.1, 0.1))
-
-
-def to_unorm8(rgba: np.ndarray) -> np.ndarray:
-    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does; int64."""
-    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
-
-
-def away_from_shadow_edges(shadow: np.ndarray) -> np.ndarray:
-    """True where the visibility pass is the same over the pixel's 3×3 neighbourhood."""
-    v = np.pad(shadow, 1, mode="edge")
-    h, w = shadow.shape
-    same = np.ones((h, w), bool)
-    for dy in range(3):
-        for dx in range(3):
-            same &= v[dy : dy + h, dx : dx + w] == shadow
-    return same
 
 
 def _agreement(ours_rgba: np.ndarray, theirs_rgba: np.ndarray, shadow: np.ndarray) -> dict[str, float]:
@@ -114,7 +70,7 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
     from oracles.egl import EGLUnavailable, gl_context
 
     width, height = (640, 360) if quick else (1920, 1080)
-    scene = build_scene(64 if quick else 256, width / height)
+    scene = two_spheres_over_ground(64 if quick else 256, width / height)
     n_tris = sum(len(m.triangles) for m in scene.meshes)
     try:
         info = gl_context()

@@ -24,8 +24,8 @@ interleaved rounds.
 
 Scenes: the frame benchmark's scene (:func:`benchmarks.bench_frame.issue_scene`, opaque and
 with its transparent sphere) at two sizes, the transparency calibration scene
-(:func:`benchmarks.tradeoffs.layered_scene`, 8 layers) and the shadow calibration scene
-(:func:`benchmarks.tradeoffs.shadow_scene`). A prediction is within 2× when
+(:func:`testbeds.tradeoff_scenes.layered_scene`, 8 layers) and the shadow calibration scene
+(:func:`testbeds.tradeoff_scenes.shadow_scene`). A prediction is within 2× when
 ``max(p/m, m/p) ≤ 2``.
 
 ``python -m benchmarks.cost_check [--repeat 3] [--segments 256]`` writes
@@ -45,9 +45,10 @@ from pathlib import Path
 import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, write_json
 from benchmarks.bench_frame import issue_scene
-from benchmarks.tradeoffs import layered_scene, shadow_runs, shadow_scene
+from benchmarks.tradeoffs import shadow_runs
 from blinn_phong import calibration as cal
 from blinn_phong.planner import shadow_map_geometry, traced_share
+from testbeds.tradeoff_scenes import layered_scene, shadow_scene
 
 __all__ = ["check_frame", "main", "run"]
 

@@ -71,7 +71,7 @@ SHADING_MARGIN = 1.5
 
 
 def _fit_depth_peeling(data: dict) -> dict:
-    from benchmarks.tradeoffs import layered_scene, transparent_fragments
+    from testbeds.tradeoff_scenes import layered_scene, transparent_fragments
 
     size = data["size"][0]
     brightest: dict[tuple[int, float], float] = {}
@@ -308,8 +308,8 @@ def shadow_stage_designs(rows: list[dict]) -> dict[str, np.ndarray]:
 def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
     """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``) and, when given,
     the shadow-volume cost model to a ``shadow_volume.json`` document (``{"crossover": [...]}``)."""
-    from benchmarks.tradeoffs import shadow_scene
     from blinn_phong.planner import shadow_map_geometry
+    from testbeds.tradeoff_scenes import shadow_scene
 
     families = tradeoffs["families"]
     models: dict[str, object] = {

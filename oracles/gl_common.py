@@ -14,7 +14,19 @@ import numpy as np
 
 from blinn_phong.scene import Scene
 
-__all__ = ["Framebuffer", "blinn_phong_main", "compile_program", "read_pixels", "world_triangles"]
+__all__ = [
+    "Framebuffer",
+    "blinn_phong_main",
+    "compile_program",
+    "read_pixels",
+    "to_unorm8",
+    "world_triangles",
+]
+
+
+def to_unorm8(rgba: np.ndarray) -> np.ndarray:
+    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does; int64."""
+    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
 
 
 def compile_program(gl, vertex_source: str, fragment_source: str) -> int:

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from addon_testing import REPO
 
 from compositing.cryptomatte import layer_key, matte, name_hash, name_id
-from tests.addon.addon_testing import REPO
 from tests.addon.test_addon_cryptomatte import _passes
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]

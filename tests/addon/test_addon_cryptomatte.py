@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813
 import pytest
+from addon_testing import run_bpy
 
 from compositing.cryptomatte import matte, name_hash, name_id
-from tests.addon.addon_testing import run_bpy
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
 

@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the library's documented alias)
 import pytest
-
-from tests.addon.addon_testing import run_bpy
+from addon_testing import run_bpy
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from addon_testing import run_bpy
 
-from tests.addon.addon_testing import run_bpy
 from tests.addon.test_addon_cryptomatte import _passes
 
 pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]

@@ -11,24 +11,8 @@ import pytest
 
 from addon.pipeline import RenderOptions, render_frame
 from blinn_phong.render import render
-from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
-
-
-def _quad(z: float, half: float, material: Material, centre: tuple[float, float] = (0.0, 0.0)) -> Mesh:
-    """A square facing +Z at height z (counter-clockwise seen from above)."""
-    cx, cy = centre
-    positions = np.array(
-        [
-            (cx - half, cy - half, z),
-            (cx + half, cy - half, z),
-            (cx + half, cy + half, z),
-            (cx - half, cy + half, z),
-        ],
-        dtype=float,
-    )
-    return Mesh(
-        positions, np.array([(0, 1, 2), (0, 2, 3)]), np.tile([0.0, 0.0, 1.0], (4, 1)), material=material
-    )
+from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Scene, look_at
+from tests.meshes import square
 
 
 def _top_camera(size: float = 4.0) -> Camera:
@@ -44,8 +28,8 @@ def test_effects_recipe_without_effects_equals_the_z_buffer_renderer() -> None:
     material = Material(diffuse=(0.6, 0.5, 0.4), specular=(0.3, 0.3, 0.3), shininess=20.0)
     scene = Scene(
         (
-            _quad(0.0, 0.8, material, centre=(-1.0, 0.0)),
-            _quad(0.5, 0.6, Material(diffuse=(0.1, 0.7, 0.2)), centre=(1.0, 0.0)),
+            square(0.0, 0.8, material, centre=(-1.0, 0.0)),
+            square(0.5, 0.6, Material(diffuse=(0.1, 0.7, 0.2)), centre=(1.0, 0.0)),
         ),
         (DirectionalLight((0.3, -0.2, -1.0), intensity=1.2),),
         _top_camera(),
@@ -76,7 +60,7 @@ def test_effects_recipe_without_effects_equals_the_z_buffer_renderer() -> None:
 def test_fog_follows_the_opengl_fog_equations(mode: str, factor: Callable[[float], float]) -> None:
     # One emissive quad filling the view at eye distance 10: C = f·c + (1 - f)·C_fog (opaque).
     material = Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0.8, 0.4, 0.2))
-    scene = Scene((_quad(0.0, 5.0, material),), (), _top_camera(), ambient=(0.0, 0.0, 0.0))
+    scene = Scene((square(0.0, 5.0, material),), (), _top_camera(), ambient=(0.0, 0.0, 0.0))
     fog = (0.3, 0.5, 0.7)
     got = render_frame(
         scene,
@@ -96,7 +80,7 @@ def test_transparent_quad_composites_over_the_one_behind(method: str) -> None:
     # Emissive glass (α = 0.4) above an opaque emissive floor: premultiplied over, per Porter-Duff.
     glass = Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0.2, 0.6, 1.0), opacity=0.4)
     floor = Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.5, 0.0))
-    scene = Scene((_quad(0.0, 5.0, floor), _quad(1.0, 5.0, glass)), (), _top_camera(), ambient=(0, 0, 0))
+    scene = Scene((square(0.0, 5.0, floor), square(1.0, 5.0, glass)), (), _top_camera(), ambient=(0, 0, 0))
     got = render_frame(scene, 8, 8, options=RenderOptions(samples_per_axis=1, transparency=method))
     expected = 0.4 * np.array([0.2, 0.6, 1.0]) + 0.6 * np.array([1.0, 0.5, 0.0])
     np.testing.assert_allclose(got.rgba[..., :3], np.broadcast_to(expected, (8, 8, 3)), atol=1e-6)
@@ -109,7 +93,7 @@ def test_shadow_of_a_square_under_an_overhead_sun(shadows: str) -> None:
     floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
     occluder = Material(ambient=(0, 0, 0), diffuse=(0.2, 0.2, 0.2))
     scene = Scene(
-        (_quad(0.0, 2.0, floor), _quad(1.0, 0.5, occluder, centre=(1.2, 0.0))),
+        (square(0.0, 2.0, floor), square(1.0, 0.5, occluder, centre=(1.2, 0.0))),
         (DirectionalLight((0.0, 0.0, -1.0), intensity=1.0),),
         _top_camera(),
         ambient=(0, 0, 0),
@@ -132,7 +116,7 @@ def test_shadow_falls_beside_the_occluder_under_a_slanted_sun() -> None:
     # Sun direction (1, 0, -1)/√2: the shadow of a square at height 1 is shifted +1 in x on the floor.
     floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
     scene = Scene(
-        (_quad(0.0, 2.0, floor), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (square(0.0, 2.0, floor), square(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
         (DirectionalLight((1.0, 0.0, -1.0), intensity=1.0),),
         _top_camera(),
         ambient=(0, 0, 0),
@@ -163,8 +147,8 @@ def test_kay_greenberg_glass_opacity_follows_the_eye_normal(tilt_degrees: float)
     kay = Material(
         ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(0.0, 0.0, 1.0), kay_greenberg=(t_min, t_max, power)
     )
-    glass = replace(_quad(0.0, 1.0, kay), transform=rotate)
-    floor = _quad(0.0, 5.0, Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.0, 0.0)))
+    glass = replace(square(0.0, 1.0, kay), transform=rotate)
+    floor = square(0.0, 5.0, Material(ambient=(0, 0, 0), diffuse=(0, 0, 0), emission=(1.0, 0.0, 0.0)))
     scene = Scene((floor, glass), (), _top_camera(), ambient=(0, 0, 0))
     got = render_frame(scene, 40, 40, RenderOptions(samples_per_axis=1))
     t = t_min + (t_max - t_min) * (1 - (1 - c) ** power)
@@ -183,7 +167,7 @@ def test_without_embree_shadows_fall_back_to_shadow_volumes(monkeypatch: pytest.
     monkeypatch.setitem(sys.modules, "blinn_phong.raytrace", None)
     floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
     scene = Scene(
-        (_quad(0.0, 2.0, floor), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (square(0.0, 2.0, floor), square(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
         (DirectionalLight((1.0, 0.0, -1.0), intensity=1.0),),
         _top_camera(),
         ambient=(0, 0, 0),
@@ -204,7 +188,7 @@ def test_auto_shading_is_exact_on_flat_faces_under_a_sun() -> None:
     # planner's per-mesh choice must give the per-pixel (Phong) image.
     material = Material(diffuse=(0.6, 0.5, 0.4), specular=(0.3, 0.3, 0.3), shininess=20.0)
     scene = Scene(
-        (_quad(0.0, 1.5, material),),
+        (square(0.0, 1.5, material),),
         (DirectionalLight((0.3, -0.2, -1.0), intensity=1.2),),
         _top_camera(),
         ambient=(0.1, 0.1, 0.1),
@@ -223,7 +207,7 @@ def test_a_light_whose_cast_shadow_is_off_lights_the_shadow_region(shadows: str)
     # own footprint dark for that light only.
     floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
     scene = Scene(
-        (_quad(0.0, 2.0, floor), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (square(0.0, 2.0, floor), square(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
         (
             DirectionalLight((1.0, 0.0, -1.0), intensity=1.0),
             DirectionalLight((0.0, 0.0, -1.0), intensity=0.5),
@@ -242,7 +226,7 @@ def test_a_light_whose_cast_shadow_is_off_lights_the_shadow_region(shadows: str)
 
 
 def test_cast_shadow_flags_must_match_the_lights() -> None:
-    scene = Scene((_quad(0.0, 2.0, Material()),), (DirectionalLight((0, 0, -1.0)),), _top_camera())
+    scene = Scene((square(0.0, 2.0, Material()),), (DirectionalLight((0, 0, -1.0)),), _top_camera())
     with pytest.raises(ValueError, match="casts_shadows"):
         render_frame(scene, 4, 4, RenderOptions(), casts_shadows=(True, False))
 
@@ -251,7 +235,7 @@ def test_status_line_names_kernels_embree_and_the_plan() -> None:
     from addon.pipeline import status_line
 
     scene = Scene(
-        (_quad(0.0, 2.0, Material()), _quad(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
+        (square(0.0, 2.0, Material()), square(1.0, 0.3, Material(), centre=(-1.0, 0.0))),
         (DirectionalLight((1.0, 0.0, -1.0)),),
         _top_camera(),
     )

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
+from tests.meshes import rectangle
 
 W, H = 9, 7
 E = (0.2, 0.45, 0.7)  # the background's emission
@@ -37,20 +38,9 @@ def _emitter(emission: tuple[float, float, float], opacity: float = 1.0) -> bp.M
     )
 
 
-def _quad(
-    x0: float, x1: float, y0: float, y1: float, z: float, material: bp.Material, **kw: object
-) -> bp.Mesh:
-    return bp.Mesh(
-        np.array([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]),
-        np.array([[0, 1, 2], [0, 2, 3]]),
-        material=material,
-        **kw,
-    )
-
-
 def _scene(*extra: bp.Mesh) -> bp.Scene:
-    back = _quad(-1, W + 1, -1, H + 1, -3.0, _emitter(E))
-    hold = _quad(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0)), holdout=True)
+    back = rectangle(-1, W + 1, -1, H + 1, -3.0, _emitter(E))
+    hold = rectangle(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0)), holdout=True)
     return bp.Scene(
         [back, hold, *extra], [], bp.Camera.orthographic(0, W, 0, H, 0.1, 10.0), ambient=(0, 0, 0)
     )
@@ -93,8 +83,8 @@ def test_holdout_in_front_of_an_emitter(method: str, samples: int, engine: str) 
 def test_transparent_pane_over_a_holdout_and_one_behind_it(method: str, engine: str) -> None:
     """A pane of opacity 0.4 in front of the holdout gives ``(0.4·e_p, 0.4)`` there (``over`` transparent
     black) and ``0.4·e_p + 0.6·e`` beside it; a pane behind the holdout is hidden."""
-    front = _quad(1.2, 7.8, 2.2, 3.8, -1.0, _emitter(PANE_E, 0.4))
-    behind = _quad(3.2, 4.8, 0.2, 6.8, -2.5, _emitter((0.0, 1.0, 0.0), 0.5))
+    front = rectangle(1.2, 7.8, 2.2, 3.8, -1.0, _emitter(PANE_E, 0.4))
+    behind = rectangle(3.2, 4.8, 0.2, 6.8, -2.5, _emitter((0.0, 1.0, 0.0), 0.5))
     result = bp.render(_scene(front, behind), W, H, engine=engine, transparency=method, shadows="none")
     held = _inside_fraction(HOLD, 1)
     pane = _inside_fraction((1.2, 7.8, 2.2, 3.8), 1)
@@ -117,8 +107,8 @@ def test_transparent_pane_over_a_holdout_and_one_behind_it(method: str, engine: 
 
 
 def test_holdout_with_a_transparent_material_is_opaque() -> None:
-    glassy = _quad(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0), opacity=0.3), holdout=True)
-    back = _quad(-1, W + 1, -1, H + 1, -3.0, _emitter(E))
+    glassy = rectangle(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0), opacity=0.3), holdout=True)
+    back = rectangle(-1, W + 1, -1, H + 1, -3.0, _emitter(E))
     scene = bp.Scene([back, glassy], [], bp.Camera.orthographic(0, W, 0, H, 0.1, 10.0), ambient=(0, 0, 0))
     result = bp.render(scene, W, H, transparency="a_buffer", shadows="none")
     held = _inside_fraction(HOLD, 1) == 1.0
@@ -128,4 +118,4 @@ def test_holdout_with_a_transparent_material_is_opaque() -> None:
 
 def test_holdout_flag_is_checked() -> None:
     with pytest.raises(TypeError, match=r"Mesh\.holdout"):
-        _quad(0, 1, 0, 1, -1.0, _emitter(E), holdout="yes")
+        rectangle(0, 1, 0, 1, -1.0, _emitter(E), holdout="yes")

@@ -18,6 +18,7 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong.frame import ShadowOptions
+from tests.meshes import rectangle
 
 W, H = 12, 8
 LIGHT = np.array([6.0, 4.0, 3.0])
@@ -38,11 +39,7 @@ METHODS = {
 
 def _quad(x0: float, x1: float, y0: float, y1: float, z: float) -> bp.Mesh:
     material = bp.Material(ambient=(0, 0, 0), diffuse=tuple(DIFFUSE), specular=(0, 0, 0))
-    return bp.Mesh(
-        np.array([(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]),
-        np.array([[0, 1, 2], [0, 2, 3]]),
-        material=material,
-    )
+    return rectangle(x0, x1, y0, y1, z, material)
 
 
 def _scene(link: bp.LightLink | None) -> bp.Scene:

@@ -28,7 +28,7 @@ from renderer_scenes import (
 )
 
 import blinn_phong as bp
-from oracles.egl import EGLUnavailable, gl_context
+from oracles.gl_common import to_unorm8
 
 pytestmark = pytest.mark.mesa
 
@@ -36,15 +36,7 @@ SIZE = 128
 ENGINES = ["numpy", "numba"]  # the reference and the compiled fast path
 
 
-@pytest.fixture(scope="module")
-def gl() -> object:
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_lighting
-
-    return gl_lighting
+GL_ORACLE = "gl_lighting"  # the gl fixture (tests/conftest.py)
 
 
 def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 / 16.0) -> np.ndarray:
@@ -75,11 +67,6 @@ def interior_mask(scene: bp.Scene, width: int, height: int, margin: float = 1.0 
         nearest_edge = np.minimum(nearest_edge, distance)
     mask[hit] = (nearest_edge >= margin) & (frags.depth[winner[hit]] > 1e-3)
     return mask.reshape(height, width)
-
-
-def to_unorm8(rgba: np.ndarray) -> np.ndarray:
-    """OpenGL's float -> UNORM8 conversion (round to nearest), as llvmpipe does."""
-    return np.floor(np.clip(rgba, 0.0, 1.0) * 255.0 + 0.5).astype(np.int64)
 
 
 def compare(ours: np.ndarray, theirs: np.ndarray, interior: np.ndarray) -> tuple[int, int, int]:

@@ -28,11 +28,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import renderer_scenes
-from test_renderer_vs_mesa import interior_mask, to_unorm8
+from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
 from blinn_phong.texture import Texture
-from oracles.egl import EGLUnavailable, gl_context
+from oracles.gl_common import to_unorm8
 
 pytestmark = pytest.mark.mesa
 
@@ -40,15 +40,7 @@ SIZE = 96
 TEXELS = 8
 
 
-@pytest.fixture(scope="module")
-def gl() -> object:
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_texture
-
-    return gl_texture
+GL_ORACLE = "gl_texture"  # the gl fixture (tests/conftest.py)
 
 
 def byte_image(seed: int, *, alpha: bool = False) -> np.ndarray:

@@ -182,3 +182,9 @@ def flat_pixels(buf: oiio.ImageBuf) -> np.ndarray:
     names = list(spec.channelnames)
     px = np.asarray(buf.get_pixels(oiio.FLOAT)).reshape(spec.height, spec.width, spec.nchannels)
     return px[..., [names.index(k) for k in ("R", "G", "B", "A")]]
+
+
+def one_pixel(samples: list[tuple[float, float, float, float, float, float]]) -> DeepImage:
+    """A 1×1 image from ``(z, zback, r, g, b, a)`` rows."""
+    s = np.array(samples, np.float64).reshape(-1, 6)
+    return DeepImage(np.array([[len(s)]]), s[:, 0], s[:, 1], s[:, 2:])

@@ -156,3 +156,21 @@ def test_overflow_is_reported_not_written(engine):
     big[..., 0] = 3e38  # finite, but 3e38 + 3e38 is not
     with pytest.raises(ValueError, match=r"the result overflowed float32 in 90000 values"):
         composite(big, big, "plus", engine=engine)
+
+
+def test_numba_engine_names_the_failing_condition_for_single_colours():
+    red = np.array([1.0, 0.0, 0.0, 1.0])
+    with pytest.raises(
+        ValueError, match=r"needs images \(at least one pixel axis before RGBA\), got shape \(4,\)"
+    ):
+        composite(red, red, "src_over", engine="numba")
+
+
+def test_numba_engine_names_each_other_condition():
+    a = np.zeros((2, 3, 4))
+    with pytest.raises(ValueError, match=r"same shape, got \(2, 3, 4\) and \(3, 4\)"):
+        composite(a, a[0], "src_over", engine="numba")
+    with pytest.raises(ValueError, match=r"scalar factor, got a factor array of shape \(2, 3\)"):
+        composite(a, a, "src_over", factor=np.ones((2, 3)), engine="numba")
+    with pytest.raises(ValueError, match=r"C-contiguous arrays, dst is not"):
+        composite(a, np.zeros((3, 2, 4)).transpose(1, 0, 2), "src_over", engine="numba")

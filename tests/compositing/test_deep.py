@@ -14,19 +14,13 @@ import math
 
 import numpy as np
 import pytest
-from deep_testdata import random_deep
+from deep_testdata import one_pixel, random_deep
 
 from compositing.deep import DeepImage, crop, flatten, from_flat, holdout, merge, tidy
 
 # Float32 storage of every result: values of order 1 are rounded by 6e-8 per operation;
 # 1e-6 leaves room for a chain of 16 samples.
 TOL = 1e-6
-
-
-def one_pixel(samples: list[tuple[float, float, float, float, float, float]]) -> DeepImage:
-    """A 1×1 image from ``(z, zback, r, g, b, a)`` rows."""
-    s = np.array(samples, np.float64).reshape(-1, 6)
-    return DeepImage(np.array([[len(s)]]), s[:, 0], s[:, 1], s[:, 2:])
 
 
 def over(front: np.ndarray, back: np.ndarray) -> np.ndarray:

@@ -18,17 +18,12 @@ from __future__ import annotations
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813
 import pytest
-from deep_testdata import flat_pixels, from_imagebuf, oiio_tidy, random_deep, to_imagebuf
+from deep_testdata import flat_pixels, from_imagebuf, oiio_tidy, one_pixel, random_deep, to_imagebuf
 
 from compositing.deep import DeepImage, flatten, from_flat, holdout, merge, tidy
 
 TOL = 1e-6
 IBA = oiio.ImageBufAlgo
-
-
-def one_pixel(samples) -> DeepImage:
-    s = np.array(samples, np.float64).reshape(-1, 6)
-    return DeepImage(np.array([[len(s)]]), s[:, 0], s[:, 1], s[:, 2:])
 
 
 def over(front, back):

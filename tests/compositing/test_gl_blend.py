@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from compositing import composite
 from compositing.factors import ALL_OPERATORS, PORTER_DUFF
 from compositing.gl_blend import GL_BLEND_EQUATIONS, GL_BLEND_FACTORS, gl_blend, gl_factors
 from tests.gl_spec import EQUATION_NAMES, FACTOR_NAMES
@@ -420,3 +421,24 @@ def test_dtypes_are_kept():
     assert gl_blend(SRC, DST, "SRC_ALPHA", "ONE_MINUS_SRC_ALPHA").dtype == np.float64
     assert gl_blend(s32, DST, "ONE", "ZERO").dtype == np.float64
     assert gl_blend(s32, d32, "ONE", "ZERO", target="unorm8").dtype == np.float32
+
+
+@pytest.mark.parametrize(
+    ("name", "factors"),
+    [
+        # Porter & Duff 1984 table 1 on premultiplied colours: over = (1, 1 − αA), in = (αB, 0)
+        ("src-over", ("ONE", "ONE_MINUS_SRC_ALPHA")),
+        (" Dst-In ", ("ZERO", "SRC_ALPHA")),
+        ("SRC_ATOP", ("DST_ALPHA", "ONE_MINUS_SRC_ALPHA")),
+    ],
+)
+def test_gl_factors_reads_operator_names_as_composite_does(name, factors):
+    assert gl_factors(name) == factors
+    src = np.array([[0.2, 0.1, 0.0, 0.4]])
+    dst = np.array([[0.3, 0.6, 0.9, 0.75]])
+    np.testing.assert_allclose(gl_blend(src, dst, *gl_factors(name)), composite(src, dst, name), atol=1e-15)
+
+
+def test_gl_factors_suggests_the_closest_name():
+    with pytest.raises(ValueError, match=r"^op: unknown operator 'src_ovr'\. Did you mean 'src_over'\?"):
+        gl_factors("src_ovr")

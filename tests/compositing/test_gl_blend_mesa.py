@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 
 from compositing.gl_blend import gl_blend, gl_factors
-from oracles.egl import EGLUnavailable, gl_context
 from tests.gl_spec import EQUATION_NAMES, FACTOR_NAMES
 
 pytestmark = pytest.mark.mesa
@@ -32,16 +31,7 @@ PIXELS = 256
 STEP = 1 / 255
 
 
-@pytest.fixture(scope="module")
-def mesa():
-    """The oracle module, or a skip with the reason EGL cannot start."""
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa through EGL is unavailable: {exc}")
-    from oracles import gl_blend as oracle
-
-    return oracle
+GL_ORACLE = "gl_blend"  # the gl fixture (tests/conftest.py)
 
 
 def blend_states(oracle, seed):
@@ -95,23 +85,23 @@ def ours(src, dst, state, target):
 
 
 @pytest.fixture(scope="module")
-def batches(mesa):
+def batches(gl):
     """Both 1125-state batches. llvmpipe compiles a shader per blend state and format, so the
     RGBA8 batch runs in a second process while this one draws the RGBA32F batch."""
     rng = np.random.default_rng(1)
-    states32, alpha_of32 = blend_states(mesa, 2)
+    states32, alpha_of32 = blend_states(gl, 2)
     src32 = random_colours(rng, (len(states32), PIXELS, 4))
     dst32 = random_colours(rng, (len(states32), PIXELS, 4))
 
-    states8, alpha_of8 = blend_states(mesa, 4)
+    states8, alpha_of8 = blend_states(gl, 4)
     src8 = random_colours(rng, (len(states8), PIXELS, 4))
     dst8 = rng.integers(0, 256, (len(states8), PIXELS, 4)).astype(np.uint8)
     dst8[rng.random(dst8.shape) < 0.1] = 0
     dst8[rng.random(dst8.shape) < 0.1] = 255
 
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        pending = pool.submit(mesa.mesa_blend, src8, dst8, states8, "unorm8")
-        got32 = mesa.mesa_blend(src32, dst32, states32, "float32")
+        pending = pool.submit(gl.mesa_blend, src8, dst8, states8, "unorm8")
+        got32 = gl.mesa_blend(src32, dst32, states32, "float32")
         got8 = pending.result()
     return (states32, alpha_of32, src32, dst32, got32), (states8, alpha_of8, src8, dst8, got8)
 
@@ -181,18 +171,18 @@ def test_rgba8_model_and_mesa_differ_by_a_step_only_rarely(unorm8_run):
     assert off_by_one < 0.05, f"{off_by_one:.2%} of the RGBA8 values differ by one step"
 
 
-def test_worked_example_on_mesa(mesa):
-    state = mesa.BlendState("ONE_MINUS_SRC_COLOR", "SRC_ALPHA")
+def test_worked_example_on_mesa(gl):
+    state = gl.BlendState("ONE_MINUS_SRC_COLOR", "SRC_ALPHA")
     src = np.array([[[0, 0, 1, 0.25]]], np.float32)
     # Expected from the course notes: (0, 0, 1, 0.25)·(1, 1, 0, 0.75) + (0, 1, 0, 0.75)·0.25.
     expected = np.array([0, 0.25, 0, 0.375])
-    got = mesa.mesa_blend(src, np.array([[[0, 1, 0, 0.75]]], np.float32), [state], "float32")[0, 0]
+    got = gl.mesa_blend(src, np.array([[[0, 1, 0, 0.75]]], np.float32), [state], "float32")[0, 0]
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
     np.testing.assert_allclose(
         gl_blend(src[0, 0], (0, 1, 0, 0.75), state.src_factor, state.dst_factor), expected
     )
     # RGBA8: 0.75 is stored as 191; the result is within one step of 255·0.375 = 95.6.
-    got8 = mesa.mesa_blend(src, np.array([[[0, 255, 0, 191]]], np.uint8), [state], "unorm8")[0, 0]
+    got8 = gl.mesa_blend(src, np.array([[[0, 255, 0, 191]]], np.uint8), [state], "unorm8")[0, 0]
     assert np.all(np.abs(got8 - expected * 255) <= 1), got8
     ours8 = gl_blend(src[0, 0], (0, 1, 0, 191 / 255), state.src_factor, state.dst_factor, target="unorm8")
     assert np.abs(np.rint(ours8 * 255) - got8).max() <= 1
@@ -227,20 +217,20 @@ def premultiplied(rng, n, hdr):
 
 
 @pytest.mark.parametrize("target", ["float32", "unorm8"])
-def test_porter_duff_through_gl_factors_on_mesa(mesa, target):
+def test_porter_duff_through_gl_factors_on_mesa(gl, target):
     rng = np.random.default_rng(5)
     ops = list(CLOSED_FORMS)
-    states = [mesa.BlendState(*gl_factors(op)) for op in ops]
+    states = [gl.BlendState(*gl_factors(op)) for op in ops]
     src = np.stack([premultiplied(rng, PIXELS, hdr=target == "float32") for _ in ops])
     dst = np.stack([premultiplied(rng, PIXELS, hdr=target == "float32") for _ in ops])
     if target == "unorm8":
         dst_bytes = np.rint(dst * 255).astype(np.uint8)
-        got = mesa.mesa_blend(src, dst_bytes, states, target) / 255.0
+        got = gl.mesa_blend(src, dst_bytes, states, target) / 255.0
         # The closed form on the 8-bit values the buffer holds, clamped and rounded: within one step.
         src, dst = np.rint(src * 255) / 255.0, dst_bytes / 255.0
         tolerance = STEP + 1e-6
     else:
-        got = mesa.mesa_blend(src, dst, states, target)
+        got = gl.mesa_blend(src, dst, states, target)
         tolerance = 1e-6
     for i, op in enumerate(ops):
         closed = CLOSED_FORMS[op](src[i], dst[i], src[i, :, 3:], dst[i, :, 3:])
@@ -252,28 +242,28 @@ def test_porter_duff_through_gl_factors_on_mesa(mesa, target):
         np.testing.assert_allclose(model, got[i], rtol=0, atol=tolerance, err_msg=f"{op}: gl_blend vs Mesa")
 
 
-def test_mesa_accepts_src_alpha_saturate_as_dfactor(mesa, float_run):
+def test_mesa_accepts_src_alpha_saturate_as_dfactor(gl, float_run):
     # The GL 4.x refpage allows it for both; GL ES 2 / GL 1.x allowed it as sfactor only.
-    assert mesa.mesa_accepts_blend_func("ONE", "SRC_ALPHA_SATURATE")
-    assert mesa.mesa_accepts_blend_func("SRC_ALPHA_SATURATE", "SRC_ALPHA_SATURATE")
-    assert not mesa.mesa_accepts_blend_func("ONE", "FUNC_ADD")  # not a factor: GL_INVALID_ENUM
+    assert gl.mesa_accepts_blend_func("ONE", "SRC_ALPHA_SATURATE")
+    assert gl.mesa_accepts_blend_func("SRC_ALPHA_SATURATE", "SRC_ALPHA_SATURATE")
+    assert not gl.mesa_accepts_blend_func("ONE", "FUNC_ADD")  # not a factor: GL_INVALID_ENUM
     states = float_run[0]
     assert any(s.dst_factor == "SRC_ALPHA_SATURATE" for s in states)
 
 
-def test_rgba8_quantises_fragment_and_constant_as_the_model(mesa):
+def test_rgba8_quantises_fragment_and_constant_as_the_model(gl):
     """The two 8-bit conversions of the model, checked densely: the fragment colour stored by
     (ONE, ZERO), and the blend colour applied to a white fragment by (CONSTANT_COLOR, ZERO)."""
     values = np.linspace(-0.1, 1.1, 4 * 30001, dtype=np.float32).reshape(1, -1, 4)
-    copy = mesa.BlendState("ONE", "ZERO")
-    got = mesa.mesa_blend(values, np.zeros(values.shape, np.uint8), [copy], "unorm8")
+    copy = gl.BlendState("ONE", "ZERO")
+    got = gl.mesa_blend(values, np.zeros(values.shape, np.uint8), [copy], "unorm8")
     model = gl_blend(values[0], np.zeros(4, np.float32), "ONE", "ZERO", target="unorm8")
     np.testing.assert_array_equal(got[0], np.rint(model * 255))
 
     constants = np.linspace(-0.05, 1.05, 4 * 300).reshape(-1, 4)
-    states = [mesa.BlendState("CONSTANT_COLOR", "ZERO", constant=tuple(c)) for c in constants]
+    states = [gl.BlendState("CONSTANT_COLOR", "ZERO", constant=tuple(c)) for c in constants]
     white = np.ones((len(states), 1, 4), np.float32)
-    got = mesa.mesa_blend(white, np.zeros(white.shape, np.uint8), states, "unorm8")[:, 0]
+    got = gl.mesa_blend(white, np.zeros(white.shape, np.uint8), states, "unorm8")[:, 0]
     model = np.stack(
         [
             gl_blend(white[0, 0], np.zeros(4), "CONSTANT_COLOR", "ZERO", constant=c, target="unorm8")

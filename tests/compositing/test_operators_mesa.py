@@ -9,22 +9,12 @@ import pytest
 from compositing_testdata import premultiplied_pixels
 
 from compositing import ALL_OPERATORS, composite
-from oracles.egl import EGLUnavailable, gl_context
 
 REALISABLE = [name for name, spec in ALL_OPERATORS.items() if spec.gl_realisable]
 PIXELS = 600
 
 
-@pytest.fixture(scope="module")
-def mesa():
-    """The oracle module, or a skip with the reason EGL cannot start."""
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa through EGL is unavailable: {exc}")
-    from oracles import gl_blend as oracle
-
-    return oracle
+GL_ORACLE = "gl_blend"  # the gl fixture (tests/conftest.py)
 
 
 def test_the_twelve_and_plus_are_realisable():
@@ -32,11 +22,11 @@ def test_the_twelve_and_plus_are_realisable():
 
 
 @pytest.mark.mesa
-def test_realisable_operators_match_mesa_rgba32f(mesa):
+def test_realisable_operators_match_mesa_rgba32f(gl):
     src = np.stack([premultiplied_pixels(PIXELS, 100 + i) for i in range(len(REALISABLE))])
     dst = np.stack([premultiplied_pixels(PIXELS, 200 + i) for i in range(len(REALISABLE))])
-    states = [mesa.BlendState(ALL_OPERATORS[op].fa, ALL_OPERATORS[op].fb) for op in REALISABLE]
-    got_gl = mesa.mesa_blend(src, dst, states, target="float32")
+    states = [gl.BlendState(ALL_OPERATORS[op].fa, ALL_OPERATORS[op].fb) for op in REALISABLE]
+    got_gl = gl.mesa_blend(src, dst, states, target="float32")
     for i, op in enumerate(REALISABLE):
         ours = composite(src[i], dst[i], op, engine="numpy")
         # float32 products and one sum, HDR values up to ~16: a few ulps at most.

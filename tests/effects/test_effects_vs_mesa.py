@@ -12,7 +12,6 @@ from blinn_phong.fog import apply_fog
 from blinn_phong.oit import resolve_a_buffer, resolve_in_draw_order
 from blinn_phong.scene import orthographic_matrix
 from blinn_phong.shadows import render_shadow_map
-from oracles.egl import EGLUnavailable, gl_context
 
 pytestmark = pytest.mark.mesa
 
@@ -20,11 +19,8 @@ W = H = 32
 
 
 @pytest.fixture(scope="module")
-def gl():
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
+def gl(mesa_context):
+    """OpenGL itself (not an oracle module), drawing into a W×H float framebuffer."""
     from OpenGL import GL
 
     # the context is shared with other Mesa tests: save every piece of state we touch

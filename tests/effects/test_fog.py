@@ -53,3 +53,29 @@ def test_bad_input_is_rejected_with_the_argument_named():
         apply_fog(np.zeros((2, 4)), np.zeros(3), (0, 0, 0))
     with pytest.raises(ValueError, match="finite"):
         fog_factor(np.array([np.nan]))
+
+
+# --------------------------------------------------------------------------- fog parameters
+
+
+@pytest.mark.parametrize(
+    ("start", "end", "name"),
+    [(0.0, np.inf, "end"), (np.nan, 10.0, "start"), (-np.inf, 10.0, "start"), (2.0, np.nan, "end")],
+)
+def test_linear_fog_needs_finite_start_and_end(start, end, name):
+    with pytest.raises(ValueError, match=rf"^{name}: expected a finite number"):
+        fog_factor(np.array([1.0, 5.0]), "linear", start=start, end=end)
+
+
+def test_linear_fog_end_before_start_is_reverse_fog():
+    # GL §3.10 f = (end − c)/(end − start) does not require end > start: here f = (c − 2)/8, clamped
+    np.testing.assert_allclose(
+        fog_factor(np.array([2.0, 6.0, 12.0]), "linear", start=10.0, end=2.0), [0.0, 0.5, 1.0], atol=1e-15
+    )
+
+
+def test_fog_reports_non_finite_counts_in_the_shared_style():
+    with pytest.raises(ValueError, match=r"^distance: expected finite values; got 1 NaN and 2 Inf of 4"):
+        fog_factor(np.array([np.nan, np.inf, -np.inf, 1.0]))
+    with pytest.raises(ValueError, match=r"^rgba: expected shape \(\.\.\., 4\), got shape \(2, 3\)"):
+        apply_fog(np.zeros((2, 3)), np.zeros(2), (0, 0, 0))

@@ -15,9 +15,11 @@ from blinn_phong.oit import (
     resolve_depth_peeling,
     resolve_in_draw_order,
     resolve_weighted_blended,
+    transparency_pass,
     triangle_draw_order,
     wboit_weights,
 )
+from blinn_phong.raster import Fragments
 
 N_PIX = 64
 BG = np.array([0.2, 0.3, 0.4, 1.0])
@@ -370,3 +372,78 @@ def test_compiled_resolves_match_the_reference(method: str, seed: int) -> None:
         got = _compiled(lists, RESOLVE_CODES["weighted_blended"], 0, lists["depth"])
     assert np.diff(lists["offsets"]).max() >= 5
     np.testing.assert_allclose(got, expected.astype(np.float32), rtol=0, atol=1e-6)
+
+
+# ---------------------------------------------------------- transparency_pass opaque z-buffer
+
+
+def _pass_fragments(pixel, depth, triangle, width=3):
+    n = len(pixel)
+    return Fragments(
+        width,
+        1,
+        1,
+        np.asarray(pixel, np.int64),
+        np.zeros(n, np.int64),
+        np.asarray(depth, np.float64),
+        np.asarray(triangle, np.int64),
+        np.full((n, 3), 1 / 3),
+        np.ones(n, bool),
+    )
+
+
+# pixel 0: opaque at 0.5 (tri 1) and 0.3 (tri 2) -> the nearer, tri 2;
+# pixel 1: two opaque at the same depth 0.4 (tri 3 and tri 0) -> GL_LESS keeps the first drawn, tri 0;
+#          a transparent fragment (tri 4) in front at 0.2; pixel 2: empty
+PASS_FRAGMENTS = _pass_fragments([0, 0, 1, 1, 1], [0.5, 0.3, 0.4, 0.4, 0.2], [1, 2, 3, 0, 4])
+PASS_OPAQUE = np.array([True, True, True, True, False])
+PASS_COLOURS = np.array([[0.1, 0, 0, 1], [0.2, 0, 0, 1], [0.3, 0, 0, 1], [0.4, 0, 0, 1], [0, 0, 0.25, 0.5]])
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("method", ["zbuffer", "a_buffer"])
+def test_transparency_pass_keeps_the_shade_dtype_and_resolves_like_gl_less(dtype, method):
+    shaded = []
+
+    def shade(index):
+        shaded.append(np.sort(index))
+        return PASS_COLOURS[index].astype(dtype)
+
+    rgba, depth = transparency_pass(
+        PASS_FRAGMENTS,
+        PASS_OPAQUE,
+        shade,
+        method,
+        triangle_mesh=np.zeros(5, int),
+        triangle_eye_distance=np.zeros(5),
+    )
+    assert rgba.dtype == dtype
+    np.testing.assert_array_equal(depth, [0.3, 0.4, 1.0])
+    np.testing.assert_array_equal(shaded[0], [1, 3])  # only the visible opaque fragments are shaded
+    expected_pixel1 = (
+        PASS_COLOURS[3] if method == "zbuffer" else PASS_COLOURS[4] + 0.5 * PASS_COLOURS[3]
+    )  # over
+    np.testing.assert_allclose(rgba, np.array([PASS_COLOURS[1], expected_pixel1, np.zeros(4)]), atol=1e-7)
+
+
+# --------------------------------------------------------------------------- WBOIT floor on one layer
+
+
+def test_wboit_one_layer_is_exact_above_the_floor_and_scaled_below_it():
+    # McGuire & Bavoil 2013, eq. 10 weight α·max(1e-2, 3e3·(1 − d)³) and the listing's max(accum.a, 1e-5)
+    alpha = np.array([0.01, 0.01, 0.5, 0.05, 0.9])
+    depth = np.array([0.99, 0.5, 0.99, 0.9, 0.999])
+    colour = 0.8
+    w = wboit_weights(alpha, "eq10", window_depth=depth)
+    np.testing.assert_allclose(w, alpha * np.maximum(1e-2, 3e3 * (1 - depth) ** 3), rtol=1e-15)
+    rgba = np.c_[np.full((5, 3), colour) * alpha[:, None], alpha]
+    out = resolve_weighted_blended(np.arange(5), w, rgba, 5)
+    accum_a = w * alpha
+    np.testing.assert_allclose(out[:, 3], alpha, rtol=1e-15)  # coverage always exact
+    expected = colour * alpha * np.minimum(1.0, accum_a / 1e-5)
+    np.testing.assert_allclose(out[:, 0], expected, rtol=1e-12)
+    # the reviewer's case: α = 0.01 at depth 0.99 resolves to 0.0008 instead of 0.008
+    np.testing.assert_allclose(out[0, 0], 0.0008, rtol=1e-12)
+    above = accum_a >= 1e-5
+    assert above.any() and (~above).any()
+    np.testing.assert_allclose(out[above, 0], colour * alpha[above], rtol=1e-12)

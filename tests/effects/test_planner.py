@@ -284,9 +284,9 @@ def test_plan_explains_every_concern_and_rejects_bad_tolerance():
 
 def _box_mesh(lid: bool, colour=(0.8, 0.6, 0.4), opacity: float = 1.0) -> Mesh:
     """A 2×2×1 box on z = 0, 4 vertices and one normal per face, outward winding; no lid: open at the top."""
-    from benchmarks.planner_fuzz import _box
+    from testbeds.planner_fuzz import faceted_box
 
-    p, t, n = _box(np.array([1.0, 1.0, 0.5]), lid=lid)
+    p, t, n = faceted_box(np.array([1.0, 1.0, 0.5]), lid=lid)
     move = np.eye(4)
     move[2, 3] = 0.5
     return Mesh(p, t, n, transform=move, material=Material(ambient=colour, diffuse=colour, opacity=opacity))

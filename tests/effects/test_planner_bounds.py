@@ -13,7 +13,6 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.planner_fuzz import random_scene
 from blinn_phong.frame import Fog
 from blinn_phong.lighting import _light_direction, lights_in_eye_space
 from blinn_phong.planner import (
@@ -27,6 +26,7 @@ from blinn_phong.planner import (
 )
 from blinn_phong.render import render
 from blinn_phong.scene import DirectionalLight, Material, Mesh, PointLight, SpotLight
+from testbeds.planner_fuzz import random_scene
 
 from .scenes import flat_cube, horizontal_quad, ortho_camera, perspective_camera, quad, scene_of
 

@@ -141,8 +141,8 @@ def test_volumes_agree_with_embree_away_from_shadow_edges_on_fuzzer_scenes(seed)
     caps drawn, ``stencil="auto"`` counts these views with z-pass (the camera is outside every
     volume) and agrees to one step on every pixel more than one pixel away from any shadow edge."""
     pytest.importorskip("embreex")
-    from benchmarks.planner_fuzz import random_scene, silhouette_tie_mask, terminator_mask
     from blinn_phong.shadow_volume import zpass_is_safe
+    from testbeds.planner_fuzz import random_scene, silhouette_tie_mask, terminator_mask
 
     scene, size = random_scene(seed), 32
     tris = np.concatenate(

@@ -1,6 +1,6 @@
 """The planner keeps its promise on random scenes it has never seen.
 
-Seeded random scenes (:func:`benchmarks.planner_fuzz.random_scene`: open and closed boxes,
+Seeded random scenes (:func:`testbeds.planner_fuzz.random_scene`: open and closed boxes,
 spheres, slabs, panes and thin slats with random transforms, opaque, transparent,
 absorbing, Kay–Greenberg and two-sided materials, directional, point and spot lights with
 attenuation down to ``k_c = 0.01``) are rendered following ``plan(scene, T)`` and with every
@@ -17,7 +17,7 @@ silhouette ties (a front and a back fragment of one mesh at equal depth, whose o
 method defines); see :mod:`benchmarks.planner_fuzz`. The reference is independent of the
 planner: it forces the exact method of every concern. The plan is made for a 640×480 frame
 (the cost models find no approximation worth its error at 32²) and rendered at 32² with its
-choices (:func:`benchmarks.planner_fuzz.planned_render`). The larger sweep with exceedance rates is
+choices (:func:`testbeds.planner_fuzz.planned_render`). The larger sweep with exceedance rates is
 ``python -m benchmarks.planner_fuzz``.
 """
 
@@ -26,9 +26,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.planner_fuzz import TOLERANCES, check, random_scene, silhouette_tie_mask, terminator_mask
 from blinn_phong.frame import embree_available
 from blinn_phong.planner import plan
+from testbeds.planner_fuzz import TOLERANCES, check, random_scene, silhouette_tie_mask, terminator_mask
 
 pytestmark = pytest.mark.skipif(
     not embree_available(), reason="the exact shadows are ray traced with embreex"
@@ -68,12 +68,12 @@ def test_the_terminator_rule_marks_only_curved_meshes_facing_a_light_edge_on() -
     """Flat-faced meshes (boxes with face normals) have no terminator triangle; a sphere under
     a light has a ring of them."""
     import blinn_phong as bp
-    from benchmarks.planner_fuzz import _box
     from blinn_phong.primitives import uv_sphere
+    from testbeds.planner_fuzz import faceted_box
 
     camera = bp.Camera.perspective(40.0, 1.0, 0.5, 30.0, view=bp.look_at((0, -5, 0.5), (0, 0, 0), (0, 0, 1)))
     light = bp.DirectionalLight((1.0, 0.0, 0.0))  # from -x: the terminator is the ring x = 0
-    box = bp.Scene([bp.Mesh(*_box(np.array([0.8, 0.8, 0.8])))], [light], camera)
+    box = bp.Scene([bp.Mesh(*faceted_box(np.array([0.8, 0.8, 0.8])))], [light], camera)
     assert not terminator_mask(box, 32).any()
     ball = bp.Scene([bp.Mesh(*uv_sphere(16, 8))], [light], camera)
     mask = terminator_mask(ball, 32)

@@ -11,24 +11,16 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
+from tests.meshes import square
 
 SIZE = 40
 X = -2 + (np.arange(SIZE) + 0.5) * 0.1  # pixel centres of a 4 × 4 orthographic view
 
 
-def _quad(z: float, half: float, material: bp.Material, centre: tuple[float, float] = (0.0, 0.0),
-          casts_shadows: bool = True) -> bp.Mesh:  # fmt: skip
-    cx, cy = centre
-    pos = np.array([[cx - half, cy - half, z], [cx + half, cy - half, z], [cx + half, cy + half, z],
-                    [cx - half, cy + half, z]])  # fmt: skip
-    return bp.Mesh(pos, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
-                   material=material, casts_shadows=casts_shadows)  # fmt: skip
-
-
 def _scene(occluder_casts: bool, floor_casts: bool = True) -> bp.Scene:
     white = bp.Material(ambient=(0, 0, 0), diffuse=(1, 1, 1), specular=(0, 0, 0))
-    floor = _quad(0.0, 2.0, white, casts_shadows=floor_casts)
-    occluder = _quad(1.0, 0.5, bp.Material(ambient=(0, 0, 0), diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0)),
+    floor = square(0.0, 2.0, white, casts_shadows=floor_casts)
+    occluder = square(1.0, 0.5, bp.Material(ambient=(0, 0, 0), diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0)),
                      centre=(1.0, 0.0), casts_shadows=occluder_casts)  # fmt: skip
     camera = bp.Camera.orthographic(-2, 2, -2, 2, 0.5, 10.0, view=bp.look_at((0, 0, 5), (0, 0, 0), (0, 1, 0)))
     return bp.Scene((floor, occluder), (bp.DirectionalLight((0.0, 0.0, -1.0)),), camera, ambient=(0, 0, 0))
@@ -59,4 +51,4 @@ def test_the_shadow_of_a_slanted_sun_disappears_with_its_caster(shadows: str) ->
 
 def test_casts_shadows_must_be_a_bool() -> None:
     with pytest.raises(TypeError, match=r"Mesh\.casts_shadows"):
-        _quad(0.0, 1.0, bp.Material(), casts_shadows="no")  # type: ignore[arg-type]
+        square(0.0, 1.0, bp.Material(), casts_shadows="no")  # type: ignore[arg-type]

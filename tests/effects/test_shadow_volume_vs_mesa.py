@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 
 from blinn_phong.shadow_volume import shadow_volume_visibility
-from oracles.egl import EGLUnavailable, gl_context
 
 from .volume_scenes import (
     HEIGHT,
@@ -39,11 +38,7 @@ pytestmark = pytest.mark.mesa
 
 
 @pytest.fixture(scope="module")
-def stencil():
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
+def stencil(mesa_context):
     from oracles.gl_stencil import render_stencil_shadows
 
     return render_stencil_shadows

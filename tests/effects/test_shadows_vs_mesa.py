@@ -20,30 +20,22 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from benchmarks.bench_shadows_mesa import away_from_shadow_edges, build_scene, to_unorm8
 from blinn_phong.raytrace import world_triangles
 from blinn_phong.shadows import light_shadow_maps
-from oracles.egl import EGLUnavailable, gl_context
+from oracles.gl_common import to_unorm8
+from testbeds.shadow_scenes import away_from_shadow_edges, two_spheres_over_ground
 
 pytestmark = pytest.mark.mesa
 
 SIZE = 128
 
 
-@pytest.fixture(scope="module")
-def gl():
-    try:
-        gl_context()
-    except EGLUnavailable as exc:
-        pytest.skip(f"Mesa EGL unavailable: {exc}")
-    from oracles import gl_shadows
-
-    return gl_shadows
+GL_ORACLE = "gl_shadows"  # the gl fixture (tests/conftest.py)
 
 
 def two_spheres(lights) -> bp.Scene:
     """Two 24×12 UV spheres over a ground plane (the benchmark's scene, small)."""
-    return build_scene(24, 1.0, lights, rings=12)
+    return two_spheres_over_ground(24, 1.0, lights, rings=12)
 
 
 LIGHT_SETS = {

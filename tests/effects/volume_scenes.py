@@ -20,7 +20,7 @@ from blinn_phong.scene import (
     look_at,
 )
 
-from .scenes import flat_cube, horizontal_quad
+from .scenes import flat_cube, horizontal_quad, world_triangles
 
 WIDTH, HEIGHT = 160, 120
 
@@ -98,14 +98,6 @@ def inside_camera(light, centre, radius) -> Camera:
 def scene_with(meshes: list[Mesh], light, camera: Camera, ground: bool = True) -> Scene:
     ground_mesh = [horizontal_quad(0.0, half=4.0)] if ground else []
     return Scene(tuple(ground_mesh + meshes), (light,), camera, light_model=LightModel())
-
-
-def world_triangles(scene: Scene) -> np.ndarray:
-    parts = []
-    for m in scene.meshes:
-        w = (np.c_[m.positions, np.ones(len(m.positions))] @ m.transform.T)[:, :3]
-        parts.append(w[m.triangles])
-    return np.concatenate(parts)
 
 
 def samples(scene: Scene, width: int = WIDTH, height: int = HEIGHT):

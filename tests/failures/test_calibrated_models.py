@@ -19,10 +19,15 @@ import pytest
 
 import blinn_phong as bp
 from benchmarks import error_models as em
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
-from benchmarks.tradeoffs import layered_scene, transparency_methods, transparent_fragments, visible_points
 from blinn_phong import calibration as cal
 from blinn_phong.primitives import grid_plane, uv_sphere
+from testbeds.error_metrics import error_metrics, has_nonfinite
+from testbeds.tradeoff_scenes import (
+    layered_scene,
+    transparency_methods,
+    transparent_fragments,
+    visible_points,
+)
 
 MODELS = cal.shipped_models()
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from compositing import composite, premultiply, unpremultiply
+from testbeds.error_metrics import error_metrics, has_nonfinite
 
 
 def _unorm8(x: np.ndarray) -> np.ndarray:

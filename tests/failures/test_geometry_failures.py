@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from blinn_phong.normals import face_normals, vertex_normals
 from blinn_phong.primitives import grid_plane
 from blinn_phong.refraction import refract
+from testbeds.error_metrics import error_metrics, has_nonfinite
 
 
 def _scene(mesh: bp.Mesh) -> bp.Scene:

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from blinn_phong.primitives import grid_plane, uv_sphere
+from testbeds.error_metrics import error_metrics, has_nonfinite
 
 TOP = bp.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0))
 DISTANT_VIEWER = bp.LightModel(local_viewer=False)

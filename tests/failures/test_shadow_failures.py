@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+from testbeds.error_metrics import error_metrics, has_nonfinite
 
 LIGHT = bp.DirectionalLight((0.5, 0.0, -1.0))
 RES = 512

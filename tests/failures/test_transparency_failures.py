@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks.tradeoff_metrics import error_metrics, has_nonfinite
 from blinn_phong.oit import resolve_a_buffer, resolve_transparency, resolve_weighted_blended, wboit_weights
 from blinn_phong.raster import rasterize
+from testbeds.error_metrics import error_metrics, has_nonfinite
 
 SIZE = 48
 RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
