@@ -17,6 +17,8 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parents[2]
 MARK = "@@RESULT@@"
 
@@ -74,3 +76,47 @@ def bpy_version() -> tuple[int, int]:
     names = sorted(p.name for p in root.iterdir() if p.name[:1].isdigit())
     major, minor = names[-1].split(".")
     return int(major), int(minor)
+
+
+def exr_parts(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
+    """Every part of a multilayer EXR: pixels by part name, header strings, channel names."""
+    import OpenImageIO as oiio  # noqa: N813
+
+    image = oiio.ImageInput.open(str(path))
+    assert image is not None, oiio.geterror()
+    pixels, header, channels = {}, {}, {}
+    try:
+        index = 0
+        while image.seek_subimage(index, 0):
+            spec = image.spec()
+            name = spec.get_string_attribute("name")
+            pixels[name] = image.read_image(index, 0, 0, spec.nchannels, oiio.FLOAT)
+            channels[name] = list(spec.channelnames)
+            for attribute in spec.extra_attribs:
+                if attribute.name.startswith("cryptomatte/"):
+                    header[attribute.name] = str(attribute.value)
+            index += 1
+    finally:
+        image.close()
+    return pixels, header, channels
+
+
+def exr_passes(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
+    """Pixels, channel names (the part after the pass) by ``<layer>.<pass>``, and the header
+    strings, of a multilayer EXR written as one part per pass (Blender 4.5 and later) or as one
+    part whose channels are named ``<layer>.<pass>.<channel>`` (Blender 4.2)."""
+    parts, header, names = exr_parts(path)
+    pixels: dict[str, np.ndarray] = {}
+    channels: dict[str, list[str]] = {}
+    for part, image in parts.items():
+        for index, full in enumerate(names[part]):
+            qualified = full if not part or full.startswith(f"{part}.") else f"{part}.{full}"
+            stem, _, channel = qualified.rpartition(".")
+            channels.setdefault(stem, []).append(channel)
+            pixels.setdefault(stem, []).append(image[..., index])  # type: ignore[attr-defined]
+    order = "RGBArgbaXYZxyzUVW"  # a single-part file may store a pass's channels sorted by name
+    for stem, names_ in channels.items():
+        ranked = sorted(range(len(names_)), key=lambda i: order.find(names_[i]) % 99)
+        channels[stem] = [names_[i] for i in ranked]
+        pixels[stem] = [pixels[stem][i] for i in ranked]  # type: ignore[index]
+    return {k: np.stack(v, axis=-1) for k, v in pixels.items()}, header, channels

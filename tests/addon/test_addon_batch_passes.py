@@ -20,10 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from addon_testing import REPO
+from addon_testing import REPO, exr_passes
 
 from compositing.cryptomatte import layer_key, matte, name_hash, name_id
-from tests.addon.test_addon_cryptomatte import _passes
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -42,7 +41,7 @@ def test_batch_multilayer_exr_holds_the_cryptomatte_passes(tmp_path: Path) -> No
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     (exr,) = out.glob("passes_*.exr")
-    pixels, header, channels = _passes(exr)
+    pixels, header, channels = exr_passes(exr)
     layer = next(name.split(".")[0] for name in pixels if name.endswith(".CryptoObject00"))
     prefix = layer_key(f"{layer}.CryptoObject")
     assert header[prefix + "name"] == f"{layer}.CryptoObject"

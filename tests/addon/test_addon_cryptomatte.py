@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813
 import pytest
-from addon_testing import run_bpy
+from addon_testing import exr_passes, run_bpy
 
 from compositing.cryptomatte import matte, name_hash, name_id
 
@@ -109,48 +109,6 @@ emit({"outputs": outputs, "layer_names": layer_names})
 """
 
 
-def _parts(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
-    """Every part of a multilayer EXR: pixels by part name, header strings, channel names."""
-    image = oiio.ImageInput.open(str(path))
-    assert image is not None, oiio.geterror()
-    pixels, header, channels = {}, {}, {}
-    try:
-        index = 0
-        while image.seek_subimage(index, 0):
-            spec = image.spec()
-            name = spec.get_string_attribute("name")
-            pixels[name] = image.read_image(index, 0, 0, spec.nchannels, oiio.FLOAT)
-            channels[name] = list(spec.channelnames)
-            for attribute in spec.extra_attribs:
-                if attribute.name.startswith("cryptomatte/"):
-                    header[attribute.name] = str(attribute.value)
-            index += 1
-    finally:
-        image.close()
-    return pixels, header, channels
-
-
-def _passes(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[str, list[str]]]:
-    """Pixels, channel names (the part after the pass) by ``<layer>.<pass>``, and the header
-    strings, of a multilayer EXR written as one part per pass (Blender 4.5 and later) or as one
-    part whose channels are named ``<layer>.<pass>.<channel>`` (Blender 4.2)."""
-    parts, header, names = _parts(path)
-    pixels: dict[str, np.ndarray] = {}
-    channels: dict[str, list[str]] = {}
-    for part, image in parts.items():
-        for index, full in enumerate(names[part]):
-            qualified = full if not part or full.startswith(f"{part}.") else f"{part}.{full}"
-            stem, _, channel = qualified.rpartition(".")
-            channels.setdefault(stem, []).append(channel)
-            pixels.setdefault(stem, []).append(image[..., index])  # type: ignore[attr-defined]
-    order = "RGBArgbaXYZxyzUVW"  # a single-part file may store a pass's channels sorted by name
-    for stem, names_ in channels.items():
-        ranked = sorted(range(len(names_)), key=lambda i: order.find(names_[i]) % 99)
-        channels[stem] = [names_[i] for i in ranked]
-        pixels[stem] = [pixels[stem][i] for i in ranked]  # type: ignore[index]
-    return {k: np.stack(v, axis=-1) for k, v in pixels.items()}, header, channels
-
-
 def _layer(pixels: dict[str, np.ndarray], stem: str) -> list[np.ndarray]:
     return [pixels[f"ViewLayer.{stem}{i:02d}"] for i in range(3)]
 
@@ -166,8 +124,8 @@ def _ids(passes: list[np.ndarray]) -> set[int]:
 
 def test_cryptomatte_matches_cycles_and_blenders_node(tmp_path: Path) -> None:
     got = run_bpy(SCRIPT, tmp_path, args=(str(tmp_path),), timeout=540)
-    cycles, cycles_header, cycles_channels = _passes(tmp_path / "cycles.exr")
-    ours, our_header, our_channels = _passes(tmp_path / "ours.exr")
+    cycles, cycles_header, cycles_channels = exr_passes(tmp_path / "cycles.exr")
+    ours, our_header, our_channels = exr_passes(tmp_path / "ours.exr")
 
     for stem in ("CryptoObject", "CryptoMaterial", "CryptoAsset"):
         assert f"{stem}00" in got["outputs"] and f"{stem}02" in got["outputs"]  # registered

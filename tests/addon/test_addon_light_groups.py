@@ -13,9 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from addon_testing import run_bpy
-
-from tests.addon.test_addon_cryptomatte import _passes
+from addon_testing import exr_passes, run_bpy
 
 pytestmark = [pytest.mark.blender, pytest.mark.timeout(300)]
 
@@ -80,7 +78,7 @@ emit({"outputs": outputs})
 
 
 def _parts(path: Path) -> dict[str, np.ndarray]:
-    return _passes(path)[0]
+    return exr_passes(path)[0]
 
 
 def test_light_group_passes_are_registered_and_sum_to_combined(tmp_path: Path) -> None:

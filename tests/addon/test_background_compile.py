@@ -132,9 +132,7 @@ def test_f12_shows_a_one_sample_image_first_then_the_full_frame(tmp_path: Path) 
     (a progressive first image) and then the full frame with every pass; the saved frame equals
     the compiled engine's render of the same scene once the kernels are in (the engines agree to
     float rounding)."""
-    from addon_testing import run_bpy
-
-    from tests.addon.test_addon_cryptomatte import _passes
+    from addon_testing import exr_passes, run_bpy
 
     env = {
         "BLINN_PHONG_KERNEL_CACHE": str(tmp_path / "kernels"),
@@ -146,8 +144,8 @@ def test_f12_shows_a_one_sample_image_first_then_the_full_frame(tmp_path: Path) 
     assert "compiling in the background" in first["status"]
     assert got["exit"] == 0
     assert second["ok"] and not second["first_image"] and second["engine"] == "numba"
-    numpy_frame, _, _ = _passes(tmp_path / "while_compiling.exr")
-    numba_frame, _, _ = _passes(tmp_path / "compiled.exr")
+    numpy_frame, _, _ = exr_passes(tmp_path / "while_compiling.exr")
+    numba_frame, _, _ = exr_passes(tmp_path / "compiled.exr")
     assert {"ViewLayer.Depth", "ViewLayer.Shadow"} <= set(numpy_frame)  # the full frame's passes
     np.testing.assert_allclose(
         numpy_frame["ViewLayer.Combined"], numba_frame["ViewLayer.Combined"], atol=1e-6
