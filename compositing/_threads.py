@@ -10,6 +10,7 @@ compiles as ordinary serial code.
 from __future__ import annotations
 
 import atexit
+import itertools
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -64,9 +65,9 @@ def in_shares(kernel: Callable[..., _Result], n: int, *args: object) -> Sequence
     threads. Returns each share's result, in order (e.g. a count to sum).
     """
     items = np.arange(n, dtype=np.int64)
-    if thread_count() > 1 and n > 1:
-        # an empty share first, on this thread: the kernel is compiled (or loaded) here, where
-        # warnings and the compile clock's listeners see it, not in a pool thread
+    if thread_count() > 1 and n > 1 and not getattr(kernel, "signatures", True):
+        # not compiled yet: an empty share first, on this thread, so that the kernel is compiled
+        # (or loaded) here, where warnings and the compile clock's listeners see it
         kernel(items[:0], *args)
     return run_shares(lambda share: kernel(share, *args), items)
 
@@ -75,9 +76,11 @@ def run_shares(work: Callable[[np.ndarray], _Result], items: np.ndarray) -> Sequ
     """``work(share)`` for contiguous shares of ``items`` (1-D), on :func:`thread_count` threads.
 
     ``work`` must release the GIL (a ``nogil=True`` kernel) and write disjoint outputs per
-    share. With one thread, or fewer items than two shares, it runs once on the caller's thread
-    with all of ``items``. Results come back in share order; an exception in any share is
-    raised here, after every share has finished.
+    share. The calling thread works too: it and ``thread_count() − 1`` pool threads take the
+    shares in order, each the next one left, until none is (a thread that finishes early takes
+    another). With one thread, or fewer items than two shares, ``work`` runs once on the
+    caller's thread with all of ``items``. Results come back in share order; an exception in any
+    share is raised here (the first share's that failed), after every thread has stopped.
     """
     items = np.asarray(items)
     if items.ndim != 1:
@@ -87,9 +90,23 @@ def run_shares(work: Callable[[np.ndarray], _Result], items: np.ndarray) -> Sequ
     if threads == 1 or n_shares < 2:
         return [work(items)]
     shares = np.array_split(items, n_shares)
-    futures = [_executor(threads).submit(work, share) for share in shares]
-    errors = [f.exception() for f in futures]
-    for error in errors:
-        if error is not None:
-            raise error
-    return [f.result() for f in futures]
+    results: list[_Result | None] = [None] * n_shares
+    errors: dict[int, BaseException] = {}
+    next_share = itertools.count()  # next() is atomic: each share is taken once
+
+    def drain() -> None:
+        for index in iter(next_share.__next__, None):
+            if index >= n_shares or errors:
+                return
+            try:
+                results[index] = work(shares[index])
+            except BaseException as error:  # raised again by the caller
+                errors[index] = error
+
+    helpers = [_executor(threads - 1).submit(drain) for _ in range(threads - 1)]
+    drain()
+    for helper in helpers:
+        helper.result()
+    if errors:
+        raise errors[min(errors)]
+    return results  # type: ignore[return-value]
