@@ -701,16 +701,43 @@ def _record_attempt(task: Task) -> bool:
 
 
 def _finish_attempt(task: Task, result: dict[str, Any]) -> None:
-    """Complete this attempt's marker with its end and outcome (so a finished attempt is never 'lost')."""
+    """Complete this attempt's marker with its end, outcome and, when it succeeded, its result (so
+    a finished attempt is never 'lost', and never rendered again: :func:`_finished_result`)."""
     if not task.attempt_dir:
         return
     marker = _marker(task)
     try:
         record = json.loads(marker.read_text())
         record.update(end=time.time(), outcome="ok" if result["ok"] else "failed")
-        marker.write_text(json.dumps(record))
-    except (OSError, ValueError):
+        if result["ok"]:
+            record["result"] = result
+        marker.write_text(json.dumps(record, default=str))
+    except (OSError, ValueError, TypeError):
         pass  # the job has ended (folder renamed) or the marker is unreadable: informative only
+
+
+def _finished_result(task: Task) -> dict[str, Any] | None:
+    """The result of an earlier attempt of ``task`` that succeeded, if every file it wrote is still
+    there; else None.
+
+    Dask keeps a task's result on the worker that computed it until the job has fetched it. When
+    that worker is lost first, the scheduler computes the task again on another worker: the frame
+    is already written, so the earlier attempt's result (kept in its marker by
+    :func:`_finish_attempt`) is returned instead of rendering the frame a second time.
+    """
+    if not task.attempt_dir:
+        return None
+    for marker in sorted(Path(task.attempt_dir).glob(f"{task.key}.*")):
+        try:
+            record = json.loads(marker.read_text())
+        except (OSError, ValueError):
+            continue
+        result = record.get("result")
+        if record.get("outcome") != "ok" or not isinstance(result, dict):
+            continue
+        if all(Path(path).is_file() for path in result.get("written", [])):
+            return result
+    return None
 
 
 def _watchdog(task: Task) -> threading.Timer | None:
@@ -767,6 +794,9 @@ def run_task(task: Task | dict) -> dict[str, Any]:
         "pid": os.getpid(),
         "host": socket.gethostname(),
     }
+    earlier = _finished_result(task)
+    if earlier is not None:  # its worker was lost before the job fetched the result
+        return earlier
     if not _record_attempt(task):
         result["error"] = f"JobClosed: the job has ended before {task.stem} started; nothing was rendered"
         result["seconds"]["total"] = time.perf_counter() - started

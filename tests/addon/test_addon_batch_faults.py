@@ -621,3 +621,27 @@ def test_a_lost_writer_on_another_node_holds_the_job_up_only_briefly(tmp_path: P
     seconds = time.monotonic() - started
     assert PERMIT_STALE_S <= seconds < PERMIT_STALE_S + 5, seconds
     assert closed is not None and (closed / "write.lost").exists()
+
+
+def test_a_recomputed_task_returns_its_finished_attempt_instead_of_rendering(tmp_path: Path) -> None:
+    """Dask recomputes a task whose worker was lost before the job fetched its result; the frame
+    is on disk already, so the earlier attempt's result comes back and nothing renders again (no
+    new attempt marker: the attempt markers are the record of every render)."""
+    from addon.batch import run_task
+
+    attempts = tmp_path / "attempts"
+    attempts.mkdir()
+    frame = tmp_path / "shot_0001.png"
+    task = Task(blend=str(tmp_path / "shot.blend"), frame=1, out_dir=str(tmp_path), output=str(frame),
+                attempt_dir=str(attempts))  # fmt: skip
+    assert _record_attempt(task)
+    frame.write_bytes(b"the finished frame")
+    earlier = {"ok": True, "written": [str(frame)], "pid": 1234, "outputs": {"image": str(frame)}}
+    _finish_attempt(task, earlier)
+    markers = sorted(attempts.iterdir())
+    assert run_task(task) == earlier
+    assert sorted(attempts.iterdir()) == markers  # no second attempt started
+    frame.unlink()  # the file is gone: the earlier result no longer stands, and the task runs
+    from addon.batch import _finished_result
+
+    assert _finished_result(task) is None
