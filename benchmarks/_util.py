@@ -81,3 +81,18 @@ def save_figure(fig: Any, path: str | os.PathLike, **savefig_kwargs: Any) -> Pat
     with atomic_path(target) as tmp:
         fig.savefig(tmp, **savefig_kwargs)
     return target
+
+
+def ratio_main(run: Any, description: str, argv: list[str] | None = None) -> None:
+    """The command line of a benchmark whose ``run(out, repeat=, quick=)`` reports rows with
+    ``median_s`` and ``ratio_to_frame``: ``--out``, ``--repeat``, ``--quick``; prints each row."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--out", type=Path, default=Path("benchmarks/results"))
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    data = run(args.out, repeat=args.repeat, quick=args.quick)
+    for name, row in data["rows"].items():
+        print(f"{name:>14}: {row['median_s']:.3f} s  ({row['ratio_to_frame']:.2f}× the frame)")

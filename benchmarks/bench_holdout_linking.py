@@ -22,7 +22,6 @@ the full run writes ``holdout_linking.json``.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 import blinn_phong as bp
-from benchmarks._util import machine_info, time_interleaved, write_json
+from benchmarks._util import machine_info, ratio_main, time_interleaved, write_json
 from benchmarks.bench_frame import issue_scene
 
 __all__ = ["main", "run", "scenes"]
@@ -75,14 +74,7 @@ def run(out: Path, *, repeat: int = 5, quick: bool = False) -> dict[str, object]
 
 def main(argv: list[str] | None = None) -> None:
     """Command line: ``--out``, ``--repeat``, ``--quick``."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/results"))
-    parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args(argv)
-    data = run(args.out, repeat=args.repeat, quick=args.quick)
-    for name, row in data["rows"].items():  # type: ignore[union-attr]
-        print(f"{name:>14}: {row['median_s']:.3f} s  ({row['ratio_to_frame']:.2f}× the frame)")
+    ratio_main(run, __doc__.split("\n")[0], argv)
 
 
 if __name__ == "__main__":
