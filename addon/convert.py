@@ -1,4 +1,4 @@
-"""Evaluated depsgraph -> ``blinn_phong.scene.Scene``.
+"""Evaluated depsgraph -> ``blinn_phong.model.scene.Scene``.
 
 Reads what the renderer needs out of Blender and nothing else; every formula lives in
 ``addon/mapping.py``. What is converted:
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from blinn_phong.scene import (
+from blinn_phong.model.scene import (
     AmbientLight,
     Camera,
     DirectionalLight,

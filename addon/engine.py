@@ -1,7 +1,7 @@
 """The "Blinn-Phong" render engine: F12, ``bpy.ops.render.render`` and command-line renders.
 
 ``render()`` converts the evaluated depsgraph (``addon/convert.py``), renders it through
-``addon/pipeline.py`` (the planner, then ``blinn_phong.render`` or the effects recipe) and writes
+``addon/pipeline.py`` (the planner, then ``blinn_phong.frame.render`` or the effects recipe) and writes
 the passes into Blender's render result:
 
 * Combined: premultiplied linear RGBA with coverage alpha;
@@ -14,10 +14,10 @@ the passes into Blender's render result:
 * Light groups (View Layer › Passes › Light Groups; ``Object.lightgroup`` on lights and emissive
   objects, ``World.lightgroup``): one pass ``Combined_<group>`` (RGB) per group of the view
   layer's list, as Cycles names them: the frame lit by that group's emitters alone
-  (``blinn_phong.light_groups``); the passes sum to Combined when every emitter has a group.
+  (``blinn_phong.frame.light_groups``); the passes sum to Combined when every emitter has a group.
 * Cryptomatte (View Layer › Passes › Cryptomatte: Object, Material, Asset, Levels): the passes
   ``CryptoObject00`` … as Cycles names and registers them (RGBA, two rank/coverage pairs each),
-  counted from the engine's own samples (``blinn_phong.id_passes``), with the layer's header
+  counted from the engine's own samples (``blinn_phong.frame.id_passes``), with the layer's header
   entries (``cryptomatte/<key>/name``, ``hash``, ``conversion``, ``manifest``) stored in the
   render result's metadata, so Blender's Cryptomatte node reads them and a multilayer EXR carries
   them (``compositing.cryptomatte``).
@@ -27,7 +27,7 @@ Pixels go in with ``foreach_set`` on flat float32 arrays, bottom row first (Blen
 
 Deep EXR (``Scene.blinn_phong.deep_output``, Render Properties › Blinn-Phong › Deep Output): each
 frame rendered (F12, an animation, ``bpy.ops.render.render``; not previews or the viewport) is
-also rendered as a deep image in the same pass (``blinn_phong.render(..., deep=True)``) and
+also rendered as a deep image in the same pass (``blinn_phong.frame.render(..., deep=True)``) and
 written with ``compositing.deep_io.write_deep`` (atomic: a failed write keeps an existing file) to
 :func:`deep_file_path`: the path an animation render saves the current frame to
 (``RenderSettings.frame_path``, ``//`` relative to the .blend) with the format's extension replaced

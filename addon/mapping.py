@@ -5,7 +5,7 @@ tested without Blender. ``addon/convert.py`` reads the values out of the depsgra
 
 Conventions: lengths in Blender units (metres), angles in radians unless a name says ``_degrees``,
 colours linear-light RGB. Matrices are 4×4 float64 acting on column vectors (OpenGL convention, as
-in ``blinn_phong.scene``). Pixel rectangles are ``(x0, y0, x1, y1)`` half-open, with y counted from the
+in ``blinn_phong.model.scene``). Pixel rectangles are ``(x0, y0, x1, y1)`` half-open, with y counted from the
 TOP row (the image convention of this project), unlike Blender, which counts from the bottom.
 
 Radiometry: Blender's lights are in watts (point, spot, area) or W/m² (sun), its diffuse BSDF is
@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from blinn_phong.scene import orthographic_matrix
+from blinn_phong.model.scene import orthographic_matrix
 
 __all__ = [
     "BLENDER_EMPTY_DEPTH",
@@ -304,7 +304,7 @@ def viewport_projection(
 
     Returns:
         ``(projection, kind)``: the (4, 4) eye → clip matrix and ``"perspective"`` or
-        ``"orthographic"`` (the ``blinn_phong.scene.Camera`` kind).
+        ``"orthographic"`` (the ``blinn_phong.model.scene.Camera`` kind).
     """
     size = {"width": region_width, "height": region_height}
     if view_perspective == "PERSP":
@@ -545,7 +545,7 @@ def blinn_phong_from_principled(
 
     Returns:
         A dict with keys ``ambient``, ``diffuse``, ``specular``, ``emission`` (RGB tuples),
-        ``shininess`` and ``opacity`` (floats), the field names of ``blinn_phong.scene.Material``.
+        ``shininess`` and ``opacity`` (floats), the field names of ``blinn_phong.model.scene.Material``.
     """
     base = np.asarray(base_color, dtype=np.float64)
     emit = np.asarray(emission_color, dtype=np.float64)

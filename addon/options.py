@@ -10,7 +10,7 @@ and everything else is generated from it:
 * ``addon/convert.py`` reads the property group into a :class:`RenderOptions`
   (:meth:`RenderOptions.from_settings`);
 * ``addon/pipeline.py`` turns a :class:`RenderOptions` into the arguments of
-  ``blinn_phong.render``.
+  ``blinn_phong.frame.render``.
 
 Field values are the values Blender stores (enum identifiers such as ``"PHONG"``, samples per axis),
 so a property group and an options object compare field by field.
@@ -51,7 +51,7 @@ TRANSPARENCY_SETTINGS: dict[str, str | None] = {
     "DEPTH_PEELING": "depth_peeling",
     "WEIGHTED": "weighted_blended",
 }
-"""Transparency setting -> ``blinn_phong.render(transparency=...)`` (None: the planner's choice)."""
+"""Transparency setting -> ``blinn_phong.frame.render(transparency=...)`` (None: the planner's choice)."""
 
 SHADOW_SETTINGS: dict[str, str | None] = {
     "AUTO": None,
@@ -63,7 +63,7 @@ SHADOW_SETTINGS: dict[str, str | None] = {
 """Shadow setting -> shadow method (None: the planner's choice per light)."""
 
 DEEP_TRANSPARENCY = ("A_BUFFER", "DEPTH_PEELING", "OPAQUE")
-"""Transparency settings whose fragments a deep image can hold (``blinn_phong.deep_output``): the
+"""Transparency settings whose fragments a deep image can hold (``blinn_phong.frame.deep_output``): the
 A-buffer (every fragment), depth peeling (the nearest ``peel_layers``) and Opaque (the nearest
 fragment). The planner's choice (Auto), sorted drawing and weighted blending keep no per-pixel
 depth order, so deep output refuses them."""
@@ -342,7 +342,7 @@ class RenderOptions:
 
     @property
     def core_shading(self) -> str:
-        """``blinn_phong.render(shading=...)``: the lower-case shading name."""
+        """``blinn_phong.frame.render(shading=...)``: the lower-case shading name."""
         return self.shading.lower()
 
     @classmethod

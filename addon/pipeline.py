@@ -1,7 +1,7 @@
-"""The engine's render settings -> ``blinn_phong.render`` (no bpy).
+"""The engine's render settings -> ``blinn_phong.frame.render`` (no bpy).
 
-``blinn_phong.render`` plans transparency and shadows (``blinn_phong.planner``), renders the
-effects the plan needs (``blinn_phong.frame``) and returns the plan with a reason per decision.
+``blinn_phong.frame.render`` plans transparency and shadows (``blinn_phong.planning.planner``), renders the
+effects the plan needs (``blinn_phong.planning.frame_plan``) and returns the plan with a reason per decision.
 This module only translates the add-on's settings (``addon/options.py``: one ``RenderOptions``
 type, declared once) into its arguments ("Auto" = the planner's choice). Without Embree
 (``embreex``), ``render`` itself replaces ray-traced and planar shadows by shadow volumes and soft
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from blinn_phong import Cryptomatte, Fog, LightGroups, ShadowOptions, render
-from blinn_phong.scene import AmbientLight, Scene
+from blinn_phong.model.scene import AmbientLight, Scene
 from compositing._kernel_cache import compile_clock
 
 from .options import SHADOW_SETTINGS, TRANSPARENCY_SETTINGS, RenderOptions, deep_output_problem
@@ -65,7 +65,7 @@ def warm_kernels(requested: str = "AUTO") -> float:
     kernels, _warning = kernel_engine(requested)
     if kernels != "numba" or kernels in _WARMED:
         return 0.0
-    from blinn_phong.scene import Camera, DirectionalLight, Mesh, orthographic_matrix
+    from blinn_phong.model.scene import Camera, DirectionalLight, Mesh, orthographic_matrix
 
     started = time.perf_counter()
     tiny = Scene(
@@ -188,7 +188,7 @@ class FrameResult:
             the frame waited (absent when every kernel was already loaded).
         triangles: input triangle count.
         deep: with ``options.deep_output`` the frame's fragments as a
-            :class:`compositing.deep.DeepImage` (``blinn_phong.render(..., deep=True)``), else None.
+            :class:`compositing.deep.DeepImage` (``blinn_phong.frame.render(..., deep=True)``), else None.
     """
 
     rgba: np.ndarray

@@ -1,4 +1,4 @@
-"""Image Texture nodes feeding a Principled BSDF → ``blinn_phong.texture.Texture`` (thin adapter).
+"""Image Texture nodes feeding a Principled BSDF → ``blinn_phong.model.texture.Texture`` (thin adapter).
 
 Recognised: an Image Texture node whose **Color** output is linked (directly) to the Principled
 BSDF's **Base Color** and/or whose **Alpha** output is linked to its **Alpha**, with its Vector
@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from blinn_phong.scene import Material
-from blinn_phong.texture import Texture
+from blinn_phong.model.scene import Material
+from blinn_phong.model.texture import Texture
 
 if TYPE_CHECKING:  # pragma: no cover
     import bpy

@@ -12,7 +12,7 @@ Tradeoff families (:mod:`benchmarks.tradeoffs`) write ``tradeoffs.json`` (``--qu
 file, so the charts always show the latest measurement of each. Charts go to
 ``<--charts>/charts/*.png`` (:mod:`benchmarks.charts`). A full run that measured the
 shading, shadow and transparency families refits the planner's error and cost models
-(:mod:`benchmarks.error_models` → ``blinn_phong/calibration.json``). The per-module benchmarks
+(:mod:`benchmarks.error_models` → ``blinn_phong/planning/calibration.json``). The per-module benchmarks
 (``bench_*``) run through their own ``run`` functions and write their own JSON; they are
 skipped by ``--quick`` unless named with ``--only``.
 """

@@ -17,7 +17,7 @@ sphere on a grey floor under a sun and a point light, unless stated):
 * ``batch``: ``python -m addon.batch blend_files/shadows.blend --frames 1-2 --workers 2``.
 
 Measured per run, by the parent process: seconds from the process's start to its first image
-(the first ``blinn_phong.render`` returning; the first preview; the first output file of the
+(the first ``blinn_phong.frame.render`` returning; the first preview; the first output file of the
 batch) and to its exit, its CPU seconds (user + system, with its reaped descendants: the batch
 workers) and the peak resident memory of the largest process of the run (``ru_maxrss`` from
 ``os.wait4``). Measured inside, with numba's ``numba:compile`` event
@@ -56,7 +56,7 @@ MARK = "@@COMPILE@@"
 SCENE = """
 import numpy as np
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 positions, triangles, normals = uv_sphere(48, 24)
 red = bp.Material(diffuse=(0.8, 0.1, 0.1), specular=(0.5, 0.5, 0.5), shininess=40.0)

@@ -2,7 +2,7 @@
 
 Transparency: the transparent fragments of a scene of interpenetrating transparent spheres
 (rasterized at ``--size``², depth complexity up to about 10) are resolved by every method of
-:mod:`blinn_phong.oit`. The reference is the A-buffer; each method reports its time, the
+:mod:`blinn_phong.effects.oit`. The reference is the A-buffer; each method reports its time, the
 ratio of its time to the A-buffer's, and its error against it (mean and max absolute
 difference of premultiplied RGBA, and the share of pixels more than one 8-bit step off).
 
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from blinn_phong.oit import (
+from blinn_phong.effects.oit import (
     depth_test,
     resolve_a_buffer,
     resolve_depth_peeling,
@@ -40,17 +40,17 @@ from blinn_phong.oit import (
     resolve_weighted_blended,
     wboit_weights,
 )
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.raytrace import (
+from blinn_phong.frame.render import prepare_scene, shade_fragments
+from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows.raytrace import (
     RayScene,
     area_light_visibility,
     directional_light_visibility,
     point_light_visibility,
 )
-from blinn_phong.render import prepare_scene, shade_fragments
-from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
-from blinn_phong.shadows import light_shadow_maps, planar_shadow_mask, shadow_map_visibility
+from blinn_phong.shadows.visibility import light_shadow_maps, planar_shadow_mask, shadow_map_visibility
 from compositing._atomic import write_json_atomic
 
 __all__ = ["main", "run"]

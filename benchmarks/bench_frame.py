@@ -62,7 +62,7 @@ import numpy as np
 
 import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, time_interleaved, write_json
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 __all__ = [
     "CASES",
@@ -148,14 +148,14 @@ CENSUS_CASES = ("plain", "a_buffer")
 def _census(scene: bp.Scene, width: int, height: int) -> dict[str, int]:
     """Fragments of a frame: rasterized (all, and of transparent meshes) against kept by the visibility stage.
 
-    ``kept_*`` and ``kept_bytes`` are what :func:`blinn_phong.visibility.frame_fragments` holds
+    ``kept_*`` and ``kept_bytes`` are what :func:`blinn_phong.frame.visibility.frame_fragments` holds
     (the nearest opaque fragment per sample and the transparent ones in front of it);
     ``rasterized_bytes`` is what an array of every rasterized fragment would take at the same
     bytes per fragment.
     """
-    from blinn_phong.prepared import prepare_scene
-    from blinn_phong.resolve import side_tables
-    from blinn_phong.visibility import frame_fragments, rasterized_count
+    from blinn_phong.frame.prepared import prepare_scene
+    from blinn_phong.frame.resolve import side_tables
+    from blinn_phong.frame.visibility import frame_fragments, rasterized_count
 
     prepared = prepare_scene(scene)
     _, side_opaque = side_tables(scene)

@@ -1,7 +1,7 @@
 """First-time planning of 100k-triangle scenes, against peers measured in the same run.
 
 ``bp.plan(scene)`` first decides per-mesh facts (closed, convex, planar, bounds:
-:mod:`blinn_phong.mesh_facts`) and then each concern. This benchmark times that on a fresh
+:mod:`blinn_phong.geometry.mesh_facts`) and then each concern. This benchmark times that on a fresh
 scene with every cached fact forgotten, for three scenes:
 
 * ``renderer``: :func:`benchmarks.bench_renderer.build_scene` (four 25,440-triangle spheres
@@ -57,7 +57,7 @@ def make_scene(name: str) -> object:  # a blinn_phong.Scene
 
         return issue_scene()
     if name == "sphere_100k":
-        from blinn_phong.primitives import uv_sphere
+        from blinn_phong.model.primitives import uv_sphere
 
         p, t, n = uv_sphere(317, 159)
         camera = bp.Camera.perspective(40.0, 16 / 9, 0.5, 50.0, view=bp.look_at((0, 1, 4), (0, 0, 0)))
@@ -68,9 +68,9 @@ def make_scene(name: str) -> object:  # a blinn_phong.Scene
 def _forget() -> None:
     """Forget every cached mesh fact (new layout: mesh_facts; earlier: the planner's dicts)."""
     try:
-        from blinn_phong import mesh_facts
+        from blinn_phong.geometry import mesh_facts
     except ImportError:
-        from blinn_phong import planner
+        from blinn_phong.planning import planner
 
         for cache in ("_OBJECT_FACTS", "_WORLD_FACTS"):
             getattr(planner, cache, {}).clear()
@@ -80,7 +80,7 @@ def _forget() -> None:
 
 def _variant(mode: str) -> Callable[[], None]:
     """Switch the mesh-fact passes to ``mode`` (compiled or numpy)."""
-    from blinn_phong import mesh_facts
+    from blinn_phong.geometry import mesh_facts
 
     original = mesh_facts._kernels
 

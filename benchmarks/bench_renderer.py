@@ -4,8 +4,8 @@ Scene: four UV spheres and a floor (about 100k triangles), four lights (directio
 attenuated point, spot, second point), per-pixel Blinn-Phong (``shading="phong"``),
 rendered at 1920×1080 by
 
-* ``blinn_phong.render(engine="numba")`` — the compiled fast path,
-* ``blinn_phong.render(engine="numpy")`` — the numpy reference,
+* ``blinn_phong.frame.render(engine="numba")`` — the compiled fast path,
+* ``blinn_phong.frame.render(engine="numpy")`` — the numpy reference,
 * Mesa llvmpipe running the per-pixel GLSL shader of ``oracles.gl_lighting`` on the
   same scene (geometry in buffer objects, time per frame including ``glFinish``).
 
@@ -45,7 +45,7 @@ WIDTH, HEIGHT = 1920, 1080
 def build_scene(segments: int = 160) -> object:  # a blinn_phong.Scene
     """Four spheres of ``2·segments·(segments/2 - 1)`` triangles each, a 800-triangle floor, 4 lights."""
     import blinn_phong as bp
-    from blinn_phong.primitives import grid_plane, uv_sphere
+    from blinn_phong.model.primitives import grid_plane, uv_sphere
 
     meshes = []
     colours = [(0.7, 0.3, 0.2), (0.2, 0.5, 0.8), (0.8, 0.7, 0.2), (0.3, 0.7, 0.4)]
@@ -216,7 +216,7 @@ def _charts(results: dict[str, object], directory: Path) -> None:
         ax.set_ylabel("CPU seconds per frame")
         ax.grid(True, alpha=0.3)
         ax.legend()
-    fig.suptitle("blinn_phong.render, phong shading, 4 lights")
+    fig.suptitle("blinn_phong.frame.render, phong shading, 4 lights")
     fig.tight_layout()
     save_figure(fig, directory / "renderer_scaling.png", dpi=100)
     plt.close(fig)

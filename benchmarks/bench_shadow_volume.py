@@ -39,12 +39,12 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._util import machine_info, save_figure, time_interleaved, write_json
-from blinn_phong import shadow_volume as sv
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.render import prepare_scene, render
-from blinn_phong.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
-from blinn_phong.shadows import light_visibility
+from blinn_phong.frame.render import prepare_scene, render
+from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows import volume as sv
+from blinn_phong.shadows.visibility import light_visibility
 
 __all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
 
@@ -83,7 +83,7 @@ def _cold(fn):
 def _caches() -> tuple:
     """Every per-caster cache a warm call relies on: topology, volumes and near-plane proofs,
     digests, and Embree's BVH."""
-    from blinn_phong import raytrace
+    from blinn_phong.shadows import raytrace
 
     return sv._TOPOLOGY_CACHE, sv._DERIVED_CACHE, sv._DIGESTS, raytrace._SCENE_CACHE
 
@@ -108,7 +108,7 @@ def _restored(fn, state: list):
 
 
 def _cold_embree(fn):
-    from blinn_phong import raytrace
+    from blinn_phong.shadows import raytrace
 
     def call():
         raytrace._SCENE_CACHE.clear()

@@ -3,12 +3,12 @@
 Scene: two UV spheres of 65,536 triangles each over a ground plane, a directional and a point
 light (one 1024² map and a cube of six), 1920×1080, per-pixel Blinn-Phong. Rendered by
 
-* ``blinn_phong.render(shadows=ShadowOptions("shadow_map", ...))`` — our shadow-mapped frame
+* ``blinn_phong.frame.render(shadows=ShadowOptions("shadow_map", ...))`` — our shadow-mapped frame
   (constant bias 1e-4, slope bias 2, nearest PCF);
 * ``oracles.gl_shadows.render_shadow_mapped`` — Mesa llvmpipe: depth passes with
   ``glPolygonOffset`` into a depth texture array, GLSL look-up with the same bias, kernel and
   map resolution (time per frame after a warm-up, geometry already uploaded);
-* ``blinn_phong.render(shadows="none")`` and ``shadows="ray_traced"`` — the plain frame and
+* ``blinn_phong.frame.render(shadows="none")`` and ``shadows="ray_traced"`` — the plain frame and
   Embree hard shadows, for the ratios to the plain frame;
 * ``oracles.gl_lighting.render_glsl_phong`` — Mesa's plain frame, for reference.
 
@@ -90,11 +90,11 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
 
     # The light-visibility work alone (both lights, every visible sample of the frame), as the
     # frame's shadows stage calls it: light_visibility on world points and face normals.
-    from blinn_phong.prepared import prepare_scene
-    from blinn_phong.raster import interpolate
-    from blinn_phong.raytrace import world_triangles
-    from blinn_phong.shadows import light_visibility
-    from blinn_phong.visibility import visible_fragments
+    from blinn_phong.frame.prepared import prepare_scene
+    from blinn_phong.frame.visibility import visible_fragments
+    from blinn_phong.geometry.raster import interpolate
+    from blinn_phong.shadows.raytrace import world_triangles
+    from blinn_phong.shadows.visibility import light_visibility
 
     prepared = prepare_scene(scene)
     frags = visible_fragments(prepared.clip, prepared.triangles, width, height, engine="auto")

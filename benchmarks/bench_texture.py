@@ -1,6 +1,6 @@
 """Texture construction: peak memory and time for a large image, against a plain copy.
 
-``blinn_phong.texture.Texture`` converts the given image into its stored float32 premultiplied
+``blinn_phong.model.texture.Texture`` converts the given image into its stored float32 premultiplied
 RGBA block by block. Measured here for a ``side × side`` RGBA image (default 8192², 1 GiB
 stored) of each kind of input — float32 linear premultiplied (cast only), float32 straight
 (premultiplied on the way), float32 straight sRGB (decoded by the IEC 61966-2-1 EOTF) and float16
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._util import machine_info, markdown_table, time_interleaved, write_json
-from blinn_phong.texture import BLOCK_TEXELS, Texture
+from blinn_phong.model.texture import BLOCK_TEXELS, Texture
 
 INPUTS = {
     "float32 linear premultiplied": (np.float32, {}),

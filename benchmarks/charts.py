@@ -262,7 +262,7 @@ def _scaling(data: dict, out: Path) -> list[Path]:
         (axes[1], "triangles", data["triangles"], "triangles (256² px)"),
     ):
         x = [r[key] for r in rows]
-        ax.plot(x, [r["ours_s"] for r in rows], "o-", label="blinn_phong.render (phong)")
+        ax.plot(x, [r["ours_s"] for r in rows], "o-", label="blinn_phong.frame.render (phong)")
         if all("mesa_glsl_s" in r for r in rows):
             ax.plot(x, [r["mesa_glsl_s"] for r in rows], "s-", label="Mesa llvmpipe GLSL")
             for r in rows:

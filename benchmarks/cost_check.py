@@ -3,18 +3,18 @@
 For each scene and frame, every method the planner weighs for a concern is rendered with
 ``render()`` (that concern's method forced, the others fixed), interleaved in one run, and its
 measured time ratio to the concern's exact method is set against the ratio the planner's cost
-models predict (:mod:`blinn_phong.calibration`, fitted by :mod:`benchmarks.error_models`):
+models predict (:mod:`blinn_phong.planning.calibration`, fitted by :mod:`benchmarks.error_models`):
 
 * shadows, per light (the other lights without shadows): Embree ray tracing (the reference),
-  shadow volumes (:func:`~blinn_phong.calibration.shadow_volume_cost`) and, for directional
-  lights, shadow maps (:func:`~blinn_phong.calibration.shadow_map_cost`), with the planner's
-  estimate of the rays a frame traces (:func:`~blinn_phong.planner.traced_share`); measured on
+  shadow volumes (:func:`~blinn_phong.planning.calibration.shadow_volume_cost`) and, for directional
+  lights, shadow maps (:func:`~blinn_phong.planning.calibration.shadow_map_cost`), with the planner's
+  estimate of the rays a frame traces (:func:`~blinn_phong.planning.planner.traced_share`); measured on
   the ``shadows`` stage of ``RenderStats.seconds``;
 * transparency: the A-buffer (reference), draw-last, sorted objects and depth peeling with 1,
-  2, 4 layers (:func:`~blinn_phong.calibration.transparency_seconds`,
-  :func:`~blinn_phong.calibration.depth_peeling_cost`);
-* shading: Phong (reference), Gouraud, flat (:func:`~blinn_phong.calibration.shading_cost`),
-  and fog against no fog (:func:`~blinn_phong.calibration.fog_cost`).
+  2, 4 layers (:func:`~blinn_phong.planning.calibration.transparency_seconds`,
+  :func:`~blinn_phong.planning.calibration.depth_peeling_cost`);
+* shading: Phong (reference), Gouraud, flat (:func:`~blinn_phong.planning.calibration.shading_cost`),
+  and fog against no fog (:func:`~blinn_phong.planning.calibration.fog_cost`).
 
 Shadows are measured on the ``shadows`` stage's wall time (tens to hundreds of milliseconds),
 with Embree's scene (BVH) built in every frame, as the models assume (:func:`benchmarks.tradeoffs.uncached`),
@@ -46,8 +46,8 @@ import blinn_phong as bp
 from benchmarks._util import machine_info, markdown_table, write_json
 from benchmarks.bench_frame import issue_scene
 from benchmarks.tradeoffs import shadow_runs
-from blinn_phong import calibration as cal
-from blinn_phong.planner import shadow_map_geometry, traced_share
+from blinn_phong.planning import calibration as cal
+from blinn_phong.planning.planner import shadow_map_geometry, traced_share
 from testbeds.tradeoff_scenes import layered_scene, shadow_scene
 
 __all__ = ["check_frame", "main", "run"]

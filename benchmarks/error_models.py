@@ -1,8 +1,9 @@
-"""Fitting the error and cost models of ``blinn_phong/calibration.json`` to the tradeoff measurements.
+"""Fitting the error and cost models of ``blinn_phong/planning/calibration.json`` to the tradeoff
+measurements.
 
 :func:`fit` reads the measurements of :mod:`benchmarks.tradeoffs` and returns small JSON
-models; :func:`save` writes them to ``blinn_phong/calibration.json``, shipped with the
-package, where :mod:`blinn_phong.calibration` reads them (the predictions and the
+models; :func:`save` writes them to ``blinn_phong/planning/calibration.json``, shipped with the
+package, where :mod:`blinn_phong.planning.calibration` reads them (the predictions and the
 ``choose_*`` functions live there, one definition used by the planner, the tests and this
 module). Each model and the error metric it predicts, in 8-bit steps:
 
@@ -44,8 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-from blinn_phong.calibration import CALIBRATION_PATH, brightest_radiance, load
-from blinn_phong.planner import MapGeometry
+from blinn_phong.planning.calibration import CALIBRATION_PATH, brightest_radiance, load
+from blinn_phong.planning.planner import MapGeometry
 from compositing._atomic import write_json_atomic
 
 __all__ = [
@@ -174,7 +175,7 @@ def _fit_frame_shadows(rows: list[dict]) -> dict:
     """The frame's shadow passes per receiver, relative to one Embree ray
     (:func:`benchmarks.tradeoffs.shadow_frame_constants`): the medians of ``surface_ratio`` and
     ``cull_ratio`` (reported), and the largest traced share beyond the receivers on meshes the
-    culling never answers (``rim``, the constant of :func:`blinn_phong.planner.traced_share`)."""
+    culling never answers (``rim``, the constant of :func:`blinn_phong.planning.planner.traced_share`)."""
     return {
         "cost": "in a frame, per receiver: surface (every method) + cull + traced share, × one ray's cost",
         "surface": float(np.median([r["surface_ratio"] for r in rows])),
@@ -308,7 +309,7 @@ def shadow_stage_designs(rows: list[dict]) -> dict[str, np.ndarray]:
 def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
     """Fit every model to a ``tradeoffs.json`` document (``{"families": {...}}``) and, when given,
     the shadow-volume cost model to a ``shadow_volume.json`` document (``{"crossover": [...]}``)."""
-    from blinn_phong.planner import shadow_map_geometry
+    from blinn_phong.planning.planner import shadow_map_geometry
     from testbeds.tradeoff_scenes import shadow_scene
 
     families = tradeoffs["families"]
@@ -333,7 +334,8 @@ def fit(tradeoffs: dict, volumes: dict | None = None) -> dict:
 
 
 def save(models: dict, path: Path = CALIBRATION_PATH) -> Path:
-    """Write the models as JSON (default: ``blinn_phong/calibration.json``, shipped with the package)."""
+    """Write the models as JSON (default: ``blinn_phong/planning/calibration.json``, shipped with the
+    package)."""
     write_json_atomic(path, models, indent=1)
     return path
 
@@ -351,7 +353,7 @@ def fit_results(results: Path, families: dict | None = None) -> dict:
 
 def main() -> None:
     """Fit the models to ``benchmarks/results/tradeoffs.json`` and ``shadow_volume.json`` and write
-    ``blinn_phong/calibration.json``."""
+    ``blinn_phong/planning/calibration.json``."""
     path = save(fit_results(Path(__file__).resolve().parent / "results"))
     print(f"wrote {path}")
 

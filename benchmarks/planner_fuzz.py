@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.primitives import uv_sphere
+from blinn_phong.model.primitives import uv_sphere
 from testbeds.planner_fuzz import TOLERANCES, check, faceted_box, random_scene
 
 __all__ = ["planning_time", "sweep"]
@@ -62,7 +62,7 @@ def planning_time(repeat: int = 5) -> dict:
     (the object-space facts are cached by array identity, as for repeated renders of a scene).
     """
     from benchmarks._util import time_interleaved
-    from blinn_phong.mesh_facts import _clear_caches
+    from blinn_phong.geometry.mesh_facts import _clear_caches
 
     p, t, n = uv_sphere(317, 159)
     floor = bp.Mesh(*faceted_box(np.array([3.0, 3.0, 0.05])), material=bp.Material(diffuse=(0.6, 0.6, 0.6)))

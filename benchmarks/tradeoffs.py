@@ -42,7 +42,7 @@ import numpy as np
 
 import blinn_phong as bp
 from benchmarks._util import time_interleaved
-from blinn_phong.primitives import uv_sphere
+from blinn_phong.model.primitives import uv_sphere
 from compositing import composite, composite_stack, premultiply
 from compositing.gl_blend import gl_blend
 from testbeds.error_metrics import error_metrics
@@ -233,8 +233,8 @@ SHADOW_BIASES = (
 
 def shadows(quick: bool = False, repeat: int = 3) -> dict:
     """Shadow maps (resolution × PCF kernel × bias) against Embree ray-traced hard shadows."""
-    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+    from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     size = 128 if quick else 256
     resolutions = (256, 1024) if quick else (256, 512, 1024, 2048)
@@ -304,9 +304,9 @@ def shadow_frame_cost(
     (bias 1e-4 + 2·slope) for several receiver counts ``N`` (the visible points, repeated or cut),
     resolutions ``R`` and two triangle counts ``T`` (the scene, and the same with a 192-segment
     sphere): the data of the frame-aware cost model
-    (:func:`blinn_phong.calibration.shadow_map_cost`), fitted to the fastest round (``min_s``)."""
-    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+    (:func:`blinn_phong.planning.calibration.shadow_map_cost`), fitted to the fastest round (``min_s``)."""
+    from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     light = scene.lights[0]
     to_light = -np.asarray(light.direction, float)
@@ -356,7 +356,7 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
 
     In a frame the compiled engine first forms every covered pixel's world point and face normal
     (``surface``, shared by every shadow method), and traces only the shadow rays
-    :mod:`blinn_phong.ray_culling` cannot answer (its pass: ``cull``; the rays left: the
+    :mod:`blinn_phong.shadows.ray_culling` cannot answer (its pass: ``cull``; the rays left: the
     ``traced`` share). Per scene, frame and light: the seconds of those passes and of Embree
     tracing every ray (BVH cached, as within a frame), their ratios per receiver to Embree's
     (``surface_ratio``, ``cull_ratio``), the traced share and the share of receivers on meshes
@@ -364,10 +364,14 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
     scene and the frame benchmark's, whose casters are convex or planar.
     """
     from benchmarks.bench_frame import issue_scene
-    from blinn_phong import raytrace
-    from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
-    from blinn_phong.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
-    from blinn_phong.ray_culling import GENERAL, TRACE, caster_tables
+    from blinn_phong.frame.fast import (
+        nearest_winners_compiled,
+        setup_triangles_compiled,
+        winner_surfaces_compiled,
+    )
+    from blinn_phong.frame.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
+    from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows.ray_culling import GENERAL, TRACE, caster_tables
 
     frames = [("shadow calibration", shadow_scene(), 256, 256)]
     frames.append(("frame benchmark", issue_scene(48 if quick else 96, 24 if quick else 48), 640, 360))
@@ -676,8 +680,8 @@ def uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]
     caches emptied first: every frame builds its BVH and its volumes, as the first frame of a
     scene or every frame of an animation does (``render()`` reuses both while the same
     triangles come back)."""
-    from blinn_phong import raytrace, shadow_volume
-
+    from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows import volume as shadow_volume
     def run() -> bp.RenderResult:
         raytrace._SCENE_CACHE.clear()
         shadow_volume._TOPOLOGY_CACHE.clear()
@@ -717,11 +721,12 @@ def shadow_stage_rows(quick: bool = False, repeat: int = 3) -> list[dict]:
     ray tracing, shadow volumes and, for directional lights, shadow maps (256², 1024²), each
     frame building its BVH and volumes (:func:`uncached`), interleaved; with the frame's
     samples ``N``, triangles ``T`` and the planner's estimate of the traced share
-    (:func:`blinn_phong.planner.traced_share`) — the data of the frame-stage cost fit
-    (:func:`blinn_phong.calibration.shadow_volume_cost`, :func:`blinn_phong.calibration.shadow_map_cost`).
+    (:func:`blinn_phong.planning.planner.traced_share`) — the data of the frame-stage cost fit
+    (:func:`blinn_phong.planning.calibration.shadow_volume_cost`,
+    :func:`blinn_phong.planning.calibration.shadow_map_cost`).
     """
     from benchmarks.bench_frame import issue_scene
-    from blinn_phong.planner import traced_share
+    from blinn_phong.planning.planner import traced_share
 
     frames = [
         ("shadow calibration", shadow_scene(), 128, 128),
@@ -768,7 +773,8 @@ FRAME_COST_PEEL = (1, 2, 4)
 
 def frame_costs(quick: bool = False, repeat: int = 3) -> dict:
     """``render()`` timings for the frame-aware cost models of the planner
-    (:func:`blinn_phong.calibration.resolve_cost`, :func:`blinn_phong.calibration.frame_seconds`).
+    (:func:`blinn_phong.planning.calibration.resolve_cost`,
+    :func:`blinn_phong.planning.calibration.frame_seconds`).
 
     Transparency rows: the transparency calibration scene (:func:`layered_scene`, 4 and 12
     layers) and the frame benchmark's scene with its transparent sphere

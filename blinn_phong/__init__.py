@@ -1,22 +1,20 @@
 """blinn_phong: a local-illumination renderer (numpy reference, compiled numba engine; no bpy).
 
-Scene model in :mod:`blinn_phong.scene`, the lighting equation in :mod:`blinn_phong.lighting`,
-the planner in :mod:`blinn_phong.planner` and the plan of a frame with the caller's options in
-:mod:`blinn_phong.frame`. :func:`render` runs one pipeline (:mod:`blinn_phong.pipeline`) whose
-stages flow one way: :mod:`~blinn_phong.prepared` → :mod:`~blinn_phong.raster` (fragments) →
-:mod:`~blinn_phong.visibility` → :mod:`~blinn_phong.shading` → :mod:`~blinn_phong.resolve`;
+Scene model in :mod:`blinn_phong.model.scene`, the lighting equation in :mod:`blinn_phong.frame.lighting`,
+the planner in :mod:`blinn_phong.planning.planner` and the plan of a frame with the caller's options in
+:mod:`blinn_phong.planning.frame_plan`. :func:`render` runs one pipeline
+(:mod:`blinn_phong.frame.pipeline`) whose
+stages flow one way: :mod:`~blinn_phong.frame.prepared` → :mod:`~blinn_phong.geometry.raster` (fragments) →
+:mod:`~blinn_phong.frame.visibility` → :mod:`~blinn_phong.frame.shading` → :mod:`~blinn_phong.frame.resolve`;
 effects (transparency, shadows, fog) are stages of that frame. Output follows the project's
 image conventions: float32 premultiplied linear RGBA, row 0 at the top.
 """
 
 from blinn_phong._scratch import release_scratch
-from blinn_phong.frame import Fog, ShadowOptions
-from blinn_phong.id_passes import Cryptomatte
-from blinn_phong.light_groups import LightGroups
-from blinn_phong.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
-from blinn_phong.planner import Choice, Plan, plan
-from blinn_phong.raster import Fragments, interpolate, rasterize, resolve_nearest
-from blinn_phong.render import (
+from blinn_phong.frame.id_passes import Cryptomatte
+from blinn_phong.frame.light_groups import LightGroups
+from blinn_phong.frame.lighting import EyeLights, ShadingTerms, gl_clamp, lights_in_eye_space, shade
+from blinn_phong.frame.render import (
     FragmentShading,
     PreparedScene,
     RenderResult,
@@ -26,7 +24,9 @@ from blinn_phong.render import (
     resolve_samples,
     shade_fragments,
 )
-from blinn_phong.scene import (
+from blinn_phong.frame.visibility import visible_fragments
+from blinn_phong.geometry.raster import Fragments, interpolate, rasterize, resolve_nearest
+from blinn_phong.model.scene import (
     AmbientLight,
     Camera,
     DirectionalLight,
@@ -41,8 +41,9 @@ from blinn_phong.scene import (
     orthographic_matrix,
     perspective_matrix,
 )
-from blinn_phong.texture import Texture
-from blinn_phong.visibility import visible_fragments
+from blinn_phong.model.texture import Texture
+from blinn_phong.planning.frame_plan import Fog, ShadowOptions
+from blinn_phong.planning.planner import Choice, Plan, plan
 from compositing._kernel_cache import register_package
 
 # The compiled kernels are cached once per user and machine, shared by every checkout

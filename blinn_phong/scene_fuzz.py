@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.frame import SHADOW_CHOICES, TRANSPARENCY_CHOICES
-from blinn_phong.primitives import box, grid_plane, uv_sphere
+from blinn_phong.model.primitives import box, grid_plane, uv_sphere
+from blinn_phong.planning.frame_plan import SHADOW_CHOICES, TRANSPARENCY_CHOICES
 
 __all__ = [
     "ENGINE_TOLERANCE",
@@ -91,7 +91,7 @@ class FuzzCase:
         width: frame width in pixels.
         height: frame height in pixels.
         samples: samples per pixel (a square).
-        options: keyword arguments for :func:`blinn_phong.render` (``shadows``,
+        options: keyword arguments for :func:`blinn_phong.frame.render` (``shadows``,
             ``transparency``, ``fog``).
         notes: what the case holds (for messages).
     """

@@ -28,7 +28,7 @@ import numpy as np
 
 __all__ = ["CASES", "is_warm", "main", "marker_path", "selected_cases", "start_background", "warm"]
 
-#: The frames :func:`warm` renders: name and keyword arguments of :func:`blinn_phong.render`
+#: The frames :func:`warm` renders: name and keyword arguments of :func:`blinn_phong.frame.render`
 #: (scene ``"opaque"``: a sphere on a floor; ``"glass"``: with a transparent sphere;
 #: ``"textured"``: a textured floor).
 _SHADOWS = ("planar", "shadow_map", "ray_traced", "shadow_volume", "soft")
@@ -54,7 +54,7 @@ SIZE = (32, 18)
 
 def _scenes() -> dict[str, object]:
     import blinn_phong as bp
-    from blinn_phong.primitives import grid_plane, uv_sphere
+    from blinn_phong.model.primitives import grid_plane, uv_sphere
 
     positions, triangles, normals = uv_sphere(16, 8)
     sphere = bp.Mesh(positions, triangles, normals, material=bp.Material(diffuse=(0.8, 0.1, 0.1)))
@@ -140,7 +140,7 @@ def warm(
     import numba  # noqa: F401  (the compiled engine needs it)
 
     import blinn_phong as bp
-    from blinn_phong.planner import embree_available
+    from blinn_phong.planning.planner import embree_available
 
     cases = selected_cases(only)
     scenes = _scenes()

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.scene import Scene
+from blinn_phong.model.scene import Scene
 
 __all__ = [
     "Framebuffer",

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong.lighting import lights_in_eye_space
-from blinn_phong.normals import vertex_normals
-from blinn_phong.scene import Mesh, Scene
+from blinn_phong.frame.lighting import lights_in_eye_space
+from blinn_phong.geometry.normals import vertex_normals
+from blinn_phong.model.scene import Mesh, Scene
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer, blinn_phong_main, compile_program
 

@@ -1,6 +1,6 @@
 """Stenciled shadow volumes drawn by a real OpenGL implementation (Mesa llvmpipe).
 
-The reference for :mod:`blinn_phong.shadow_volume`: the same scene and light are drawn by
+The reference for :mod:`blinn_phong.shadows.volume`: the same scene and light are drawn by
 OpenGL into a framebuffer object with a ``GL_DEPTH24_STENCIL8`` attachment, following
 Everitt & Kilgard ("Practical and Robust Stenciled Shadow Volumes", NVIDIA 2002):
 
@@ -12,7 +12,7 @@ Everitt & Kilgard ("Practical and Robust Stenciled Shadow Volumes", NVIDIA 2002)
      ``GL_DEPTH_CLAMP`` (OpenGL 3.2) so volume faces at infinity are not clipped by the far plane;
 3. the stencil buffer is read back: 0 = lit.
 
-The volumes are built here independently of :mod:`blinn_phong.shadow_volume`, by the simplest
+The volumes are built here independently of :mod:`blinn_phong.shadows.volume`, by the simplest
 correct construction (no adjacency, no silhouettes): every scene triangle, turned to face the
 light, is extruded on its own — light cap, three side quads and a dark cap at infinity
 (homogeneous ``w = 0``). A point is inside as many of these as there are triangles between it
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong.scene import DirectionalLight, PointLight, Scene, SpotLight
+from blinn_phong.model.scene import DirectionalLight, PointLight, Scene, SpotLight
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer, world_triangles
 

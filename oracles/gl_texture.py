@@ -24,8 +24,8 @@ import time
 
 import numpy as np
 
-from blinn_phong.scene import Scene
-from blinn_phong.texture import Texture, straight_colour
+from blinn_phong.model.scene import Scene
+from blinn_phong.model.texture import Texture, straight_colour
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer
 from oracles.gl_lighting import GLRender, _mesh_normals, _set_material, _set_state
@@ -92,7 +92,7 @@ def render_textured(
         fmt: the internal format of every texture: ``"rgba8"``, ``"rgba32f"`` or ``"srgb8_alpha8"``.
         encoded: for ``"srgb8_alpha8"``: the (H, W, 4) uint8 sRGB-encoded image, row 0 at the top.
         premultiplied: upload the premultiplied texels instead of the straight colour: GL then
-            filters premultiplied values as :class:`~blinn_phong.texture.Texture` does and
+            filters premultiplied values as :class:`~blinn_phong.model.texture.Texture` does and
             writes ``Cf·Σw·(a·c)`` — the premultiplied colour of an unlit-specular surface.
 
     Raises :class:`oracles.egl.EGLUnavailable` when no context can be created.

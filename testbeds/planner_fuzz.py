@@ -34,9 +34,9 @@ import math
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.primitives import uv_sphere
-from blinn_phong.raster import rasterize
-from blinn_phong.render import prepare_scene
+from blinn_phong.frame.render import prepare_scene
+from blinn_phong.geometry.raster import rasterize
+from blinn_phong.model.primitives import uv_sphere
 
 __all__ = [
     "TOLERANCES",
@@ -242,7 +242,7 @@ def planned_render(
     cost models do, and at a few hundred pixels they find no approximation worth its error."""
     if plan_frame is None:
         return bp.render(scene, size, size, tolerance=tolerance, shading="auto")
-    from blinn_phong.frame import scene_with_planned_shading
+    from blinn_phong.planning.frame_plan import scene_with_planned_shading
 
     p = bp.plan(scene, tolerance, width=plan_frame[0], height=plan_frame[1])
     shadows = [
@@ -270,7 +270,7 @@ def check(
 ) -> dict:
     """Render ``scene`` following the plan at ``tolerance`` and with exact methods; measure.
 
-    The plan is made for ``plan_frame`` (default 640×480, :data:`blinn_phong.planner.DEFAULT_FRAME`;
+    The plan is made for ``plan_frame`` (default 640×480, :data:`blinn_phong.planning.planner.DEFAULT_FRAME`;
     None: the rendered frame) and rendered at ``size²`` (:func:`planned_render`).
 
     Returns a dict: ``max_steps`` (the largest per-pixel error outside terminator and

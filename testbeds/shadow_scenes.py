@@ -20,7 +20,7 @@ def two_spheres_over_ground(
     tests/effects/test_shadows_vs_mesa.py.
     """
     import blinn_phong as bp
-    from blinn_phong.primitives import grid_plane, uv_sphere
+    from blinn_phong.model.primitives import grid_plane, uv_sphere
 
     meshes = []
     for x, colour in ((-1.2, (0.8, 0.3, 0.2)), (1.2, (0.2, 0.5, 0.8))):

@@ -13,8 +13,8 @@ from collections.abc import Callable
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.oit import resolve_transparency, wboit_weights
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.effects.oit import resolve_transparency, wboit_weights
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 __all__ = ["layered_scene", "shadow_scene", "transparency_methods", "transparent_fragments", "visible_points"]
 
@@ -51,7 +51,7 @@ def shadow_scene(segments: int = 48) -> bp.Scene:
 
 def visible_points(scene: bp.Scene, size: int) -> tuple[np.ndarray, np.ndarray]:
     """World positions and face normals of the nearest surface at every covered pixel."""
-    from blinn_phong.raster import interpolate, rasterize, resolve_nearest
+    from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 
     prepared = bp.prepare_scene(scene)
     frags = rasterize(prepared.clip, prepared.triangles, size, size)
@@ -88,7 +88,7 @@ def layered_scene(layers: int, opacity: float, seed: int = 7) -> bp.Scene:
 
 def transparent_fragments(scene: bp.Scene, size: int) -> dict:
     """Shaded premultiplied fragments of every (transparent) triangle and what the resolvers need."""
-    from blinn_phong.raster import rasterize
+    from blinn_phong.geometry.raster import rasterize
 
     prepared = bp.prepare_scene(scene)
     frags = rasterize(prepared.clip, prepared.triangles, size, size)

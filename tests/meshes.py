@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.scene import Material, Mesh
+from blinn_phong.model.scene import Material, Mesh
 
 
 def square(

@@ -11,8 +11,8 @@ Steps:
    directory (never inside the checkout: a read-only checkout builds).
 2. Vendor the core packages (``blinn_phong``, ``compositing``) into the staged add-on as
    sub-packages, then rewrite every absolute import of a core package, in the add-on's own modules
-   and in the vendored code alike, into the equivalent relative import: ``from blinn_phong.scene
-   import Mesh`` in ``engine.py`` becomes ``from .blinn_phong.scene import Mesh``, and
+   and in the vendored code alike, into the equivalent relative import: ``from blinn_phong.model.scene
+   import Mesh`` in ``engine.py`` becomes ``from .blinn_phong.model.scene import Mesh``, and
    ``from compositing.factors import X`` in ``blinn_phong/a.py`` becomes
    ``from ..compositing.factors import X``. In the repository the add-on imports the top-level
    packages by their plain names; the installed extension imports nothing by absolute name and
@@ -62,7 +62,7 @@ WHEEL_PACKAGES = ("numba", "llvmlite", "embreex", "scipy")
 
 * numba + llvmlite: the compiled kernels (without them the numpy kernels run, with a warning);
 * embreex: Embree, for ray-traced and soft shadows;
-* scipy: ``scipy.spatial.ConvexHull`` in :func:`blinn_phong.mesh_facts._projected_width`, which the
+* scipy: ``scipy.spatial.ConvexHull`` in :func:`blinn_phong.geometry.mesh_facts._projected_width`, which the
   planner calls to size a shadow map for a directional light (no fallback: a render needs it).
 
 Not bundled: numpy (every Blender ships its own: 1.26 in 4.2–5.0, 2.x in 5.1+, both supported by

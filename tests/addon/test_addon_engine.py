@@ -1,6 +1,6 @@
 """The render engine inside Blender: registration, F12-style renders, passes, border, failures.
 
-Pixels are compared with ``blinn_phong.render`` on a scene built by hand here (not through the
+Pixels are compared with ``blinn_phong.frame.render`` on a scene built by hand here (not through the
 converter), so a conversion mistake cannot hide behind the same mistake on both sides.
 """
 
@@ -97,7 +97,7 @@ def _read_exr(path: Path) -> np.ndarray:
 
 
 def _hand_scene():
-    from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
+    from blinn_phong.model.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
 
     def euler(rx: float, ry: float, rz: float) -> np.ndarray:
         cx, sx, cy, sy, cz, sz = (

@@ -109,9 +109,9 @@ found = {{
 if install == "1":
     # The planner sizes a shadow map by the thinnest caster seen from a directional light, the
     # width of a convex hull (scipy.spatial.ConvexHull): a 0.03-wide slat above a floor, sun above.
-    primitives = importlib.import_module({PACKAGE!r} + ".blinn_phong.primitives")
-    model = importlib.import_module({PACKAGE!r} + ".blinn_phong.scene")
-    planner = importlib.import_module({PACKAGE!r} + ".blinn_phong.planner")
+    primitives = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.primitives")
+    model = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.scene")
+    planner = importlib.import_module({PACKAGE!r} + ".blinn_phong.planning.planner")
     move = np.eye(4)
     move[2, 3] = 0.6
     slat = model.Mesh(*primitives.box((0.015, 1.3, 0.01)), transform=move)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from addon import mapping
-from blinn_phong.scene import perspective_matrix
+from blinn_phong.model.scene import perspective_matrix
 
 # numpy 2 renamed trapz to trapezoid (numpy 1.26, for Blender 4.2–5.0, has only trapz).
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz
@@ -245,7 +245,7 @@ def test_principled_rejects_negative_colour() -> None:
 def test_rendering_a_crop_equals_cropping_the_render() -> None:
     # Rasterize the same triangles into the full frame and into a cropped frame: identical
     # coverage and depth in the overlap (the OpenGL viewport transform is an exact pixel shift).
-    from blinn_phong.raster import rasterize, resolve_nearest
+    from blinn_phong.geometry.raster import rasterize, resolve_nearest
 
     rng = np.random.default_rng(7)
     width, height, region = 48, 32, (9, 5, 37, 26)

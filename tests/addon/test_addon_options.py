@@ -96,8 +96,8 @@ def test_deep_output_setting_its_file_name_and_the_transparency_it_needs() -> No
     assert options.deep_output_path("/r/shot_0001.EXR", ".exr") == "/r/shot_0001.deep.exr"
     assert options.deep_output_path("/r/shot.v2_0001", ".png") == "/r/shot.v2_0001.deep.exr"
     assert options.deep_output_path("/r/shot.v2_0001", "") == "/r/shot.v2_0001.deep.exr"
-    # Exactly the settings whose core method keeps a per-pixel depth order (blinn_phong.deep_output).
-    from blinn_phong.deep_output import DEEP_METHODS
+    # Exactly the settings whose core method keeps a per-pixel depth order (blinn_phong.frame.deep_output).
+    from blinn_phong.frame.deep_output import DEEP_METHODS
 
     keeps_order = [k for k, method in options.TRANSPARENCY_SETTINGS.items() if method in DEEP_METHODS]
     assert sorted(keeps_order) == sorted(options.DEEP_TRANSPARENCY)

@@ -143,10 +143,10 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
     image = read_image(tmp_path / "installed.exr")
     assert image.shape == (108, 192, 4) and 0.05 < image[..., 3].mean() < 0.9  # 10 % of 1920×1080
     pkg = "bl_ext.test_repo.blinn_phong_render"
-    assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.scene", pkg + ".compositing.factors"} <= set(
+    assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.model.scene", pkg + ".compositing.factors"} <= set(
         got["imported"]
     )
-    assert got["ortho_module"] == pkg + ".blinn_phong.scene"
+    assert got["ortho_module"] == pkg + ".blinn_phong.model.scene"
     assert got["top_level_loaded"] == []
 
 
@@ -164,7 +164,7 @@ def test_loads_the_legacy_way_from_scripts_addons(built_zip: Path, tmp_path: Pat
         import addon_utils
         module = addon_utils.enable("blinn_phong_render", default_set=True, handle_error=print)
         state = list(addon_utils.check("blinn_phong_render"))
-        scene_module = importlib.import_module("blinn_phong_render.blinn_phong.scene").__name__
+        scene_module = importlib.import_module("blinn_phong_render.blinn_phong.model.scene").__name__
         addon_utils.disable("blinn_phong_render")
         emit({"file": module.__file__, "state": state, "scene_module": scene_module,
               "top_level_loaded": sorted({"blinn_phong", "compositing", "addon"} & set(sys.modules))})
@@ -174,7 +174,7 @@ def test_loads_the_legacy_way_from_scripts_addons(built_zip: Path, tmp_path: Pat
     )
     assert Path(got["file"]).is_relative_to(addons)
     assert got["state"] == [True, True]
-    assert got["scene_module"] == "blinn_phong_render.blinn_phong.scene"
+    assert got["scene_module"] == "blinn_phong_render.blinn_phong.model.scene"
     assert got["top_level_loaded"] == []
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from addon.pipeline import RenderOptions, render_frame
-from blinn_phong.render import render
-from blinn_phong.scene import Camera, DirectionalLight, LightModel, Material, Scene, look_at
+from blinn_phong.frame.render import render
+from blinn_phong.model.scene import Camera, DirectionalLight, LightModel, Material, Scene, look_at
 from tests.meshes import square
 
 
@@ -23,7 +23,7 @@ def _top_camera(size: float = 4.0) -> Camera:
 
 
 def test_effects_recipe_without_effects_equals_the_z_buffer_renderer() -> None:
-    # Forcing the A-buffer and zero-density fog on an opaque scene must reproduce blinn_phong.render.
+    # Forcing the A-buffer and zero-density fog on an opaque scene must reproduce blinn_phong.frame.render.
     # The two quads cannot shadow each other, so any shadow method leaves the reference unchanged.
     material = Material(diffuse=(0.6, 0.5, 0.4), specular=(0.3, 0.3, 0.3), shininess=20.0)
     scene = Scene(
@@ -164,7 +164,7 @@ def test_without_embree_shadows_fall_back_to_shadow_volumes(monkeypatch: pytest.
     import sys
 
     monkeypatch.setitem(sys.modules, "embreex", None)
-    monkeypatch.setitem(sys.modules, "blinn_phong.raytrace", None)
+    monkeypatch.setitem(sys.modules, "blinn_phong.shadows.raytrace", None)
     floor = Material(ambient=(0, 0, 0), diffuse=(1.0, 1.0, 1.0))
     scene = Scene(
         (square(0.0, 2.0, floor), square(1.0, 0.3, Material(), centre=(-1.0, 0.0))),

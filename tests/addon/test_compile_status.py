@@ -28,7 +28,7 @@ import gc, json
 import numba
 import numpy as np
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 from addon import pipeline
 from addon.options import RenderOptions
 
@@ -46,11 +46,12 @@ FRESH = CHILD.replace(
     "pipeline.render_frame(scene, 64, 48, options)  # fills the disk cache (the first run on a machine)",
     r'''
 pipeline.warm_kernels("AUTO")
-from blinn_phong import ray_culling, shadow_kernels
+from blinn_phong.shadows import ray_culling
+from blinn_phong.shadows import kernels as shadow_kernels
 targets = [
     o for o in gc.get_objects()
     if isinstance(o, numba.core.dispatcher.Dispatcher)
-    and o.py_func.__module__ in ("blinn_phong.ray_culling", "blinn_phong.shadow_kernels")
+    and o.py_func.__module__ in ("blinn_phong.shadows.ray_culling", "blinn_phong.shadows.kernels")
 ]
 for dispatcher in targets:
     dispatcher._cache.disable()  # these compile inside the frame

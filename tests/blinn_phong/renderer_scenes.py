@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 
 def f32(x: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong import pipeline
+from blinn_phong.frame import pipeline
 from compositing.cryptomatte import matte, name_hash, name_id, pass_names
 
 W, H = 6, 4

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.visibility import visible_fragments
+from blinn_phong.frame.visibility import visible_fragments
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 pytest.importorskip("numba")
 
@@ -127,8 +127,8 @@ def effects_scene(two_sided: bool) -> bp.Scene:
 @pytest.mark.parametrize("samples", [1, 4])
 def test_frame_fragments_are_identical(samples: int) -> None:
     # The visible-fragment lists: same opaque winners, same transparent fragments in the same order.
-    from blinn_phong.resolve import side_tables
-    from blinn_phong.visibility import frame_fragments
+    from blinn_phong.frame.resolve import side_tables
+    from blinn_phong.frame.visibility import frame_fragments
 
     scene = effects_scene(two_sided=True)
     prepared = bp.prepare_scene(scene)
@@ -197,7 +197,7 @@ def test_frame_engines_agree_on_every_effect(options: dict, samples: int) -> Non
 def test_bands_give_the_single_pass_image(monkeypatch: pytest.MonkeyPatch) -> None:
     # Shading and resolving in bands of rows changes nothing: each stage works per fragment or per
     # sample, so the images are equal bit for bit (deterministic by construction).
-    from blinn_phong import pipeline
+    from blinn_phong.frame import pipeline
 
     scene = effects_scene(two_sided=True)
     options = {

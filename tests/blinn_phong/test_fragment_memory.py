@@ -5,7 +5,7 @@ Checked by counting, never by timing:
 * the visibility stage keeps exactly the fragments a brute-force depth test keeps (every
   rasterized fragment from the numpy reference rasterizer, each sample's nearest opaque depth by
   ``np.minimum.at``, the transparent ones strictly in front of it: ``GL_LESS``);
-* :func:`blinn_phong.visibility.rasterized_count` (compiled) counts what the numpy reference
+* :func:`blinn_phong.frame.visibility.rasterized_count` (compiled) counts what the numpy reference
   rasterizer produces;
 * the compiled visibility stage's peak traced memory (``tracemalloc``, which sees numpy's
   allocations) is bounded by the kept fragments, the per-sample arrays and the triangle set-up,
@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-import blinn_phong.pipeline as pipeline
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import rasterize
-from blinn_phong.visibility import frame_fragments, rasterized_count
+import blinn_phong.frame.pipeline as pipeline
+from blinn_phong.frame.visibility import frame_fragments, rasterized_count
+from blinn_phong.geometry.raster import rasterize
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 pytest.importorskip("numba")
 

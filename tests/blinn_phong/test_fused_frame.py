@@ -1,6 +1,6 @@
 """The compiled plain frame (fused shading and resolve, compiled triangle set-up) against the references.
 
-* the compiled triangle set-up equals :func:`blinn_phong.raster._setup_triangles` bit for bit
+* the compiled triangle set-up equals :func:`blinn_phong.geometry.raster._setup_triangles` bit for bit
   (the same IEEE operations in the same order, no fast-math: deterministic by construction);
 * the fused frame (one pass per pixel: interpolation, the lighting equation, the frame
   buffers) equals the numpy reference engine's frame within 1e-6 on a scene with every light
@@ -10,7 +10,7 @@
   frames whose transparent fragments the pass sorts and composites (A-buffer, depth peeling);
 * fogged frames (linear, exp and exp2 fog, eye-plane and radial distance, with and without
   shadows, both viewer models) stay on the fused pass and equal the numpy engine's
-  (which fogs by :mod:`blinn_phong.fog`'s numpy formulas) within 1e-6 (fog is refused with
+  (which fogs by :mod:`blinn_phong.model.fog`'s numpy formulas) within 1e-6 (fog is refused with
   the GL-compatibility preset);
 * per-channel visibility (N, L, 3) weights each light's diffuse and specular terms channel by
   channel: checked against the numpy engine's per-light terms (``shade(..., per_light=True)``)
@@ -25,12 +25,12 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import _setup_triangles
+from blinn_phong.geometry.raster import _setup_triangles
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 pytest.importorskip("numba")
 
-from blinn_phong.fast import setup_triangles_compiled, shade_plain_fragments_compiled
+from blinn_phong.frame.fast import setup_triangles_compiled, shade_plain_fragments_compiled
 
 
 def scene(local_viewer: bool = True, specular: str = "blinn") -> bp.Scene:
@@ -110,8 +110,8 @@ def _case_id(case: dict) -> str:
 
 
 def _record_fused(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """The names of the fused kernels :func:`blinn_phong.pipeline.render_frame` calls, in order."""
-    from blinn_phong import pipeline
+    """The names of the fused kernels :func:`blinn_phong.frame.pipeline.render_frame` calls, in order."""
+    from blinn_phong.frame import pipeline
 
     used: list[str] = []
     for name in ("shade_plain_winners_compiled", "shade_plain_fragments_compiled"):
@@ -178,7 +178,7 @@ FOG_EXTRAS = {
 def test_fogged_frame_stays_fused_and_equals_the_numpy_reference(
     fog: bp.Fog, extra: dict, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    # The numpy engine fogs by blinn_phong.fog's numpy formulas (fog_factor, apply_fog) on the
+    # The numpy engine fogs by blinn_phong.model.fog's numpy formulas (fog_factor, apply_fog) on the
     # staged fragment colours; the fused pass by the compiled per-fragment fog. Same float64
     # operations in the same order, so 1e-6 as above (float32 step near 1: 6e-8).
     extra = dict(extra)
@@ -205,8 +205,8 @@ def test_per_channel_visibility_weights_each_light_per_channel() -> None:
     # One covered pixel per fragment; the expected terms from the numpy engine's per-light terms.
     s = scene()
     prepared = bp.prepare_scene(s)
-    from blinn_phong.shading import plain_tables
-    from blinn_phong.visibility import frame_fragments
+    from blinn_phong.frame.shading import plain_tables
+    from blinn_phong.frame.visibility import frame_fragments
 
     visible = frame_fragments(prepared.clip, prepared.triangles, 32, 24, engine="numba")
     f = visible.fragments
@@ -221,7 +221,7 @@ def test_per_channel_visibility_weights_each_light_per_channel() -> None:
         32, 24, visible.opaque_of, f.triangle, f.bary, f.depth, f.front_facing,
         plain_tables(prepared, False), vis, vis.mean(axis=(1, 2)), out,
     )  # fmt: skip
-    from blinn_phong.shading import surface_at_fragments
+    from blinn_phong.frame.shading import surface_at_fragments
 
     back = ~f.front_facing
     points, normals, _ = surface_at_fragments(prepared, f, back)

@@ -31,7 +31,7 @@ import numpy as np
 import numba
 import blinn_phong as bp
 import compositing
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 pos, tri, nrm = uv_sphere(24, 12, 1.0)
 lifted = np.eye(4)

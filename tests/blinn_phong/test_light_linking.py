@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.frame import ShadowOptions
+from blinn_phong.planning.frame_plan import ShadowOptions
 from tests.meshes import rectangle
 
 W, H = 12, 8

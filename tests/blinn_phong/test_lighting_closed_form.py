@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 RNG = np.random.default_rng(7)
 

@@ -1,11 +1,11 @@
-"""blinn_phong.normals.normalize: dtypes, lengths whose square under- or overflows, zero vectors."""
+"""blinn_phong.geometry.normals.normalize: dtypes, lengths whose square under- or overflows, zero vectors."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from blinn_phong.normals import normalize
+from blinn_phong.geometry.normals import normalize
 
 
 def test_normalize_integer_vectors_gives_float64():

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-import blinn_phong.pipeline as pipeline
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.resolve import shadow_pass_values
+import blinn_phong.frame.pipeline as pipeline
+from blinn_phong.frame.resolve import shadow_pass_values
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 LAY_FLAT = np.array([[1, 0, 0, 0], [0, 0, 1, -1], [0, -1, 0, 0], [0, 0, 0, 1]], float)  # z = 0 → y = -1
 

@@ -18,7 +18,7 @@ import pytest
 import blinn_phong as bp
 import compositing
 from blinn_phong._checks import BYTES_PER_SAMPLE, check_frame_size, frame_bytes
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 
 def _camera(view=None):
@@ -232,7 +232,7 @@ def test_the_compile_notice_appears_once_and_only_when_numba_compiles(tmp_path):
     code = f"""
         import sys
         sys.path.insert(1, {root!r})
-        from blinn_phong._feedback import announce_compiles
+        from blinn_phong.frame._feedback import announce_compiles
         announce_compiles("auto")
         import other_kernels
         other_kernels.sub(1)
@@ -254,7 +254,7 @@ def test_a_long_render_prints_progress_and_a_short_one_stays_silent(capsys, monk
     capsys.readouterr()
     bp.render(scene, 8, 8)
     assert capsys.readouterr().err == ""
-    import blinn_phong._feedback as feedback
+    import blinn_phong.frame._feedback as feedback
 
     monkeypatch.setattr(feedback, "PROGRESS_AFTER", 0.0)  # every render is "long" now
     bp.render(scene, 8, 8)

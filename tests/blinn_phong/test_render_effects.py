@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import uv_sphere
+from blinn_phong.model.primitives import uv_sphere
 
 
 @pytest.fixture(autouse=True, params=["numpy", "numba"])
@@ -555,7 +555,8 @@ scene = bp.Scene((floor, block), (bp.PointLight((0, 0, 4)),), camera, ambient=(0
 for shadows in (None, "ray_traced", bp.ShadowOptions("shadow_map", resolution=1024)):
     result = bp.render(scene, 40, 40, shadows=shadows)
     print(result.rgba[20, 16, 0], result.rgba[20, 2, 0], result.plan.shadows[0].method)
-print("blinn_phong.raytrace" in sys.modules, bp.plan(scene).shadows[0].method, result.plan.shadows[0].reason)
+print("blinn_phong.shadows.raytrace" in sys.modules, bp.plan(scene).shadows[0].method,
+      result.plan.shadows[0].reason)
 """
     root = Path(__file__).resolve().parents[2]
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=120)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.normals import face_normals, transform_normals, vertex_normals
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.geometry.normals import face_normals, transform_normals, vertex_normals
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 
 def pixel_camera(width: int, height: int, near: float = 1.0, far: float = 5.0) -> bp.Camera:

@@ -1,6 +1,6 @@
 """The GL-compatibility preset against real OpenGL: Mesa llvmpipe, fixed function and a GLSL shader.
 
-Every scene is rendered twice — by ``blinn_phong.render(..., gl_compat=True)`` and by
+Every scene is rendered twice — by ``blinn_phong.frame.render(..., gl_compat=True)`` and by
 Mesa (``oracles.gl_lighting``) from the same Scene object — and compared on the
 pixels both cover away from triangle edges (pixel centre at least 1/16 pixel from
 every edge of its visible triangle): at most 1/255 per channel after OpenGL's float -> UNORM8
@@ -155,7 +155,7 @@ SCENES: dict[str, SceneFactory] = {
 
 def _open_hemisphere() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The upper half of a UV sphere, open at the bottom so its inside (back faces) shows."""
-    from blinn_phong.primitives import uv_sphere
+    from blinn_phong.model.primitives import uv_sphere
 
     pos, tris, normals = uv_sphere(40, 20)
     keep = (pos[tris][:, :, 1] >= -1e-9).all(axis=1)

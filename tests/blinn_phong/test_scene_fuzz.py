@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.frame import SHADOW_CHOICES, TRANSPARENCY_CHOICES
+from blinn_phong.planning.frame_plan import SHADOW_CHOICES, TRANSPARENCY_CHOICES
 from blinn_phong.scene_fuzz import FRAME_SIZES, SAMPLE_COUNTS, check_case, downscaled_size, fuzz_case
 
 #: Frames above this many samples drop to fewer samples per pixel (the suite's time budget).

@@ -1,4 +1,4 @@
-"""blinn_phong.lighting.shade and shade_many on both engines: input checks with counts, and the
+"""blinn_phong.frame.lighting.shade and shade_many on both engines: input checks with counts, and the
 guarded cases of the shared light terms (OpenGL 2.1 §2.14.1 by hand)."""
 
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.fast import numba_available
-from blinn_phong.lighting import lights_in_eye_space, shade, shade_many
-from blinn_phong.scene import DirectionalLight, LightModel, Material, PointLight, SpotLight
+from blinn_phong._numba import numba_available
+from blinn_phong.frame.lighting import lights_in_eye_space, shade, shade_many
+from blinn_phong.model.scene import DirectionalLight, LightModel, Material, PointLight, SpotLight
 
 # --------------------------------------------------------------------------- shade() input checks
 

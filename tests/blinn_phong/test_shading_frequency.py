@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 SHINY = bp.Material(ambient=(0, 0, 0), diffuse=(0.3, 0.3, 0.3), specular=(1, 1, 1), shininess=60.0)
 

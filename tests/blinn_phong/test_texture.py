@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.texture import Texture, srgb_to_linear
+from blinn_phong.model.texture import Texture, srgb_to_linear
 
 # A 2×3 (H×W) image of distinct opaque colours, row 0 at the TOP.
 IMAGE = np.array(
@@ -255,7 +255,7 @@ def test_alpha_clipped_and_translucent_texels_over_an_opaque_surface(engine: str
 @pytest.mark.parametrize("separate", [False, True])
 def test_compiled_texture_stage_equals_the_reference(gl_compat: bool, separate: bool) -> None:
     pytest.importorskip("numba")
-    from blinn_phong.texturing import texture_fragments
+    from blinn_phong.frame.texturing import texture_fragments
 
     rng = np.random.default_rng(5)
     img = rng.random((5, 7, 4)).astype(np.float32)

@@ -1,7 +1,7 @@
 """Texture lookups at coordinates far outside [0, 1] (up to ±1e300), both engines.
 
 Expected values come from the definitions (OpenGL 2.1 §3.8.7–3.8.8, module docstring of
-``blinn_phong.texture``), evaluated by hand on a 4×2 image whose texel centres are exact
+``blinn_phong.model.texture``), evaluated by hand on a 4×2 image whose texel centres are exact
 binary fractions:
 
 * ``extend`` (``GL_CLAMP_TO_EDGE``): beyond the image, the edge texel on that side;
@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.texture import Texture
+from blinn_phong.model.texture import Texture
 
 W, H = 4, 2
 # Row 0 at the TOP; distinct opaque texels.

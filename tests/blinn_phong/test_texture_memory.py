@@ -1,6 +1,6 @@
 """Texture size: oversized images refused up front, construction without full-size float64 copies.
 
-* The limit (``blinn_phong.texture.check_texture_size``): a texture stores 16 bytes per texel
+* The limit (``blinn_phong.model.texture.check_texture_size``): a texture stores 16 bytes per texel
   (float32 RGBA) and may take at most half the physical memory; a larger one is refused
   before anything is allocated, the message naming the field, the size, the bytes needed and
   the limit. A zero-stride ``np.broadcast_to`` view stands for a huge image without memory.
@@ -19,7 +19,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from blinn_phong.texture import BLOCK_TEXELS, Texture, check_texture_size
+from blinn_phong.model.texture import BLOCK_TEXELS, Texture, check_texture_size
 
 
 def test_oversized_texture_is_refused_before_allocating() -> None:
@@ -93,7 +93,7 @@ def test_compiled_texture_stage_does_not_copy_the_texture() -> None:
     """The compiled stage reads the stored image itself (it used to concatenate a copy per band)."""
     pytest.importorskip("numba")
     import blinn_phong as bp
-    from blinn_phong.texturing import texture_fragments
+    from blinn_phong.frame.texturing import texture_fragments
 
     n = 1024  # 16 MiB stored
     texture = Texture(np.random.default_rng(3).random((n, n, 3), dtype=np.float32), interpolation="closest")

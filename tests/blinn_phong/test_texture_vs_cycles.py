@@ -29,7 +29,7 @@ import renderer_scenes
 from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
-from blinn_phong.texture import Texture
+from blinn_phong.model.texture import Texture
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 

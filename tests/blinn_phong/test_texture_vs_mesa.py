@@ -1,7 +1,7 @@
 """Image textures against Mesa llvmpipe: fixed-function lighting with a ``GL_MODULATE`` texture.
 
 A lit plane, tilted away from a perspective camera, its texture coordinates running past
-[0, 1] so every wrap mode is exercised, is rendered by ``blinn_phong.render(gl_compat=True,
+[0, 1] so every wrap mode is exercised, is rendered by ``blinn_phong.frame.render(gl_compat=True,
 shading="gouraud")`` and by Mesa (``oracles.gl_texture``: the same lights and materials,
 per-vertex lighting, ``GL_SEPARATE_SPECULAR_COLOR``) from the same Scene.
 
@@ -31,7 +31,7 @@ import renderer_scenes
 from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
-from blinn_phong.texture import Texture
+from blinn_phong.model.texture import Texture
 from oracles.gl_common import to_unorm8
 
 pytestmark = pytest.mark.mesa

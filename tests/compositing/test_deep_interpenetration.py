@@ -2,7 +2,7 @@
 
 The sets (a sphere, front and back surfaces, through a tilted transparent pane) are
 computed in closed form by :mod:`compositing.deep_demo`. Oracle: the A-buffer of both
-sets together, :func:`blinn_phong.oit.resolve_a_buffer` (per-pixel depth sort and front-to-
+sets together, :func:`blinn_phong.effects.oit.resolve_a_buffer` (per-pixel depth sort and front-to-
 back ``over`` of all fragments, Carpenter 1984), on the fragments of both sets.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.oit import resolve_a_buffer
+from blinn_phong.effects.oit import resolve_a_buffer
 from compositing.deep import flatten, merge
 from compositing.deep_demo import deep_of, flat_of, main, scene_fragments
 from compositing.deep_io import read_deep

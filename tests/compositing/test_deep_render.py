@@ -1,7 +1,7 @@
-"""Deep output of the renderer (``render(..., deep=True)``, :func:`blinn_phong.deep_output.render_deep`)
+"""Deep output of the renderer (``render(..., deep=True)``, :func:`blinn_phong.frame.deep_output.render_deep`)
 against its flat renders.
 
-Oracle: :func:`blinn_phong.render` with the A-buffer (or depth peeling) on the same scene:
+Oracle: :func:`blinn_phong.frame.render` with the A-buffer (or depth peeling) on the same scene:
 flattening the deep frame must give the flat frame, for every transparency model, fog and
 Kay–Greenberg opacity, in bands and strips and with the compiled stages, and two renders of
 separate object sets that interpenetrate, deep-merged, must give one render of both. The deep
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong import pipeline, visibility
-from blinn_phong.deep_output import render_deep
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.frame import pipeline, visibility
+from blinn_phong.frame.deep_output import render_deep
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 from compositing.deep import flatten, merge
 
 W, H = 48, 36

@@ -5,7 +5,7 @@ The independent source throughout is numba's own bookkeeping: a dispatcher's
 numba's per-overload compile timer (``metadata["timers"]["compiler_lock"]``), and the files
 numba writes (``.nbi`` index, ``.nbc`` machine code). Each process is a fresh interpreter with a
 private cache directory (``BLINN_PHONG_KERNEL_CACHE``); the kernels are a small family (one
-mesh pass of ``blinn_phong._mesh_kernels`` and the generated ``src_over`` compositing kernel,
+mesh pass of ``blinn_phong.geometry._mesh_kernels`` and the generated ``src_over`` compositing kernel,
 about a second to compile) so the default run stays quick.
 """
 
@@ -35,7 +35,7 @@ CHILD = r"""
 import json, sys
 import numpy as np
 import blinn_phong, compositing
-from blinn_phong import _mesh_kernels as m
+from blinn_phong.geometry import _mesh_kernels as m
 from compositing import _fused
 from compositing._kernel_cache import compile_clock
 
@@ -95,7 +95,7 @@ def test_a_second_checkout_at_another_path_compiles_nothing(tmp_path: Path) -> N
         "src_over": [0, 1],
     }
     assert first["compile_s"] > 0 and set(first["by_module"]) == {
-        "blinn_phong._mesh_kernels",
+        "blinn_phong.geometry._mesh_kernels",
         "compositing (generated)",
     }
     stored = _machine_code(cache)
@@ -127,7 +127,7 @@ def test_edited_sources_get_their_own_entry_and_leave_the_others_alone(tmp_path:
     one = _copy_checkout(tmp_path / "one", 1_600_000_000)
     first = _run(one, cache)
     edited = _copy_checkout(tmp_path / "edited", 1_600_000_000)
-    kernels = edited / "blinn_phong" / "_mesh_kernels.py"
+    kernels = edited / "blinn_phong" / "geometry" / "_mesh_kernels.py"
     kernels.write_text(kernels.read_text() + "\n# an edit that changes the file, not the kernel\n")
     changed = _run(edited, cache)
     # The edited module compiles into a directory of its own; the unchanged family is shared.
@@ -145,7 +145,7 @@ def test_edited_sources_get_their_own_entry_and_leave_the_others_alone(tmp_path:
 def test_a_change_in_an_imported_module_changes_the_stamp(tmp_path: Path) -> None:
     # numba keys a kernel by its own file only; a kernel inlining a function of another project
     # module must be compiled again when that module changes. The stamp follows the imports.
-    stamp = "from blinn_phong import fast; from compositing import _kernel_cache as kc; "
+    stamp = "from blinn_phong.frame import fast; from compositing import _kernel_cache as kc; "
     stamp += "print(kc.source_stamp(fast.__file__))"
 
     def fast_stamp(checkout: Path) -> str:
@@ -163,7 +163,8 @@ def test_a_change_in_an_imported_module_changes_the_stamp(tmp_path: Path) -> Non
     copy = _copy_checkout(tmp_path / "copy", 1_600_000_000)
     original = fast_stamp(copy)
     assert original == fast_stamp(ROOT)  # same contents at another path
-    planner, lighting = copy / "blinn_phong" / "planner.py", copy / "blinn_phong" / "lighting.py"
+    planner = copy / "blinn_phong" / "planning" / "planner.py"
+    lighting = copy / "blinn_phong" / "frame" / "lighting.py"
     planner.write_text(planner.read_text() + "\n# planner.py is not imported by fast.py\n")
     assert fast_stamp(copy) == original
     lighting.write_text(lighting.read_text() + "\n# lighting.py is (its kernels are inlined)\n")
@@ -228,11 +229,12 @@ def test_an_index_is_saved_under_the_entry_lock(tmp_path: Path) -> None:
         cache
         / kc.environment_key()
         / "blinn_phong"
+        / "geometry"
         / (
             "_mesh_kernels-"
-            + kc.source_stamp(ROOT / "blinn_phong" / "_mesh_kernels.py")[:16]
+            + kc.source_stamp(ROOT / "blinn_phong" / "geometry" / "_mesh_kernels.py")[:16]
             + "-"
-            + hashlib.sha256(b"blinn_phong._mesh_kernels").hexdigest()[:8]  # the module's name
+            + hashlib.sha256(b"blinn_phong.geometry._mesh_kernels").hexdigest()[:8]  # the module's name
         )
     )
     entry.mkdir(parents=True)
@@ -257,7 +259,11 @@ def test_every_kernel_of_the_packages_uses_the_shared_cache(tmp_path: Path) -> N
         import gc, json
         import numba
         import blinn_phong
-        from blinn_phong import _mesh_kernels, _volume_helpers, frame_maps, ray_culling, shadow_kernels
+        from blinn_phong.geometry import _mesh_kernels
+        from blinn_phong.shadows import _volume_helpers
+        from blinn_phong.shadows import frame_maps
+        from blinn_phong.shadows import ray_culling
+        from blinn_phong.shadows import kernels as shadow_kernels
         found = {}
         for o in gc.get_objects():
             if isinstance(o, numba.core.dispatcher.Dispatcher) and o.py_func.__module__[:11] == "blinn_phong":
@@ -270,7 +276,7 @@ def test_every_kernel_of_the_packages_uses_the_shared_cache(tmp_path: Path) -> N
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     found = json.loads(done.stdout.strip().splitlines()[-1])
-    assert len(found) > 20 and any(name.startswith("blinn_phong.shadow_kernels.") for name in found), found
+    assert len(found) > 20 and any(name.startswith("blinn_phong.shadows.kernels.") for name in found), found
     outside = {name: path for name, path in found.items() if not Path(path).is_relative_to(cache)}
     assert not outside
 

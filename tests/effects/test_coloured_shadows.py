@@ -10,9 +10,9 @@ the ray offset), so each is under a known set of filters.
 import numpy as np
 import pytest
 
-from blinn_phong.raytrace import RayScene, transmitted_light
-from blinn_phong.scene import DirectionalLight, PointLight
-from blinn_phong.shadows import light_visibility
+from blinn_phong.model.scene import DirectionalLight, PointLight
+from blinn_phong.shadows.raytrace import RayScene, transmitted_light
+from blinn_phong.shadows.visibility import light_visibility
 
 from .geometry import box_triangles, quad_triangles
 

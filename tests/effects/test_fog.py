@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from blinn_phong.fog import apply_fog, eye_distance, fog_factor
+from blinn_phong.model.fog import apply_fog, eye_distance, fog_factor
 
 
 def test_linear_fog_is_the_fraction_of_the_way_from_end_to_start():

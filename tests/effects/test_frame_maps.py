@@ -1,16 +1,16 @@
-"""Shadow maps looked up inside the fused shading kernel (:mod:`blinn_phong.frame_maps`).
+"""Shadow maps looked up inside the fused shading kernel (:mod:`blinn_phong.shadows.frame_maps`).
 
 When every shadowed light of an opaque one-sample frame uses a shadow map, the fused kernel
 looks each pixel's world point up itself, and a point light's cube is rendered only over the
 texels the *visible triangles* can be looked up in. Checked here:
 
-* the rectangles of :func:`blinn_phong.shadow_kernels.receiver_triangle_rects` hold every
+* the rectangles of :func:`blinn_phong.shadows.kernels.receiver_triangle_rects` hold every
   texel that a look-up of any point on the triangles reads — recomputed with numpy from the
-  formulas of :func:`blinn_phong.shadows.shadow_visibility` (``_reference_taps``) at random
+  formulas of :func:`blinn_phong.shadows.visibility.shadow_visibility` (``_reference_taps``) at random
   points of the triangles, their corners and edges, for triangles inside one face's cone,
   across the borders of several faces, and passing next to the light;
 * the frame equals, bit for bit, the general path (each pixel's world point written, then
-  :func:`blinn_phong.shadows.light_visibility` per light, then the kernel reads the
+  :func:`blinn_phong.shadows.visibility.light_visibility` per light, then the kernel reads the
   visibilities): the same points, the same maps wherever a look-up reads, the same
   operations per look-up, the same shadow-pass sum — deterministic by construction (no
   threaded reduction), for every light type, the PCF kernels, the biases, unshadowed
@@ -25,15 +25,16 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong._scratch import ScratchPool, carve, carved_bytes
-from blinn_phong.shadows import light_cameras
+from blinn_phong.shadows.visibility import light_cameras
 
 from .test_shadow_kernels import SCENE  # the shadow-kernel tests' casters
 from .test_shadow_receiver_maps import POINT, RES, _reference_taps
 
 pytest.importorskip("numba")
 
-from blinn_phong import frame_maps, pipeline  # imports numba
-from blinn_phong.shadow_kernels import receiver_triangle_rects
+from blinn_phong.frame import pipeline
+from blinn_phong.shadows import frame_maps  # imports numba
+from blinn_phong.shadows.kernels import receiver_triangle_rects
 
 
 def _triangles_around_the_light(rng: np.random.Generator) -> np.ndarray:
@@ -100,7 +101,7 @@ def test_triangle_rectangles_are_tight_for_a_small_patch() -> None:
 
 
 def _scene(light_at_the_border: bool = False) -> bp.Scene:
-    from blinn_phong.primitives import grid_plane, uv_sphere
+    from blinn_phong.model.primitives import grid_plane, uv_sphere
 
     pos, tris, normals = uv_sphere(24, 12)
     meshes = []
@@ -186,7 +187,7 @@ def test_a_light_at_the_border_reads_several_faces() -> None:
     # the case above whose cube faces meet in view: the visible triangles reach four faces
     scene = _scene(True)
     prepared = bp.prepare_scene(scene)
-    from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled
+    from blinn_phong.frame.fast import nearest_winners_compiled, setup_triangles_compiled
 
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, 160, 120, 1, False)
     winner = nearest_winners_compiled(setup)
@@ -258,7 +259,7 @@ def test_a_look_up_outside_the_rendered_texels_shades_the_frame_again(
 ) -> None:
     # rectangles cut to their upper half: the look-ups of the lower half leave them, the kernel
     # says so, and the frame is shaded again from the general path's visibilities
-    from blinn_phong import shadow_kernels
+    from blinn_phong.shadows import kernels as shadow_kernels
 
     def halved(*args: object) -> np.ndarray:
         rects = receiver_triangle_rects(*args)  # type: ignore[arg-type]

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.pipeline import _fragment_surface, _world_triangles, _world_vertices
-from blinn_phong.prepared import prepare_scene
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.raster import interpolate
-from blinn_phong.scene import DirectionalLight, PointLight
-from blinn_phong.shadows import light_visibility, planar_shadow_mask
-from blinn_phong.visibility import frame_fragments
+from blinn_phong.frame.pipeline import _fragment_surface, _world_triangles, _world_vertices
+from blinn_phong.frame.prepared import prepare_scene
+from blinn_phong.frame.visibility import frame_fragments
+from blinn_phong.geometry.raster import interpolate
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.model.scene import DirectionalLight, PointLight
+from blinn_phong.shadows.visibility import light_visibility, planar_shadow_mask
 
 from .geometry import box_triangles, quad_triangles
 
@@ -70,7 +70,11 @@ def test_winner_surfaces_are_the_fragment_surfaces(cull):
     # of the numpy reference (same sums in the same order; the normal's length by one einsum, so
     # a rounding or two: 1e-15 on unit vectors, 1e-14 on coordinates of size ~5).
     pytest.importorskip("numba")
-    from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
+    from blinn_phong.frame.fast import (
+        nearest_winners_compiled,
+        setup_triangles_compiled,
+        winner_surfaces_compiled,
+    )
 
     scene = _scene()
     prepared = prepare_scene(scene)
@@ -118,7 +122,7 @@ def test_world_geometry_is_cached_per_scene_geometry_and_read_only():
     # ray tracer's hash of them); another transform is another geometry.
     import dataclasses
 
-    from blinn_phong.raytrace import world_triangles
+    from blinn_phong.shadows.raytrace import world_triangles
 
     scene = _scene()
     tris = _world_triangles(scene)

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from blinn_phong import mesh_facts as mf
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.scene import Mesh
+from blinn_phong.geometry import mesh_facts as mf
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.model.scene import Mesh
 
 needs_numba = pytest.mark.skipif(mf._kernels() is None, reason="numba is not installed")
 
@@ -260,7 +260,7 @@ def test_equal_arrays_are_analysed_once_and_different_ones_apart():
 
 
 def test_normal_angle_is_the_largest_angle_between_world_normals_of_an_edge():
-    from blinn_phong.calibration import max_normal_angle
+    from blinn_phong.planning.calibration import max_normal_angle
 
     # closed form: a quad whose two far vertices' normals lean 30° and 50° (about x and y);
     # under a stretch by 2 along z the world normals (inverse transpose) lean atan(2·tan θ)

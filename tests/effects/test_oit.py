@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from blinn_phong.oit import (
+from blinn_phong.effects.oit import (
     depth_complexity,
     depth_test,
     object_draw_order,
@@ -19,7 +19,7 @@ from blinn_phong.oit import (
     triangle_draw_order,
     wboit_weights,
 )
-from blinn_phong.raster import Fragments
+from blinn_phong.geometry.raster import Fragments
 
 N_PIX = 64
 BG = np.array([0.2, 0.3, 0.4, 1.0])
@@ -226,7 +226,7 @@ def test_bad_fragments_are_rejected():
 
 
 def test_a_buffer_on_rasterized_interpenetrating_quads_matches_the_plane_equations():
-    from blinn_phong.scene import AmbientLight, Scene
+    from blinn_phong.model.scene import AmbientLight, Scene
 
     from .scenes import horizontal_quad, ortho_camera, quad, render_transparency
 
@@ -330,7 +330,7 @@ def _random_sample_lists(seed: int, n_keys: int = 300, max_layers: int = 7) -> d
 
 
 def _compiled(lists: dict, code: int, max_layers: int, sort_key: np.ndarray) -> np.ndarray:
-    from blinn_phong.fast import resolve_frame_compiled
+    from blinn_phong.frame.fast import resolve_frame_compiled
 
     n = len(lists["rgba"])
     zeros = np.zeros((n, 3))
@@ -349,7 +349,7 @@ def test_compiled_resolves_match_the_reference(method: str, seed: int) -> None:
     # the closed-form over stack): same sort (ties in list order), same over, float32 output, so
     # the only differences are float64 rounding (far below 1e-6).
     pytest.importorskip("numba")
-    from blinn_phong.fast import RESOLVE_CODES
+    from blinn_phong.frame.fast import RESOLVE_CODES
 
     lists = _random_sample_lists(seed)
     tr = slice(lists["n_o"], None)

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from blinn_phong.calibration import shipped_models
-from blinn_phong.frame import Fog, ShadowOptions
-from blinn_phong.planner import plan
-from blinn_phong.render import render
-from blinn_phong.scene import AmbientLight, DirectionalLight, LightModel, Material, Mesh, PointLight
-from blinn_phong.shadows import light_visibility
+from blinn_phong.frame.render import render
+from blinn_phong.model.scene import AmbientLight, DirectionalLight, LightModel, Material, Mesh, PointLight
+from blinn_phong.planning.calibration import shipped_models
+from blinn_phong.planning.frame_plan import Fog, ShadowOptions
+from blinn_phong.planning.planner import plan
+from blinn_phong.shadows.visibility import light_visibility
 
 from .scenes import (
     flat_cube,
@@ -293,8 +293,8 @@ def _box_mesh(lid: bool, colour=(0.8, 0.6, 0.4), opacity: float = 1.0) -> Mesh:
 
 
 def test_a_closed_uv_sphere_is_convex_and_needs_no_shadow_work():
-    from blinn_phong.planner import _mesh_facts
-    from blinn_phong.primitives import uv_sphere
+    from blinn_phong.model.primitives import uv_sphere
+    from blinn_phong.planning.planner import _mesh_facts
 
     for segments, rings in ((64, 32), (317, 159)):  # 3 968 and 100 172 triangles
         p, t, n = uv_sphere(segments, rings)
@@ -314,7 +314,7 @@ def test_a_closed_uv_sphere_is_convex_and_needs_no_shadow_work():
 
 
 def test_a_cube_with_split_vertices_is_welded_closed_and_convex():
-    from blinn_phong.planner import _mesh_facts
+    from blinn_phong.planning.planner import _mesh_facts
 
     facts = _mesh_facts(flat_cube((0, 0, 0), 0.8))
     assert facts.closed and facts.convex
@@ -353,7 +353,7 @@ def test_an_open_box_shades_its_own_floor_under_two_sided_lighting(two_sided):
 
 
 def test_the_radiance_bound_includes_attenuation_above_one():
-    from blinn_phong.planner import _light_factor_bound, _max_radiance, _mesh_facts
+    from blinn_phong.planning.planner import _light_factor_bound, _max_radiance, _mesh_facts
 
     # a point light 0.5 above a quad at z = 0: the nearest distance to its bounding box is 0.5,
     # so att ≤ 1/(0.01 + 1·0.25) = 3.846 — and the quad's centre reaches it exactly
@@ -392,7 +392,7 @@ def test_depth_peeling_under_a_close_point_light_stays_within_the_tolerance():
 
 
 def test_thin_casters_need_texels_finer_than_their_width():
-    from blinn_phong.planner import shadow_map_geometry
+    from blinn_phong.planning.planner import shadow_map_geometry
 
     slat = np.diag([0.03, 2.6, 0.02, 1.0])
     slats = []
@@ -445,9 +445,9 @@ def test_plan_is_the_plan_render_follows_for_kay_greenberg_and_the_default_shadi
 
 
 def test_soft_shadows_do_not_depend_on_the_camera_and_say_how_many_rays(monkeypatch):
-    from blinn_phong import raytrace
-    from blinn_phong.frame import ShadowOptions, _shadow_choice, embree_available
-    from blinn_phong.pipeline import _soft_visibility
+    from blinn_phong.frame.pipeline import _soft_visibility
+    from blinn_phong.planning.frame_plan import ShadowOptions, _shadow_choice, embree_available
+    from blinn_phong.shadows import raytrace
 
     if not embree_available():
         pytest.skip("soft shadows cast rays with embreex")

@@ -1,7 +1,7 @@
 """The planner's rigorous bounds: the light factor ``att·spot`` over a mesh, and fog's factor range.
 
 Each bound is checked against an independent evaluation: the lighting equation's own
-``att·spot`` (:func:`blinn_phong.lighting._light_direction`, OpenGL 2.1 §2.14.1) at points
+``att·spot`` (:func:`blinn_phong.frame.lighting._light_direction`, OpenGL 2.1 §2.14.1) at points
 sampled on every triangle, the fog formulas of OpenGL 2.1 §3.10 written out here, distances
 from closed forms and dense sampling, and rendered images.
 """
@@ -13,9 +13,11 @@ import math
 import numpy as np
 import pytest
 
-from blinn_phong.frame import Fog
-from blinn_phong.lighting import _light_direction, lights_in_eye_space
-from blinn_phong.planner import (
+from blinn_phong.frame.lighting import _light_direction, lights_in_eye_space
+from blinn_phong.frame.render import render
+from blinn_phong.model.scene import DirectionalLight, Material, Mesh, PointLight, SpotLight
+from blinn_phong.planning.frame_plan import Fog
+from blinn_phong.planning.planner import (
     _fog_range,
     _light_factor_bound,
     _light_factors,
@@ -24,8 +26,6 @@ from blinn_phong.planner import (
     _triangle_distances,
     plan,
 )
-from blinn_phong.render import render
-from blinn_phong.scene import DirectionalLight, Material, Mesh, PointLight, SpotLight
 from testbeds.planner_fuzz import random_scene
 
 from .scenes import flat_cube, horizontal_quad, ortho_camera, perspective_camera, quad, scene_of
@@ -233,7 +233,7 @@ def test_fog_scales_the_shadow_bound_and_the_rendered_shadow_stays_within_it():
 
 
 def test_fog_bounds_the_colour_behind_peeled_layers_by_its_closed_form():
-    from blinn_phong.planner import _fogged_radiance_bound, _max_radiance
+    from blinn_phong.planning.planner import _fogged_radiance_bound, _max_radiance
 
     glow = Material(emission=(1.5, 1.5, 1.5), diffuse=(0.2, 0.2, 0.2), specular=(0, 0, 0), opacity=0.5)
     panes = [
@@ -261,7 +261,7 @@ def test_big_meshes_bound_att_spot_by_their_box_and_ball_under_any_view(scaled_v
     world ones under a rigid view (rotation and translation keep distances and angles), the
     eye-space vertices' otherwise. Either way att·spot at every vertex and at random points of
     every triangle stays below the bound (the lighting equation's own factors)."""
-    from blinn_phong.primitives import uv_sphere
+    from blinn_phong.model.primitives import uv_sphere
 
     pos, tris, normals = uv_sphere(160, 80, 1.0)  # 25,280 triangles: the box-and-ball path
     transform = np.eye(4)

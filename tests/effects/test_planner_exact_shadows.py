@@ -15,12 +15,12 @@ import copy
 import numpy as np
 import pytest
 
-import blinn_phong.planner as planner
-from blinn_phong import calibration
-from blinn_phong.frame import frame_plan
-from blinn_phong.planner import plan
-from blinn_phong.render import render
-from blinn_phong.scene import AmbientLight, DirectionalLight, PointLight
+import blinn_phong.planning.planner as planner
+from blinn_phong.frame.render import render
+from blinn_phong.model.scene import AmbientLight, DirectionalLight, PointLight
+from blinn_phong.planning import calibration
+from blinn_phong.planning.frame_plan import frame_plan
+from blinn_phong.planning.planner import plan
 
 from .scenes import horizontal_quad, perspective_camera, scene_of, sphere
 from .volume_scenes import boundary_band
@@ -141,7 +141,7 @@ def test_volumes_agree_with_embree_away_from_shadow_edges_on_fuzzer_scenes(seed)
     caps drawn, ``stencil="auto"`` counts these views with z-pass (the camera is outside every
     volume) and agrees to one step on every pixel more than one pixel away from any shadow edge."""
     pytest.importorskip("embreex")
-    from blinn_phong.shadow_volume import zpass_is_safe
+    from blinn_phong.shadows.volume import zpass_is_safe
     from testbeds.planner_fuzz import random_scene, silhouette_tie_mask, terminator_mask
 
     scene, size = random_scene(seed), 32

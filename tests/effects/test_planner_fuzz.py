@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.frame import embree_available
-from blinn_phong.planner import plan
+from blinn_phong.planning.frame_plan import embree_available
+from blinn_phong.planning.planner import plan
 from testbeds.planner_fuzz import TOLERANCES, check, random_scene, silhouette_tie_mask, terminator_mask
 
 pytestmark = pytest.mark.skipif(
@@ -68,7 +68,7 @@ def test_the_terminator_rule_marks_only_curved_meshes_facing_a_light_edge_on() -
     """Flat-faced meshes (boxes with face normals) have no terminator triangle; a sphere under
     a light has a ring of them."""
     import blinn_phong as bp
-    from blinn_phong.primitives import uv_sphere
+    from blinn_phong.model.primitives import uv_sphere
     from testbeds.planner_fuzz import faceted_box
 
     camera = bp.Camera.perspective(40.0, 1.0, 0.5, 30.0, view=bp.look_at((0, -5, 0.5), (0, 0, 0), (0, 0, 1)))
@@ -84,7 +84,7 @@ def test_the_terminator_rule_marks_only_curved_meshes_facing_a_light_edge_on() -
 
 def test_silhouette_ties_lie_on_the_outline_of_a_closed_mesh_only():
     import blinn_phong as bp
-    from blinn_phong.primitives import uv_sphere
+    from blinn_phong.model.primitives import uv_sphere
 
     camera = bp.Camera.perspective(40.0, 1.0, 0.5, 30.0, view=bp.look_at((0, -5, 0.5), (0, 0, 0), (0, 0, 1)))
     ball = bp.Scene([bp.Mesh(*uv_sphere(24, 12))], [bp.DirectionalLight((1.0, 0.0, 0.0))], camera)

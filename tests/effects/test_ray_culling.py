@@ -1,6 +1,6 @@
 """Skipped shadow rays are the provably unoccluded ones: tracing only the rest changes no sample.
 
-:mod:`blinn_phong.ray_culling` answers "lit" without Embree where a ray can reach the light by
+:mod:`blinn_phong.shadows.ray_culling` answers "lit" without Embree where a ray can reach the light by
 two geometric facts (its own planar or convex mesh lies behind it; it misses every other caster's
 bounding box). The reference is Embree tracing every ray: the visibilities must be equal sample for
 sample (both are exact 0/1 answers for the same float32 rays), on scenes where each fact is used
@@ -11,11 +11,15 @@ light inside a sphere, scenes far from the origin where the offsets grow, float3
 import numpy as np
 import pytest
 
-from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
-from blinn_phong.pipeline import _traced_hard, _world_triangles, _world_vertices
-from blinn_phong.prepared import prepare_scene
-from blinn_phong.scene import Camera, Mesh, PointLight, Scene, look_at
-from blinn_phong.shadows import light_visibility
+from blinn_phong.frame.fast import (
+    nearest_winners_compiled,
+    setup_triangles_compiled,
+    winner_surfaces_compiled,
+)
+from blinn_phong.frame.pipeline import _traced_hard, _world_triangles, _world_vertices
+from blinn_phong.frame.prepared import prepare_scene
+from blinn_phong.model.scene import Camera, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows.visibility import light_visibility
 
 from .volume_scenes import LIGHTS, casters, outside_camera, scene_with, sphere_mesh
 
@@ -37,9 +41,9 @@ def _surfaces(scene: Scene, width: int = 160, height: int = 120):
 def _check(scene: Scene, light) -> tuple[float, int]:
     """Assert culled == traced for ``light``; return the fraction of rays answered without Embree
     and the number answered "shadowed"."""
-    from blinn_phong import raytrace
-    from blinn_phong.pipeline import _ray_answers
-    from blinn_phong.ray_culling import LIT, SHADOWED, TRACE, caster_tables
+    from blinn_phong.frame.pipeline import _ray_answers
+    from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows.ray_culling import LIT, SHADOWED, TRACE, caster_tables
 
     points, normals, mesh_of, tris = _surfaces(scene)
     assert len(points) > 1000
@@ -106,7 +110,7 @@ def test_point_light_inside_a_sphere_and_float32_coordinates():
 def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
     # Planar shadows with every caster between the plane and the light cast the plane's shadow
     # rays against the frame's BVH; the frame answers most of them by culling. Same answers.
-    from blinn_phong.pipeline import _planar_hard
+    from blinn_phong.frame.pipeline import _planar_hard
 
     light = LIGHTS[light_name]
     scene = scene_with(casters("pair"), light, outside_camera())

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from blinn_phong.raytrace import (
+from blinn_phong.shadows.raytrace import (
     RayScene,
     area_light_visibility,
     directional_light_visibility,
@@ -119,7 +119,7 @@ def test_scene_rejects_bad_triangles():
 def test_the_frame_hashes_its_casters_once_and_an_edited_array_gets_a_new_bvh(monkeypatch):
     import hashlib
 
-    from blinn_phong import raytrace
+    from blinn_phong.shadows import raytrace
 
     tris = np.concatenate([GROUND, box_triangles((-0.5, -0.5, 0.5), (0.5, 0.5, 1.5))])
     calls = []

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from blinn_phong.raytrace import RayScene
-from blinn_phong.refraction import reflect, refract, trace_refraction, transmitted_highlight
+from blinn_phong.effects.refraction import reflect, refract, trace_refraction, transmitted_highlight
+from blinn_phong.shadows.raytrace import RayScene
 
 from .geometry import box_triangles
 

@@ -9,7 +9,7 @@ the renderer's absorption is the grey filter ``1 − α``), 1 for emission (it h
 for an opaque pane, and the product of the transmittances under stacked panes.
 
 The per-channel visibility that carries this into shading, (N, L, 3), is checked without Embree:
-:func:`blinn_phong.lighting.shade` with a coloured visibility equals the unshadowed terms times
+:func:`blinn_phong.frame.lighting.shade` with a coloured visibility equals the unshadowed terms times
 it per channel, on the numpy and the compiled engine.
 """
 
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.lighting import lights_in_eye_space, shade
-from blinn_phong.primitives import grid_plane
-from blinn_phong.shadows import caster_transmittance, shadow_transmittance
+from blinn_phong.frame.lighting import lights_in_eye_space, shade
+from blinn_phong.model.primitives import grid_plane
+from blinn_phong.shadows.visibility import caster_transmittance, shadow_transmittance
 
 SIZE = 64  # pixels; the view spans x, y ∈ [-2, 2], 1/16 unit per pixel
 

@@ -2,7 +2,7 @@
 
 ``light_visibility("shadow_map")`` with the compiled engine renders no cube face that no
 receiver uses, and the others only over a rectangle holding every texel the receivers' look-ups
-read (:func:`blinn_phong.shadow_kernels.receiver_visibility_compiled`; a single map, directional
+read (:func:`blinn_phong.shadows.kernels.receiver_visibility_compiled`; a single map, directional
 or spot, is rendered whole by the same kernels, and checked here too). A texel's depth is the
 minimum over the triangles covering it — the same whether or not its neighbours are rendered —
 and each look-up reads only texels inside its face's rectangle, so:
@@ -11,18 +11,18 @@ and each look-up reads only texels inside its face's rectangle, so:
   (:func:`light_shadow_maps` then :func:`shadow_map_visibility`, both compiled). This is
   deterministic by construction: the same double-precision operations per texel and per point,
   a minimum that does not depend on the drawing order, no threaded reduction;
-* they agree with the numpy reference (:mod:`blinn_phong.shadows`) as the other compiled
+* they agree with the numpy reference (:mod:`blinn_phong.shadows.visibility`) as the other compiled
   kernels do (1e-9; tests/effects/test_shadow_kernels.py explains the bound);
 * the rectangles hold every texel the reference's taps read: recomputed here with numpy from
-  the formulas of :func:`blinn_phong.shadows.shadow_visibility` (face of the major axis, normal
+  the formulas of :func:`blinn_phong.shadows.visibility.shadow_visibility` (face of the major axis, normal
   offset, projection, the taps of each kernel clamped to the map).
 """
 
 import numpy as np
 import pytest
 
-from blinn_phong.scene import DirectionalLight, PointLight, SpotLight
-from blinn_phong.shadows import (
+from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.shadows.visibility import (
     PCF_KERNELS,
     light_cameras,
     light_shadow_maps,
@@ -146,7 +146,7 @@ def _reference_taps(light, points, normals, kernel, normal_offset):
 @pytest.mark.parametrize("kernel", PCF_KERNELS)
 @pytest.mark.parametrize("normal_offset", [0.0, 0.05])
 def test_receiver_rectangles_hold_every_texel_the_reference_reads(kind, kernel, normal_offset):
-    from blinn_phong.shadow_kernels import KERNEL_CODES, _receiver_rects
+    from blinn_phong.shadows.kernels import KERNEL_CODES, _receiver_rects
 
     light = LIGHTS[kind]
     points, normals = _receivers("below")

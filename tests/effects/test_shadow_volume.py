@@ -1,7 +1,7 @@
 """Shadow volumes against Embree's ray-traced hard shadows and the closed-form shadow of a sphere.
 
 Embree: the same visible samples (pixel centres of our rasterizer) are classified by shadow
-rays (:mod:`blinn_phong.raytrace`) and by stencil counting; the two must agree on every sample
+rays (:mod:`blinn_phong.shadows.raytrace`) and by stencil counting; the two must agree on every sample
 not touching a lit/shadowed boundary of the ray-traced mask (a sample next to the boundary
 can lie within float rounding of a volume face).
 
@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from blinn_phong.fast import numba_available
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.scene import Camera, DirectionalLight, Mesh, PointLight, look_at
-from blinn_phong.shadow_volume import (
+from blinn_phong._numba import numba_available
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.model.scene import Camera, DirectionalLight, Mesh, PointLight, look_at
+from blinn_phong.shadows.volume import (
     analyse_topology,
     shadow_volume_triangles,
     shadow_volume_visibility,
@@ -95,7 +95,7 @@ def test_camera_inside_volume_zfail_matches_embree(caster, light_name):
 def test_engines_count_identically(method, parallel, monkeypatch):
     """Integer counts from the same float expressions: numba and numpy agree exactly (deterministic),
     on one thread and with the tile rows interleaved between threads (forced on this small image)."""
-    import blinn_phong.shadow_volume as sv
+    import blinn_phong.shadows.volume as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -121,7 +121,7 @@ def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, mon
     tiles from each tile's depth range and depth plane; the numpy engine tests every receiver.
     The counts agree exactly (integers from the same float expressions), and the quad's cap,
     in front of the ground below it, really counts there."""
-    import blinn_phong.shadow_volume as sv
+    import blinn_phong.shadows.volume as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -158,7 +158,7 @@ def test_a_reused_binning_counts_as_a_fresh_one(parallel, monkeypatch):
     light's tile order; even a stale order (the arrays changed in place) counts exactly as a
     fresh binning does, since every tile's bounds and depths are measured again (on one thread
     and with the tile rows split between threads)."""
-    import blinn_phong.shadow_volume as sv
+    import blinn_phong.shadows.volume as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -282,8 +282,7 @@ def test_bad_input_is_named():
 
 
 def test_render_accepts_shadow_volume_and_matches_ray_traced():
-    from blinn_phong import render
-    from blinn_phong.frame import ShadowOptions
+    from blinn_phong import ShadowOptions, render
 
     light = LIGHTS["spot"]
     scene = scene_with(casters("sphere"), light, outside_camera())
@@ -328,8 +327,8 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
     """Compiled welding and edge pairing (edges grouped by start vertex, or a hash table where
     degrees are high) and sorting (numpy) build the same volumes, bit for bit — also for
     non-manifold input: a triangle given twice, and an edge shared by three faces."""
-    import blinn_phong.fast
-    import blinn_phong.shadow_volume as sv
+    import blinn_phong.frame.fast
+    import blinn_phong.shadows.volume as sv
 
     scene = scene_with(casters("pair") + casters("torus") + casters("box"), LIGHTS["point"], outside_camera())
     p, t, _ = uv_sphere(12, 6)
@@ -342,7 +341,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
         monkeypatch.setattr(sv, "_GROUP_STEPS_PER_EDGE", 0)
     compiled = sv._analyse(tris)
     assert any("more than two faces" in r for r in compiled.reasons)  # the fin is non-manifold
-    monkeypatch.setattr(blinn_phong.fast, "numba_available", lambda: False)
+    monkeypatch.setattr(blinn_phong.frame.fast, "numba_available", lambda: False)
     reference = sv._analyse(tris)
     for name in ("valid", "closed", "component", "neighbour"):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name))
@@ -354,7 +353,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
 
 
 def test_without_embree_hard_shadows_fall_back_to_shadow_volumes(monkeypatch):
-    import blinn_phong.frame as frame
+    import blinn_phong.planning.frame_plan as frame
 
     light = LIGHTS["point"]
     scene = scene_with(casters("sphere"), light, outside_camera())

@@ -18,7 +18,7 @@ apart by more than 1e-5) would be excluded too; on these scenes there are none.
 import numpy as np
 import pytest
 
-from blinn_phong.shadow_volume import shadow_volume_visibility
+from blinn_phong.shadows.volume import shadow_volume_visibility
 
 from .volume_scenes import (
     HEIGHT,

@@ -5,9 +5,9 @@ import itertools
 import numpy as np
 import pytest
 
-from blinn_phong.raytrace import RayScene, directional_light_visibility
-from blinn_phong.scene import DirectionalLight, PointLight, SpotLight
-from blinn_phong.shadows import (
+from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility
+from blinn_phong.shadows.visibility import (
     PCF_KERNELS,
     light_shadow_maps,
     planar_shadow_mask,

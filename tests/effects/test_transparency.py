@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from blinn_phong.transparency import (
+from blinn_phong.effects.transparency import (
     TRANSPARENCY_MODELS,
     blend_transparent_surface,
     kay_greenberg_transparency,

@@ -1,4 +1,4 @@
-"""Shadow volumes counted over a frame's pixel tiles (:func:`blinn_phong.shadow_volume.pixel_binning`).
+"""Shadow volumes counted over a frame's pixel tiles (:func:`blinn_phong.shadows.volume.pixel_binning`).
 
 A frame's receivers are its pixels' surface points, which the camera projects onto the pixel
 centres, so a grid of pixel blocks bins them without projecting or sorting. Checked here:
@@ -19,13 +19,17 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong import shadow_volume as sv
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.shadows import volume as sv
 
 pytest.importorskip("numba")
 
-from blinn_phong import pipeline
-from blinn_phong.fast import nearest_winners_compiled, setup_triangles_compiled, winner_surfaces_compiled
+from blinn_phong.frame import pipeline
+from blinn_phong.frame.fast import (
+    nearest_winners_compiled,
+    setup_triangles_compiled,
+    winner_surfaces_compiled,
+)
 
 W, H = 150, 100
 

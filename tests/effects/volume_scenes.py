@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.primitives import uv_sphere
-from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-from blinn_phong.raytrace import RayScene, directional_light_visibility, point_light_visibility
-from blinn_phong.render import prepare_scene
-from blinn_phong.scene import (
+from blinn_phong.frame.render import prepare_scene
+from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.primitives import uv_sphere
+from blinn_phong.model.scene import (
     Camera,
     DirectionalLight,
     LightModel,
@@ -19,6 +18,7 @@ from blinn_phong.scene import (
     SpotLight,
     look_at,
 )
+from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, point_light_visibility
 
 from .scenes import flat_cube, horizontal_quad, world_triangles
 

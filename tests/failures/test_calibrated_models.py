@@ -1,6 +1,6 @@
 """The calibrated error models hold on scenes that were not used to fit them.
 
-``blinn_phong/calibration.json`` (read by :mod:`blinn_phong.calibration`) is fitted by
+``blinn_phong/planning/calibration.json`` (read by :mod:`blinn_phong.planning.calibration`) is fitted by
 :mod:`benchmarks.error_models` to the measurements of ``python -m benchmarks`` (layered
 quads with seed 7, layer counts 2–16 and opacities 0.2/0.5/0.8; one shadow scene; a sphere
 with shininess 40 and segments 8–128). Here other scenes — other seeds, layer counts,
@@ -19,8 +19,8 @@ import pytest
 
 import blinn_phong as bp
 from benchmarks import error_models as em
-from blinn_phong import calibration as cal
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.planning import calibration as cal
 from testbeds.error_metrics import error_metrics, has_nonfinite
 from testbeds.tradeoff_scenes import (
     layered_scene,
@@ -71,8 +71,8 @@ def _held_out_shadow_scene() -> tuple[bp.Scene, float]:
 
 
 def test_shadow_map_model_bounds_a_held_out_scene() -> None:
-    from blinn_phong.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+    from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
+    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     scene, r_min = _held_out_shadow_scene()
     light = scene.lights[0]
@@ -153,8 +153,8 @@ def test_the_planner_keeps_transparency_within_the_tolerance(tolerance: float) -
 
 @pytest.mark.parametrize("tolerance", [1.0, 16.0, 64.0])
 def test_the_planner_keeps_shadows_within_the_tolerance(tolerance: float) -> None:
-    from blinn_phong.raytrace import world_triangles
-    from blinn_phong.shadows import light_visibility
+    from blinn_phong.shadows.raytrace import world_triangles
+    from blinn_phong.shadows.visibility import light_visibility
 
     scene, _ = _held_out_shadow_scene()
     light = scene.lights[0]

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.normals import face_normals, vertex_normals
-from blinn_phong.primitives import grid_plane
-from blinn_phong.refraction import refract
+from blinn_phong.effects.refraction import refract
+from blinn_phong.geometry.normals import face_normals, vertex_normals
+from blinn_phong.model.primitives import grid_plane
 from testbeds.error_metrics import error_metrics, has_nonfinite
 
 

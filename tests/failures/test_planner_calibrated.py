@@ -1,6 +1,6 @@
 """The planner's tolerance, in 8-bit steps, holds on scenes not used for calibration.
 
-``blinn_phong/calibration.json`` was fitted to layered quads tilted ±30° under an
+``blinn_phong/planning/calibration.json`` was fitted to layered quads tilted ±30° under an
 orthographic camera (seed 7, 2–16 layers, opacities 0.2/0.5/0.8), one shadow scene (a
 sphere and a box over a ground plane, light (0.4, 0.25, −1)) and a UV sphere of shininess
 40. Here the scenes differ in geometry, layer count, opacity, camera and light angles: a
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.frame import embree_available
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.planning.frame_plan import embree_available
 
 STEP = 1.0 / 255.0
 

@@ -12,8 +12,8 @@ import pytest
 
 import blinn_phong as bp
 from addon.options import RenderOptions
-from blinn_phong.primitives import grid_plane, uv_sphere
-from blinn_phong.shadow_volume import shadow_volume_visibility
+from blinn_phong.model.primitives import grid_plane, uv_sphere
+from blinn_phong.shadows.volume import shadow_volume_visibility
 
 
 def _scene() -> bp.Scene:
@@ -136,7 +136,7 @@ def test_shadow_volume_visibility_names_the_bad_array(points, normals, name: str
 
 def test_cost_model_helpers_accept_numpy_scalars() -> None:
     """The calibrated choosers take the numpy numbers a caller computes them from."""
-    from blinn_phong import calibration as cal
+    from blinn_phong.planning import calibration as cal
 
     models = cal.shipped_models()
     expected = cal.choose_depth_peeling(models, 4.0, 0.5, 1.0, 4)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.primitives import grid_plane, uv_sphere
+from blinn_phong.model.primitives import grid_plane, uv_sphere
 from testbeds.error_metrics import error_metrics, has_nonfinite
 
 TOP = bp.look_at((0.0, 0.0, 5.0), (0.0, 0.0, 0.0))

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.shadows import light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 from testbeds.error_metrics import error_metrics, has_nonfinite
 
 LIGHT = bp.DirectionalLight((0.5, 0.0, -1.0))
@@ -157,7 +157,7 @@ def test_ray_traced_shadows_at_large_scale_need_an_offset_in_float32_spacings(sc
     (``raytrace.OFFSET_ULPS``) keeps every lit point lit. Exact answer: the closed form above,
     scaled; points within 1e-3·scale of a shadow edge are left out (float32 edge rounding).
     """
-    from blinn_phong import raytrace
+    from blinn_phong.shadows import raytrace
 
     points, normals = _ground_points()
     exact = _exact_shadowed(points)

@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.scene import Camera, DirectionalLight, Mesh, PointLight, look_at
-from blinn_phong.shadow_volume import (
+from blinn_phong.model.scene import Camera, DirectionalLight, Mesh, PointLight, look_at
+from blinn_phong.shadows.volume import (
     analyse_topology,
     shadow_volume_triangles,
     shadow_volume_visibility,
@@ -200,8 +200,8 @@ def test_a_silhouette_with_a_gap_streaks(method):
 def _every_layer(scene, width=WIDTH, height=HEIGHT):
     """Every fragment at every pixel centre, hidden ones included (what an A-buffer shades):
     (world points, face normals, flat pixel index, nearest-at-its-pixel flag)."""
-    from blinn_phong.raster import interpolate, rasterize, resolve_nearest
-    from blinn_phong.render import prepare_scene
+    from blinn_phong.frame.render import prepare_scene
+    from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 
     prepared = prepare_scene(scene)
     frags = rasterize(prepared.clip, prepared.triangles, width, height)
@@ -225,8 +225,8 @@ def test_zpass_without_light_caps_is_wrong_behind_a_caster(light_name):
     crossings is a lit face and the other is not. Those samples are all hidden from the eye
     (an Embree ray from the eye to them is blocked). The camera is outside every volume and
     ``choose_stencil`` picks z-pass: with the light caps drawn it agrees with Embree."""
-    from blinn_phong.raytrace import RayScene
-    from blinn_phong.shadow_volume import choose_stencil
+    from blinn_phong.shadows.raytrace import RayScene
+    from blinn_phong.shadows.volume import choose_stencil
 
     light = LIGHTS[light_name]
     scene = scene_with(casters("sphere"), light, outside_camera())

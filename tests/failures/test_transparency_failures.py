@@ -11,8 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 import blinn_phong as bp
-from blinn_phong.oit import resolve_a_buffer, resolve_transparency, resolve_weighted_blended, wboit_weights
-from blinn_phong.raster import rasterize
+from blinn_phong.effects.oit import (
+    resolve_a_buffer,
+    resolve_transparency,
+    resolve_weighted_blended,
+    wboit_weights,
+)
+from blinn_phong.geometry.raster import rasterize
 from testbeds.error_metrics import error_metrics, has_nonfinite
 
 SIZE = 48
