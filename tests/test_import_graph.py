@@ -32,6 +32,29 @@ def test_the_project_has_no_import_cycle() -> None:
     assert not cycles, "import cycle(s) among the project's modules:\n" + "\n".join(cycles)
 
 
+def test_the_renderers_rooms_import_only_downward() -> None:
+    tool = _tool()
+    climbing = tool.upward_arrows(tool.graph())
+    listed = "\n".join(f"{a} -> {b}" for a, b in climbing)
+    assert not climbing, "imports from a room to a room above it (tools/architecture.py ROOMS):\n" + listed
+
+
+def test_a_climbing_import_is_found(tmp_path: Path) -> None:
+    tool = _tool()
+    package = tmp_path / "blinn_phong"
+    for room in ("model", "frame"):
+        (package / room).mkdir(parents=True)
+        (package / room / "__init__.py").write_text("")
+    (package / "__init__.py").write_text("from blinn_phong.frame.run import go\n")
+    (package / "_helper.py").write_text("")
+    run = "from blinn_phong.model import data\nfrom blinn_phong import _helper\n"
+    (package / "frame" / "run.py").write_text(run)
+    (package / "model" / "data.py").write_text("def f():\n    from ..frame import run\n")
+    for other in tool.PACKAGES[1:]:
+        (tmp_path / other).mkdir()
+    assert tool.upward_arrows(tool.graph(tmp_path)) == [("blinn_phong.model.data", "blinn_phong.frame.run")]
+
+
 def test_relative_and_function_level_imports_are_arrows(tmp_path: Path) -> None:
     tool = _tool()
     # ``compositing/gl_blend.py`` imports its package's modules relatively only
