@@ -455,7 +455,7 @@ def test_no_nan_or_inf_under_any_combination() -> None:
     )
     configurations = [
         {"transparency": method, "shadows": shadow}
-        for method in bp.frame.TRANSPARENCY_CHOICES
+        for method in bp.planning.frame_plan.TRANSPARENCY_CHOICES
         for shadow in ("none", bp.ShadowOptions("shadow_map", resolution=128), "ray_traced")
     ]
     configurations += [

@@ -327,7 +327,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
     """Compiled welding and edge pairing (edges grouped by start vertex, or a hash table where
     degrees are high) and sorting (numpy) build the same volumes, bit for bit — also for
     non-manifold input: a triangle given twice, and an edge shared by three faces."""
-    import blinn_phong.frame.fast
+    import blinn_phong._numba
     import blinn_phong.shadows.volume as sv
 
     scene = scene_with(casters("pair") + casters("torus") + casters("box"), LIGHTS["point"], outside_camera())
@@ -341,7 +341,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
         monkeypatch.setattr(sv, "_GROUP_STEPS_PER_EDGE", 0)
     compiled = sv._analyse(tris)
     assert any("more than two faces" in r for r in compiled.reasons)  # the fin is non-manifold
-    monkeypatch.setattr(blinn_phong.frame.fast, "numba_available", lambda: False)
+    monkeypatch.setattr(blinn_phong._numba, "numba_available", lambda: False)
     reference = sv._analyse(tris)
     for name in ("valid", "closed", "component", "neighbour"):
         np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name))
