@@ -364,12 +364,12 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
     scene and the frame benchmark's, whose casters are convex or planar.
     """
     from benchmarks.bench_frame import issue_scene
-    from blinn_phong.frame.fast import (
+    from blinn_phong.frame.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
+    from blinn_phong.geometry.raster_kernels import (
         nearest_winners_compiled,
         setup_triangles_compiled,
         winner_surfaces_compiled,
     )
-    from blinn_phong.frame.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
     from blinn_phong.shadows import raytrace
     from blinn_phong.shadows.ray_culling import GENERAL, TRACE, caster_tables
 

@@ -396,8 +396,8 @@ def _locator_class() -> type:
                 root = cache_directory()
                 subpath, stamp = place
                 # The module's import name too: a vendored copy (the Blender extension's
-                # ``bl_ext.….blinn_phong.frame.fast``) may have the same sources as
-                # ``blinn_phong.frame.fast``,
+                # ``bl_ext.….blinn_phong.frame.fused``) may have the same sources as
+                # ``blinn_phong.frame.fused``,
                 # but its cached kernels refer to its own modules by name.
                 module = str(getattr(py_func, "__module__", "") or "")
                 subpath += "-" + hashlib.sha256(module.encode()).hexdigest()[:8]
@@ -492,10 +492,10 @@ def _install_locator() -> None:
 
 
 def kernel_module(dispatcher: object) -> str:
-    """The project module (``blinn_phong.frame.fast``) or other module a numba dispatcher's function is in.
+    """The project module (``blinn_phong.frame.fused``) or other module a numba dispatcher's function is in.
 
     Named by its file inside the registered package, so vendored copies (the Blender
-    extension's ``bl_ext.….blinn_phong.frame.fast``) read the same; generated compositing kernels
+    extension's ``bl_ext.….blinn_phong.frame.fused``) read the same; generated compositing kernels
     are ``compositing (generated)``.
     """
     func = getattr(dispatcher, "py_func", None)

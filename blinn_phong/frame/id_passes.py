@@ -134,7 +134,7 @@ def passes_from_winners(
     Args:
         request: the :class:`Cryptomatte` request (for the prepared scene's meshes).
         winner: (H·W,) int64 sub-triangle nearest at each pixel, −1 where none
-            (:func:`blinn_phong.frame.fast.nearest_winners_compiled`).
+            (:func:`blinn_phong.geometry.raster_kernels.nearest_winners_compiled`).
         source: (S,) int64 prepared triangle of each sub-triangle (the set-up's ``source``).
         triangle_mesh: (T,) int64 mesh of each prepared triangle.
         height: image height.

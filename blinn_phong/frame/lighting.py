@@ -31,7 +31,7 @@ not clamped here; the GL-compatibility clamp is the separate, explicit
 functions, :func:`_view_vector`, :func:`_light_direction` and :func:`_reflection`, written
 once on numbers that may be arrays (numpy) or scalars (compiled by numba); the engines
 agree to 1e-12. The compiled per-point body is :func:`point_terms`, which the fused frame
-kernel of :mod:`blinn_phong.frame.fast` (interpolation, lighting and the frame buffers in one
+kernel of :mod:`blinn_phong.frame.fused` (interpolation, lighting and the frame buffers in one
 pass) calls as well.
 """
 
@@ -507,7 +507,7 @@ def point_terms() -> object:  # a numba dispatcher
     It evaluates each light with the same Python functions as the numpy engine
     (:func:`_view_vector`, :func:`_light_direction`, :func:`_reflection`), compiled for scalars
     and inlined; the lighting kernel of :func:`shade` and the fused frame kernel of
-    :mod:`blinn_phong.frame.fast` both call it, so the equation is written once. (Arrays are passed
+    :mod:`blinn_phong.frame.fused` both call it, so the equation is written once. (Arrays are passed
     one by one and light rows as tuples of scalars: inside a per-point loop, array views and
     arrays unpacked from tuples cost a reference count each.)
     """

@@ -41,13 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from blinn_phong._numba import use_compiled
-from blinn_phong.frame.fast import (
-    nearest_winners_compiled,
-    setup_triangles_compiled,
-    shade_plain_fragments_compiled,
-    shade_plain_winners_compiled,
-    winner_surfaces_compiled,
-)
+from blinn_phong.frame.fused import shade_plain_fragments_compiled, shade_plain_winners_compiled
 from blinn_phong.frame.id_passes import Cryptomatte, passes_from_fragments, passes_from_winners
 from blinn_phong.frame.light_groups import LightGroups
 from blinn_phong.frame.prepared import PreparedScene, prepare_scene
@@ -65,6 +59,11 @@ from blinn_phong.frame.texturing import texture_fragments
 from blinn_phong.frame.visibility import FrameFragments, frame_fragments
 from blinn_phong.geometry.normals import face_normals
 from blinn_phong.geometry.raster import Fragments, interpolate
+from blinn_phong.geometry.raster_kernels import (
+    nearest_winners_compiled,
+    setup_triangles_compiled,
+    winner_surfaces_compiled,
+)
 from blinn_phong.model.linking import holdout_meshes, linked_visibility, lit_links
 from blinn_phong.model.scene import AmbientLight, Camera, DirectionalLight, Scene, SpotLight
 from blinn_phong.planning.planner import Plan
@@ -590,7 +589,7 @@ def _opaque_from_winners(
     fragment arrays at all).
 
     The same images as the stages of :func:`render_frame` (the same operations in the same
-    order: :func:`blinn_phong.frame.fast.shade_plain_winners_compiled`). ``holdout``: (M,) bool per mesh
+    order: :func:`blinn_phong.frame.fused.shade_plain_winners_compiled`). ``holdout``: (M,) bool per mesh
     (:func:`blinn_phong.model.linking.holdout_meshes`) or None; pixels a holdout wins are then set to
     transparent black (colour, alpha and light passes), as the general path's alpha-weighted
     passes give. ``light_groups``: their passes made in the same pass (:func:`_group_buffers`).
@@ -675,7 +674,8 @@ def _winner_visibility(
     winner: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The general path's ``(vis (N, L, K), shadow pass (N,), rank)`` of the z-buffer's winners:
-    their world points and face normals (:func:`blinn_phong.frame.fast.winner_surfaces_compiled`),
+    their world points and face normals
+    (:func:`blinn_phong.geometry.raster_kernels.winner_surfaces_compiled`),
     then each light's visibility there (:func:`_visibility_at`)."""
     points, normals, rank, mesh_of = winner_surfaces_compiled(
         setup,

@@ -12,7 +12,7 @@
   nearest surface of each sample.
 
 Each has a numpy reference (readable, built on :mod:`blinn_phong.effects.oit` and
-:mod:`compositing`) and a compiled twin in :mod:`blinn_phong.frame.fast`; they agree to 1e-6
+:mod:`compositing`) and a compiled twin in :mod:`blinn_phong.frame.resolve_kernels`; they agree to 1e-6
 (the per-sample colours are rounded to float32 before the box filter in both).
 """
 
@@ -32,18 +32,18 @@ from blinn_phong.effects.transparency import (
     transparent_fragment,
     washed_out_opacity,
 )
-from blinn_phong.frame.fast import (
+from blinn_phong.frame.prepared import PreparedScene
+from blinn_phong.frame.resolve_kernels import (
     RESOLVE_CODES,
     fragment_colours_compiled,
     resolve_frame_compiled,
     resolve_plain_compiled,
-    scatter_samples_compiled,
 )
-from blinn_phong.frame.prepared import PreparedScene
 from blinn_phong.frame.shading import FragmentShading
 from blinn_phong.frame.visibility import FrameFragments
 from blinn_phong.geometry.normals import normalize
 from blinn_phong.geometry.raster import interpolate, resolve_nearest
+from blinn_phong.geometry.raster_kernels import scatter_samples_compiled
 from blinn_phong.model.fog import apply_fog, eye_distance
 from blinn_phong.model.scene import Material, Scene
 
@@ -227,7 +227,8 @@ class FogParameters:
 
     def compiled_args(self) -> tuple[str, bool, tuple[float, float, float], np.ndarray]:
         """``(mode, radial, (density, start, end), colour)``: the ``fog`` argument of the compiled
-        kernels (:func:`blinn_phong.frame.fast.fragment_colours_compiled`, the fused plain frame)."""
+        kernels (:func:`blinn_phong.frame.resolve_kernels.fragment_colours_compiled`, the fused plain
+        frame)."""
         radial = self.distance == "radial"
         return (self.mode, radial, (self.density, self.start, self.end), np.array(self.color))
 

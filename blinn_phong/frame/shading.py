@@ -23,7 +23,7 @@ import numpy as np
 
 from blinn_phong._checks import choice_error
 from blinn_phong._numba import use_compiled
-from blinn_phong.frame.fast import PlainTables, surface_at_fragments_compiled
+from blinn_phong.frame.fused import PlainTables
 from blinn_phong.frame.lighting import (
     ShadingTerms,
     gl_clamp,
@@ -35,6 +35,7 @@ from blinn_phong.frame.lighting import (
 from blinn_phong.frame.prepared import PreparedScene
 from blinn_phong.geometry.normals import normalize
 from blinn_phong.geometry.raster import Fragments, interpolate
+from blinn_phong.geometry.raster_kernels import surface_at_fragments_compiled
 from blinn_phong.model.scene import SHADINGS, Material, Mesh, Scene
 
 __all__ = [
@@ -206,7 +207,7 @@ def fused_shading_applies(
     and every material's fragment colour the partial-occlusion ``(α·c, α)`` (no Kay–Greenberg
     opacity, no specular wash-out, no emission/absorption model). Transparency resolves are
     checked by the caller (none may be needed). The fused pass
-    (:func:`blinn_phong.frame.fast.shade_plain_fragments_compiled`) gives the images of
+    (:func:`blinn_phong.frame.fused.shade_plain_fragments_compiled`) gives the images of
     :func:`shade_fragments`, :func:`blinn_phong.frame.texturing.texture_fragments` and
     :func:`blinn_phong.frame.resolve.resolve_frame` for these frames.
     """
@@ -269,7 +270,7 @@ def _frequency_tables(prepared: PreparedScene, shading: str) -> tuple[np.ndarray
 
 
 def plain_tables(prepared: PreparedScene, gl_compat: bool, shading: str = "phong") -> PlainTables:
-    """The arrays the fused frame kernels of :mod:`blinn_phong.frame.fast` read (see ``PlainTables`` there):
+    """The arrays the fused frame kernels of :mod:`blinn_phong.frame.fused` read (see ``PlainTables`` there):
     geometry in eye and world space, per-side material tables (index ``2·mesh + back``), the
     eye-space lights, the light model's flags, and each mesh's shading frequency with its
     per-face or per-vertex terms (:func:`_frequency_tables`; ``shading`` as for

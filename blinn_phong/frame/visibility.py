@@ -16,7 +16,7 @@ exactly these lists).
 
 Two engines implement the stage: ``"numpy"`` — the reference, which rasterizes every
 fragment with :func:`blinn_phong.geometry.raster.rasterize` and filters; ``"numba"`` — the compiled
-loops of :mod:`blinn_phong.frame.fast`, which never build the array of all fragments (memory is
+loops of :mod:`blinn_phong.geometry.raster_kernels`, which never build the array of all fragments (memory is
 the per-sample z-buffer plus the fragments that survive the depth test). Both return the same
 fragments in the same order (tests/blinn_phong/test_engines_agree.py).
 """
@@ -30,12 +30,12 @@ from functools import cached_property
 import numpy as np
 
 from blinn_phong._numba import ENGINES, use_compiled
-from blinn_phong.frame.fast import (
+from blinn_phong.geometry.raster import Fragments, rasterize, resolve_nearest
+from blinn_phong.geometry.raster_kernels import (
     frame_fragments_compiled,
     setup_triangles_compiled,
     visible_fragments_compiled,
 )
-from blinn_phong.geometry.raster import Fragments, rasterize, resolve_nearest
 
 __all__ = [
     "ENGINES",
@@ -61,7 +61,7 @@ def visible_fragments(
 
     ``engine="numpy"`` is :func:`~blinn_phong.geometry.raster.rasterize` +
     :func:`~blinn_phong.geometry.raster.resolve_nearest` (the reference); ``engine="numba"`` runs the
-    compiled loop of :mod:`blinn_phong.frame.fast`, which never materialises hidden fragments;
+    compiled loop of :mod:`blinn_phong.geometry.raster_kernels`, which never materialises hidden fragments;
     ``"auto"`` picks numba when it imports. Arguments as for
     :func:`~blinn_phong.geometry.raster.rasterize` (``progress`` is reported by the numpy engine).
     """
@@ -240,7 +240,7 @@ def rasterized_count(
     What an array of all fragments (:func:`blinn_phong.geometry.raster.rasterize`) would hold, against
     which the fragments :func:`frame_fragments` keeps are measured. ``engine="numpy"`` is
     ``len(rasterize(...))``; the compiled engine counts them in the transparent-list counting
-    pass of :mod:`blinn_phong.frame.fast` against an empty depth buffer (memory: two integers per
+    pass of :mod:`blinn_phong.geometry.raster_kernels` against an empty depth buffer (memory: two integers per
     sample). Samples whose depth is not below 1.0 (the far plane, the depth buffer's clear value)
     are not counted by the compiled engine (``GL_LESS`` against the clear value discards them).
     Arguments as for :func:`frame_fragments`.
@@ -249,7 +249,7 @@ def rasterized_count(
         return len(
             rasterize(clip_xyzw, triangles, width, height, samples=samples, cull_backfaces=cull_backfaces)
         )
-    from blinn_phong.frame.fast import _bands, _kernel
+    from blinn_phong.geometry.raster_kernels import _bands, _kernel
 
     setup = setup_triangles_compiled(clip_xyzw, triangles, width, height, samples, cull_backfaces)
     k = setup.k

@@ -1,7 +1,7 @@
 """A frame's shadow maps, stacked for the look-up inside the fused shading kernel (compiled).
 
 When every shadowed light of an opaque one-sample frame uses a shadow map, the fused kernel
-(:func:`blinn_phong.frame.fast.shade_plain_winners_compiled`) looks each pixel's world point up in
+(:func:`blinn_phong.frame.fused.shade_plain_winners_compiled`) looks each pixel's world point up in
 the maps as it shades it (:func:`blinn_phong.shadows.kernels.visibility_at`), so the frame
 needs no world-point array and no visibility array. The maps must exist first, without the
 points:
@@ -15,7 +15,7 @@ points:
 A texel's depth is a minimum over the casters that cover it, so it does not depend on which
 other texels are rendered: every texel a look-up reads holds the value of the complete map,
 and the visibilities are those of :func:`blinn_phong.shadows.visibility.light_visibility` at the
-points :func:`blinn_phong.frame.fast.winner_surfaces_compiled` computes, bit for bit
+points :func:`blinn_phong.geometry.raster_kernels.winner_surfaces_compiled` computes, bit for bit
 (``tests/effects/test_frame_maps.py``).
 """
 

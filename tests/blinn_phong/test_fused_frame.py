@@ -30,7 +30,8 @@ from blinn_phong.model.primitives import grid_plane, uv_sphere
 
 pytest.importorskip("numba")
 
-from blinn_phong.frame.fast import setup_triangles_compiled, shade_plain_fragments_compiled
+from blinn_phong.frame.fused import shade_plain_fragments_compiled
+from blinn_phong.geometry.raster_kernels import setup_triangles_compiled
 
 
 def scene(local_viewer: bool = True, specular: str = "blinn") -> bp.Scene:

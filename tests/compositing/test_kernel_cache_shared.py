@@ -145,8 +145,8 @@ def test_edited_sources_get_their_own_entry_and_leave_the_others_alone(tmp_path:
 def test_a_change_in_an_imported_module_changes_the_stamp(tmp_path: Path) -> None:
     # numba keys a kernel by its own file only; a kernel inlining a function of another project
     # module must be compiled again when that module changes. The stamp follows the imports.
-    stamp = "from blinn_phong.frame import fast; from compositing import _kernel_cache as kc; "
-    stamp += "print(kc.source_stamp(fast.__file__))"
+    stamp = "from blinn_phong.frame import fused; from compositing import _kernel_cache as kc; "
+    stamp += "print(kc.source_stamp(fused.__file__))"
 
     def fast_stamp(checkout: Path) -> str:
         done = subprocess.run(
@@ -165,7 +165,7 @@ def test_a_change_in_an_imported_module_changes_the_stamp(tmp_path: Path) -> Non
     assert original == fast_stamp(ROOT)  # same contents at another path
     planner = copy / "blinn_phong" / "planning" / "planner.py"
     lighting = copy / "blinn_phong" / "frame" / "lighting.py"
-    planner.write_text(planner.read_text() + "\n# planner.py is not imported by fast.py\n")
+    planner.write_text(planner.read_text() + "\n# planner.py is not imported by fused.py\n")
     assert fast_stamp(copy) == original
     lighting.write_text(lighting.read_text() + "\n# lighting.py is (its kernels are inlined)\n")
     assert fast_stamp(copy) != original

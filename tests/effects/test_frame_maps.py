@@ -187,7 +187,7 @@ def test_a_light_at_the_border_reads_several_faces() -> None:
     # the case above whose cube faces meet in view: the visible triangles reach four faces
     scene = _scene(True)
     prepared = bp.prepare_scene(scene)
-    from blinn_phong.frame.fast import nearest_winners_compiled, setup_triangles_compiled
+    from blinn_phong.geometry.raster_kernels import nearest_winners_compiled, setup_triangles_compiled
 
     setup = setup_triangles_compiled(prepared.clip, prepared.triangles, 160, 120, 1, False)
     winner = nearest_winners_compiled(setup)

@@ -70,7 +70,7 @@ def test_winner_surfaces_are_the_fragment_surfaces(cull):
     # of the numpy reference (same sums in the same order; the normal's length by one einsum, so
     # a rounding or two: 1e-15 on unit vectors, 1e-14 on coordinates of size ~5).
     pytest.importorskip("numba")
-    from blinn_phong.frame.fast import (
+    from blinn_phong.geometry.raster_kernels import (
         nearest_winners_compiled,
         setup_triangles_compiled,
         winner_surfaces_compiled,

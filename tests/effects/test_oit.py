@@ -330,7 +330,7 @@ def _random_sample_lists(seed: int, n_keys: int = 300, max_layers: int = 7) -> d
 
 
 def _compiled(lists: dict, code: int, max_layers: int, sort_key: np.ndarray) -> np.ndarray:
-    from blinn_phong.frame.fast import resolve_frame_compiled
+    from blinn_phong.frame.resolve_kernels import resolve_frame_compiled
 
     n = len(lists["rgba"])
     zeros = np.zeros((n, 3))
@@ -349,7 +349,7 @@ def test_compiled_resolves_match_the_reference(method: str, seed: int) -> None:
     # the closed-form over stack): same sort (ties in list order), same over, float32 output, so
     # the only differences are float64 rounding (far below 1e-6).
     pytest.importorskip("numba")
-    from blinn_phong.frame.fast import RESOLVE_CODES
+    from blinn_phong.frame.resolve_kernels import RESOLVE_CODES
 
     lists = _random_sample_lists(seed)
     tr = slice(lists["n_o"], None)

@@ -11,13 +11,13 @@ light inside a sphere, scenes far from the origin where the offsets grow, float3
 import numpy as np
 import pytest
 
-from blinn_phong.frame.fast import (
+from blinn_phong.frame.pipeline import _traced_hard, _world_triangles, _world_vertices
+from blinn_phong.frame.prepared import prepare_scene
+from blinn_phong.geometry.raster_kernels import (
     nearest_winners_compiled,
     setup_triangles_compiled,
     winner_surfaces_compiled,
 )
-from blinn_phong.frame.pipeline import _traced_hard, _world_triangles, _world_vertices
-from blinn_phong.frame.prepared import prepare_scene
 from blinn_phong.model.scene import Camera, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows.visibility import light_visibility
 

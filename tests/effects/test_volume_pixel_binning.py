@@ -25,7 +25,7 @@ from blinn_phong.shadows import volume as sv
 pytest.importorskip("numba")
 
 from blinn_phong.frame import pipeline
-from blinn_phong.frame.fast import (
+from blinn_phong.geometry.raster_kernels import (
     nearest_winners_compiled,
     setup_triangles_compiled,
     winner_surfaces_compiled,
