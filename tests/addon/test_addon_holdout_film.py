@@ -185,3 +185,59 @@ def test_partial_mix_holdout_is_reported(renders) -> None:
     assert not any("without the holdout" in n for n in notes["notes_full"]), notes["notes_full"]
     partial = [n for n in notes["notes_partial"] if n.startswith("MixKeep:") and "holdout" in n]
     assert len(partial) == 1 and "0.5" in partial[0] and "holdout" in partial[0], notes["notes_partial"]
+
+
+WORLD_SCRIPT = """
+import numpy as np
+import blinn_phong as bp
+from addon import engine
+from tests.blinn_phong.test_holdouts import HOLD, H, W, _emitter
+from tests.meshes import rectangle
+
+camera = bp.Camera.orthographic(0, W, 0, H, 0.1, 10.0)
+hold = rectangle(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0)), holdout=True)
+pane = rectangle(4.0, W + 1, -1, H + 1, -1.0, _emitter((0.9, 0.3, 0.1), 0.5))
+world = np.array([0.05, 0.1, 0.2, 1.0], np.float32)
+out = {}
+# no Cryptomatte asked for; the object layer (a free layer measures); every layer (the object layer's
+# IDs of the holdout measure)
+for levels in (None, 6, "all"):
+    scene = bp.Scene([hold, pane], [], camera, ambient=(0, 0, 0))
+    asked = None if levels is None else bp.Cryptomatte({"object": ["Hold", "Pane"]}, 6)
+    if levels == "all":
+        asked = bp.Cryptomatte({k: ["Hold", "Pane"] for k in ("object", "material", "asset")}, 6)
+    request = engine.holdout_request(scene.meshes, asked)
+    result = bp.render(scene, W, H, transparency="a_buffer", shadows="none", cryptomatte=request.request)
+    held = engine.holdout_coverage(result.passes, request)
+    out[str(levels)] = {
+        "rgba": engine.world_behind(result.rgba, world, held).tolist(),
+        "passes": sorted(result.passes),
+    }
+alone = bp.render(
+    bp.Scene([pane], [], camera, ambient=(0, 0, 0)), W, H, transparency="a_buffer", shadows="none"
+)
+out["pane"] = alone.rgba.tolist()
+emit(out)
+"""
+
+
+def test_world_goes_behind_a_transparent_pane_but_not_behind_the_holdout(tmp_path: Path) -> None:
+    """A half-transparent pane over part of a holdout: with the world composited behind (Film →
+    Transparent off), each pixel is ``pane + (1 − α_pane)·(0 where held out, else the world)``
+    (``over``; Cycles: a path through the pane that meets a holdout adds its throughput to the
+    holdout, not the world's colour), with the pane's colour from a render of the pane alone."""
+    from tests.blinn_phong.test_holdouts import HOLD, _inside_fraction
+
+    out = run_bpy(WORLD_SCRIPT, tmp_path, timeout=300)
+    pane = np.array(out["pane"])
+    held = _inside_fraction(HOLD, 1)[..., None]
+    world = np.array([0.05, 0.1, 0.2, 1.0])
+    expected = pane + (1.0 - pane[..., 3:]) * (1.0 - held) * world
+    assert 0 < pane[0, -1, 3] < 1 and held.any() and (held[..., 0] * pane[..., 3] > 0).any()
+    for levels in ("None", "6", "all"):
+        np.testing.assert_allclose(np.array(out[levels]["rgba"]), expected, rtol=0, atol=1e-6)
+    assert out["None"]["passes"] == sorted(p for p in out["None"]["passes"] if not p.startswith("Crypto"))
+    assert [p for p in out["6"]["passes"] if p.startswith("Crypto")] == [
+        "CryptoObject00", "CryptoObject01", "CryptoObject02"
+    ]  # fmt: skip
+    assert len([p for p in out["all"]["passes"] if p.startswith("Crypto")]) == 9  # all kept
