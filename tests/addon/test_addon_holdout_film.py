@@ -13,8 +13,8 @@ material is a Holdout node half over the floor and half over the world, a sphere
 Holdout, and a cube with the same mix at factor 0 (the emitter alone in Cycles). Cycles writes
 alpha 0 and colour 0 wherever a holdout is seen, film transparent or not; the engine's Combined
 must equal Cycles' RGBA on every pixel away from edges (3×3 neighbourhood uniform in both). A
-second render of ours with the mix at factor 0.5 (a partial holdout in Cycles) must warn with the
-material's name.
+second render with the mix at factor 0.5 (a partial holdout in Cycles: alpha and colour halved)
+must warn with the material's name (ours renders the emitter alone there).
 """
 
 from __future__ import annotations
@@ -121,6 +121,9 @@ bpy.data.materials["MixKeep"].node_tree.nodes["Mix Shader"].inputs[0].default_va
 scene.render.filepath = f"{out}/partial_ours.exr"
 bpy.ops.render.render(write_still=True)
 notes_partial = list(engine.LAST_RENDER.get("notes", []))
+scene.render.engine = "CYCLES"
+scene.render.filepath = f"{out}/partial_cycles.exr"
+bpy.ops.render.render(write_still=True)
 render_ui.unregister()
 engine.unregister()
 properties.unregister()
@@ -185,6 +188,10 @@ def test_partial_mix_holdout_is_reported(renders) -> None:
     assert not any("without the holdout" in n for n in notes["notes_full"]), notes["notes_full"]
     partial = [n for n in notes["notes_partial"] if n.startswith("MixKeep:") and "holdout" in n]
     assert len(partial) == 1 and "0.5" in partial[0] and "holdout" in partial[0], notes["notes_partial"]
+    # what is not rendered: Cycles' partial holdout, alpha and colour halved
+    images, _ = renders
+    np.testing.assert_allclose(images["partial_cycles"][6, 32], [0.15, 0.45, 0.2, 0.5], rtol=0, atol=1e-5)
+    np.testing.assert_allclose(images["partial_ours"][6, 32], [0.3, 0.9, 0.4, 1.0], rtol=0, atol=1e-5)
 
 
 WORLD_SCRIPT = """
