@@ -56,10 +56,12 @@ __all__ = [
     "clamp_to_socket_range",
     "cryptomatte_names",
     "derived_light_values",
+    "holdout_weight",
     "light_from_object",
     "light_links",
     "light_radius",
     "material_from_blender",
+    "material_holdout",
     "material_is_holdout",
     "mesh_arrays",
     "principled_inputs",
@@ -154,15 +156,83 @@ def mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarra
 # --------------------------------------------------------------------------- materials
 
 
-def material_is_holdout(material: bpy.types.Material | None) -> bool:
-    """True when a Holdout node feeds the Surface of the material's active Material Output."""
+def _surface_node(material: bpy.types.Material | None) -> bpy.types.Node | None:
+    """The node feeding the Surface of the material's active Material Output (None: unlinked)."""
     tree = None if material is None else material.node_tree
     if tree is None:
-        return False
+        return None
     outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
     output = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
     surface = output.inputs.get("Surface") if output is not None else None
-    return bool(surface is not None and surface.is_linked and surface.links[0].from_node.type == "HOLDOUT")
+    if surface is None or not surface.is_linked:
+        return None
+    return surface.links[0].from_node
+
+
+def _shader_source(socket: bpy.types.NodeSocket) -> bpy.types.Node | None:
+    """The node feeding a shader input (through reroutes); None when unlinked."""
+    node = socket.links[0].from_node if socket.is_linked else None
+    while node is not None and node.type == "REROUTE":
+        node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
+    return node
+
+
+def holdout_weight(node: bpy.types.Node | None) -> float | None:
+    """The holdout weight of the shader tree ending at ``node``, as Cycles sums it: 1 for a
+    *Holdout* node, ``(1 − fac)·w(first) + fac·w(second)`` for a *Mix Shader* (the shader closure
+    weights Cycles gives the two inputs, ``svm_node_mix_closure``), 0 for any other shader or an
+    unlinked input; None when a Mix Shader's factor is linked (a weight per shading point).
+    """
+    if node is None:
+        return 0.0
+    if node.type == "HOLDOUT":
+        return 1.0
+    if node.type != "MIX_SHADER":
+        return 0.0
+    fac_socket, first, second = node.inputs[0], node.inputs[1], node.inputs[2]
+    w_first = holdout_weight(_shader_source(first))
+    w_second = holdout_weight(_shader_source(second))
+    if w_first is None or w_second is None:
+        return None
+    if w_first == w_second:
+        return w_first  # the factor does not matter (e.g. two shaders without a holdout)
+    if fac_socket.is_linked:
+        return None
+    fac = min(max(float(fac_socket.default_value), 0.0), 1.0)  # Cycles clamps the factor to [0, 1]
+    return (1.0 - fac) * w_first + fac * w_second
+
+
+def material_holdout(material: bpy.types.Material | None) -> tuple[bool, str | None]:
+    """Whether the material's surface is a holdout, and a note when it is a partial one.
+
+    The surface is a full holdout when its holdout weight (:func:`holdout_weight`) is 1: a
+    *Holdout* node on the active Material Output's Surface, or a *Mix Shader* with the Holdout
+    at factor 1 (second input) or 0 (first input). The core's holdouts are whole
+    (``Mesh.holdout``), so a weight strictly between 0 and 1 (Cycles: alpha reduced by the
+    weight) or a linked factor is not rendered as a holdout: the note names the material and
+    says so, and the surface is rendered as its other shader.
+    """
+    node = _surface_node(material)
+    weight = holdout_weight(node)
+    if weight == 1.0:
+        return True, None
+    if weight == 0.0:
+        return False, None
+    name = material.name if material is not None else "(none)"
+    if weight is None:
+        what = "a Holdout mixed by a linked factor"
+    else:
+        what = f"a partial holdout (a Holdout mixed at weight {weight:.3g})"
+    return False, (
+        f"{name}: the surface is {what}; only whole holdouts (weight 0 or 1) are rendered, "
+        "so it is rendered without the holdout"
+    )
+
+
+def material_is_holdout(material: bpy.types.Material | None) -> bool:
+    """True when the material's surface is a whole holdout (:func:`material_holdout`): a Holdout
+    node on the active Material Output's Surface, or one mixed in at weight 1."""
+    return material_holdout(material)[0]
 
 
 def _linked_objects(collection: object) -> dict[str, bool] | None:
@@ -570,6 +640,9 @@ def scene_from_depsgraph(
                     f"object '{obj.name}', material '{material_name}': {error}; the object is not rendered"
                 )
                 break
+            material_held_out, holdout_note = material_holdout(blender_material)
+            if holdout_note is not None and not held_out:
+                material_notes.append(holdout_note)
             notes.extend(n for n in material_notes if n not in notes)
             used = triangles[material_index == slot_index]
             mesh = Mesh(
@@ -581,7 +654,7 @@ def scene_from_depsgraph(
                 shading=extra.pop("shading"),
                 uv=uv,
                 casts_shadows=bool(getattr(obj, "visible_shadow", True)),  # Ray Visibility > Shadow
-                holdout=held_out or material_is_holdout(blender_material),
+                holdout=held_out or material_held_out,
             )
             ids = cryptomatte_names(obj, blender_material)
             object_meshes.append((mesh, f"{obj.name}/{material_name}", extra, ids))

@@ -5,6 +5,12 @@ strip of a large frame) to a :class:`DeepFragments`: the band's visible fragment
 premultiplied colours from :func:`blinn_phong.frame.resolve.fragment_colours`. What the deep image
 holds, and how it relates to the flat frame, is described in :mod:`blinn_phong.frame.deep_output`
 (``render(..., deep=True)``).
+
+Holdout meshes (``Mesh.holdout``) enter the deep image as samples of zero colour whose alpha is
+their coverage, ``(0, 0, 0, coverage)``, as deep holdouts are written for OpenEXR deep compositing
+(a deep merge with another image then occludes what lies behind the holdout); the flat frame's
+holdout fragments are ``(0, 0, 0, 0)`` instead (:mod:`blinn_phong.model.linking`). The holdout samples
+alone are kept as a second deep image (:meth:`DeepFragments.holdout_image`).
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from blinn_phong.geometry.raster import interpolate
+from blinn_phong.model.linking import holdout_meshes
 from compositing.deep import DeepImage, from_fragments
 
 if TYPE_CHECKING:
@@ -53,6 +60,7 @@ class DeepFragments:
         self.height, self.width, self.method = int(height), int(width), method
         self.layers = None if method != "depth_peeling" or not layers else int(layers)
         self._parts: list[tuple[int, DeepImage]] = []
+        self._holdout_parts: list[tuple[int, DeepImage]] = []
         self._row0 = 0
 
     def strip(self, row0: int) -> DeepFragments:
@@ -71,6 +79,10 @@ class DeepFragments:
             rgba: (N, 4) premultiplied fragment colours from
                 :func:`blinn_phong.frame.resolve.fragment_colours`.
             row0: the band's first row in the frame passed to ``render_frame``.
+
+        The fragments of holdout meshes are kept as ``(0, 0, 0, 1)`` (zero colour, full alpha:
+        with the subpixel weights of :func:`compositing.deep.from_fragments` a sample's alpha is
+        the holdout's coverage of its pixel), whatever ``rgba`` holds for them.
         """
         f = band.fragments
         keep = np.ones(len(f), bool)
@@ -86,23 +98,47 @@ class DeepFragments:
         # rounding step below 0 at worst is clamped, as OpenEXR depths are >= 0).
         eye_depth = np.maximum(eye_depth, 0.0)
         surface = 2 * prepared.triangle_mesh[f.triangle] + (~f.front_facing)
-        image = from_fragments(
-            (f.height, f.width),
-            f.pixel[keep],
-            eye_depth[keep],
-            rgba[keep],
-            samples_per_pixel=f.samples,
-            surface=surface[keep] if f.samples > 1 else None,
-        )
-        self._parts.append((self._row0 + int(row0), image))
+        holdout = holdout_meshes(prepared.scene)
+        held = None if holdout is None else holdout[prepared.triangle_mesh[f.triangle]]
+        if held is not None and held.any():
+            rgba = np.array(rgba, dtype=np.float32)
+            rgba[held] = (0.0, 0.0, 0.0, 1.0)
+
+        def image_of(chosen: np.ndarray) -> DeepImage:
+            return from_fragments(
+                (f.height, f.width),
+                f.pixel[chosen],
+                eye_depth[chosen],
+                rgba[chosen],
+                samples_per_pixel=f.samples,
+                surface=surface[chosen] if f.samples > 1 else None,
+            )
+
+        self._parts.append((self._row0 + int(row0), image_of(keep)))
+        if held is not None:
+            self._holdout_parts.append((self._row0 + int(row0), image_of(keep & held)))
 
     def image(self) -> DeepImage:
-        """The frame's deep image: the bands in row order (every row exactly once).
+        """The frame's deep image: the bands in row order (every row exactly once), holdout
+        samples included.
 
         Raises:
             RuntimeError: the bands collected do not tile the frame's rows.
         """
-        parts = sorted(self._parts, key=lambda p: p[0])
+        return self._joined(self._parts)
+
+    def holdout_image(self) -> DeepImage | None:
+        """The holdout samples of :meth:`image` alone (the same samples, in the same pixels), or
+        None when the scene has no holdout mesh.
+
+        Raises:
+            RuntimeError: the bands collected do not tile the frame's rows.
+        """
+        return self._joined(self._holdout_parts) if self._holdout_parts else None
+
+    def _joined(self, parts: list[tuple[int, DeepImage]]) -> DeepImage:
+        """The band images of ``parts`` stacked in row order (every row exactly once)."""
+        parts = sorted(parts, key=lambda p: p[0])
         row = 0
         for row0, part in parts:
             if row0 != row or part.shape[1] != self.width:

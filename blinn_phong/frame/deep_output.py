@@ -14,7 +14,10 @@ the deep image:
 * ``Z = ZBack`` = the fragment's eye-space depth (distance along the view axis, ``-z_eye``,
   interpolated perspective-correctly from the vertices: the same camera gives the same depths
   in every render, and in every strip of one, so separate renders merge);
-* RGBA = the premultiplied fragment colour the resolve composites with ``over``.
+* RGBA = the premultiplied fragment colour the resolve composites with ``over``; a holdout mesh's
+  fragment is ``(0, 0, 0, 1)`` (weighted by its coverage), so a deep merge is cut behind it, where
+  the flat frame has ``(0, 0, 0, 0)``: flattening gives the flat frame's colour and its alpha plus
+  the holdout's visible coverage (``render(..., deep=True).deep_holdout``: those samples alone).
 
 With one sample per pixel, :func:`compositing.deep.flatten` of the result is the A-buffer
 image (the resolve sorts by window depth, a monotonic function of eye depth; fragments at

@@ -110,6 +110,9 @@ class RenderResult:
             gives one line per decision; the caller's overrides say so).
         deep: with ``render(..., deep=True)`` the frame's fragments as a
             :class:`compositing.deep.DeepImage` (:mod:`blinn_phong.frame.deep_output`), else None.
+            Holdout meshes are in it as samples ``(0, 0, 0, coverage)``.
+        deep_holdout: with ``deep=True`` and a holdout mesh in the scene, those holdout samples
+            alone (a :class:`compositing.deep.DeepImage`), else None.
     """
 
     rgba: np.ndarray
@@ -119,6 +122,7 @@ class RenderResult:
     stats: RenderStats
     plan: Plan | None = None
     deep: object = None
+    deep_holdout: object = None
 
 
 def _numpy_engine_compiles_nothing(func: Callable[..., RenderResult]) -> Callable[..., RenderResult]:
@@ -322,10 +326,11 @@ def render(
         deep=collector,
         light_groups=light_groups,
     )
-    deep_image = None
+    deep_image = deep_holdout = None
     if collector is not None:
         t = time.perf_counter()
         deep_image = collector.image()
+        deep_holdout = collector.holdout_image()
         seconds["deep"] = time.perf_counter() - t
     if light_groups is not None and not all(
         light_groups.pass_name(g) in image.passes for g in light_groups.groups
@@ -351,5 +356,6 @@ def render(
     report("done", 1.0)
     stats = RenderStats(seconds, len(prepared.triangles), n_shaded)
     return RenderResult(
-        image.rgba, image.depth, image.normal, image.passes, stats, plan=the_plan, deep=deep_image
-    )
+        image.rgba, image.depth, image.normal, image.passes, stats,
+        plan=the_plan, deep=deep_image, deep_holdout=deep_holdout,
+    )  # fmt: skip
