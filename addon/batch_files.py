@@ -262,8 +262,7 @@ def write_permit(task: Task) -> Iterator[None]:
             os.close(dir_fd)
 
 
-#: The permit each thread holds: ``(job folder, its stat when the permit was taken, message)``
-#: (a plain dict, which cloudpickle can send to cluster workers with this module's functions).
+#: The permit each thread holds: ``(job folder, its stat when the permit was taken, message)``.
 _HELD: dict[int, tuple[str, os.stat_result, str]] = {}
 
 
