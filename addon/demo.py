@@ -33,7 +33,7 @@ import numpy as np
 from compositing import composite
 from compositing.io import read_image, write_image
 
-from .batch import atomic_target, write_text_atomic
+from .batch_files import atomic_target, write_text_atomic
 
 __all__ = ["main", "run_demo"]
 

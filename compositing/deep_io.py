@@ -202,7 +202,7 @@ def write_deep(
         progress: called with the fraction of values handed to OpenImageIO.
         atomic: True: through a temporary file renamed over ``path`` on success. False: straight
             into ``path``, for a caller whose ``path`` is its own temporary file (e.g.
-            ``addon.batch.atomic_target``, which names it after the job and checks it first).
+            ``addon.batch_files.atomic_target``, which names it after the job and checks it first).
 
     Raises:
         ValueError: not ``.exr``, bad options.
