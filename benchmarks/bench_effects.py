@@ -44,13 +44,14 @@ from blinn_phong.frame.render import prepare_scene, shade_fragments
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.planar import planar_shadow_mask
 from blinn_phong.shadows.raytrace import (
     RayScene,
     area_light_visibility,
     directional_light_visibility,
     point_light_visibility,
 )
-from blinn_phong.shadows.visibility import light_shadow_maps, planar_shadow_mask, shadow_map_visibility
 from compositing._atomic import write_json_atomic
 
 __all__ = ["main", "run"]

@@ -44,7 +44,7 @@ from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import volume as sv
-from blinn_phong.shadows.visibility import light_visibility
+from blinn_phong.shadows.methods import light_visibility
 
 __all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
 

@@ -93,8 +93,8 @@ def run(repeat: int = 3, quick: bool = False) -> dict[str, object]:
     from blinn_phong.frame.prepared import prepare_scene
     from blinn_phong.frame.visibility import visible_fragments
     from blinn_phong.geometry.raster import interpolate
+    from blinn_phong.shadows.methods import light_visibility
     from blinn_phong.shadows.raytrace import world_triangles
-    from blinn_phong.shadows.visibility import light_visibility
 
     prepared = prepare_scene(scene)
     frags = visible_fragments(prepared.clip, prepared.triangles, width, height, engine="auto")

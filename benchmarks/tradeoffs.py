@@ -233,8 +233,8 @@ SHADOW_BIASES = (
 
 def shadows(quick: bool = False, repeat: int = 3) -> dict:
     """Shadow maps (resolution × PCF kernel × bias) against Embree ray-traced hard shadows."""
+    from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
     from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     size = 128 if quick else 256
     resolutions = (256, 1024) if quick else (256, 512, 1024, 2048)
@@ -305,8 +305,8 @@ def shadow_frame_cost(
     resolutions ``R`` and two triangle counts ``T`` (the scene, and the same with a 192-segment
     sphere): the data of the frame-aware cost model
     (:func:`blinn_phong.planning.calibration.shadow_map_cost`), fitted to the fastest round (``min_s``)."""
+    from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
     from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     light = scene.lights[0]
     to_light = -np.asarray(light.direction, float)
@@ -364,7 +364,7 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
     scene and the frame benchmark's, whose casters are convex or planar.
     """
     from benchmarks.bench_frame import issue_scene
-    from blinn_phong.frame.pipeline import _ray_answers, _ray_target, _world_triangles, _world_vertices
+    from blinn_phong.frame.pipeline import _world_triangles, _world_vertices
     from blinn_phong.geometry.raster_kernels import (
         nearest_winners_compiled,
         setup_triangles_compiled,
@@ -372,6 +372,7 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
     )
     from blinn_phong.shadows import raytrace
     from blinn_phong.shadows.ray_culling import GENERAL, TRACE, caster_tables
+    from blinn_phong.shadows.ray_traced import _ray_answers, ray_target
 
     frames = [("shadow calibration", shadow_scene(), 256, 256)]
     frames.append(("frame benchmark", issue_scene(48 if quick else 96, 24 if quick else 48), 640, 360))
@@ -392,7 +393,7 @@ def shadow_frame_constants(quick: bool = False, repeat: int = 3) -> list[dict]:
         tables = caster_tables(scene, bvh.centre)
         general = float(np.mean(tables[0][mesh_of] == GENERAL))
         for j, light in enumerate(scene.lights):
-            vec, positional = _ray_target(light)
+            vec, positional = ray_target(light)
             trace = raytrace.point_light_visibility if positional else raytrace.directional_light_visibility
             trace_all = functools.partial(trace, bvh, points, normals, vec)
             cull = functools.partial(_ray_answers, light, points, normals, mesh_of, bvh.centre, tables)

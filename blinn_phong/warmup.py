@@ -140,7 +140,7 @@ def warm(
     import numba  # noqa: F401  (the compiled engine needs it)
 
     import blinn_phong as bp
-    from blinn_phong.planning.planner import embree_available
+    from blinn_phong.shadows.method import embree_available
 
     cases = selected_cases(only)
     scenes = _scenes()

@@ -7,7 +7,7 @@ does shadow mapping (Williams 1978):
    of a ``GL_DEPTH_COMPONENT32F`` 2D array texture of ``resolution²`` texels, with
    ``glPolygonOffset(slope_bias, 0)`` (OpenGL 2.1 §3.5.5: the implementation adds
    ``slope_bias·max(|∂z/∂x|, |∂z/∂y|)``, clamped to [0, 1]), both faces, ``GL_LESS``.
-   The light cameras are those of :func:`blinn_phong.shadows.visibility.light_cameras` (an
+   The light cameras are those of :func:`blinn_phong.shadows.maps.light_cameras` (an
    orthographic camera for a directional light, a perspective one for a spot, six cube
    faces for a point light) — the set-up, like the scene's own camera, is an input.
 2. **Lighting pass**: the per-pixel Blinn-Phong GLSL program of
@@ -20,7 +20,7 @@ does shadow mapping (Williams 1978):
    clamped to the map; points outside the light's frustum are lit.
 
 Output: uint8 RGBA, row 0 at the top, background (0, 0, 0, 0); optionally the depth maps
-read back (float32, row 0 at the top, as :class:`blinn_phong.shadows.visibility.ShadowMap` stores them).
+read back (float32, row 0 at the top, as :class:`blinn_phong.shadows.maps.ShadowMap` stores them).
 Used only by tests and benchmarks. Raises :class:`oracles.egl.EGLUnavailable` when no
 context can be created.
 """
@@ -34,7 +34,7 @@ import numpy as np
 
 from blinn_phong.frame.lighting import lights_in_eye_space
 from blinn_phong.model.scene import AmbientLight, Scene
-from blinn_phong.shadows.visibility import PCF_KERNELS, light_cameras
+from blinn_phong.shadows.maps import PCF_KERNELS, light_cameras
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer, blinn_phong_main, compile_program, world_triangles
 from oracles.gl_lighting import MAX_LIGHTS, _MeshBuffers, _set_state
@@ -178,7 +178,7 @@ def render_shadow_mapped(
         resolution: shadow-map texels per side.
         constant_bias: window-depth units added to the stored depth in the comparison.
         slope_bias: ``glPolygonOffset`` factor of the depth pass.
-        kernel: one of :data:`blinn_phong.shadows.visibility.PCF_KERNELS`.
+        kernel: one of :data:`blinn_phong.shadows.maps.PCF_KERNELS`.
         repeats: frames drawn and timed after one untimed warm-up frame.
         read_maps: also read the depth maps back.
 

@@ -7,7 +7,7 @@
    seen: the nearest opaque one per sample and the transparent ones in front of it (with the
    plain z-buffer every triangle is opaque, so this is the z-buffer pass);
 3. per light, the visibility of those fragments by the plan's shadow method, once per light
-   and frame (:func:`blinn_phong.shadows.visibility.light_visibility`, or
+   and frame (:func:`blinn_phong.shadows.methods.light_visibility`, or
    :func:`blinn_phong.shadows.raytrace.area_light_visibility` for soft shadows) — skipped when no
    light casts shadows;
 4. :func:`blinn_phong.frame.shading.shade_fragments` — shade them once, with that visibility;
@@ -65,9 +65,11 @@ from blinn_phong.geometry.raster_kernels import (
     winner_surfaces_compiled,
 )
 from blinn_phong.model.linking import holdout_meshes, linked_visibility, lit_links
-from blinn_phong.model.scene import AmbientLight, Camera, DirectionalLight, Scene, SpotLight
+from blinn_phong.model.scene import AmbientLight, Camera, Scene
 from blinn_phong.planning.planner import Plan
-from blinn_phong.shadows.visibility import caster_transmittance, light_visibility, trusted_arrays
+from blinn_phong.shadows.method import ShadowFrame
+from blinn_phong.shadows.methods import frame_visibility, shadow_method, trusted_arrays
+from blinn_phong.shadows.transmittance import caster_transmittance
 
 if TYPE_CHECKING:
     from blinn_phong.frame.deep_fragments import DeepFragments
@@ -200,46 +202,6 @@ def _fragment_surface(
     return points, np.ascontiguousarray(faces[fragments.triangle])
 
 
-def _soft_visibility(
-    light: object,
-    params: dict[str, object],
-    ray_scene: object,
-    points: np.ndarray,
-    normals: np.ndarray,
-    aim: np.ndarray | None = None,
-) -> np.ndarray:
-    """Area-light visibility: a square of side ``2·radius`` at the light, facing along a spot light's
-    axis, else towards ``aim``, by default the centre of the casters' bounding box (never the
-    camera's view)."""
-    from blinn_phong.shadows.raytrace import area_light_visibility  # Embree: imported only when used
-
-    radius = float(params["radius"])  # type: ignore[arg-type]
-    centre = np.asarray(light.position, dtype=np.float64)  # type: ignore[attr-defined]
-    if aim is None:
-        corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
-        aim = (corners.min(axis=0) + corners.max(axis=0)) / 2
-    axis = aim - centre
-    if isinstance(light, SpotLight):
-        axis = np.array(light.direction, dtype=np.float64)
-    if float(np.linalg.norm(axis)) < 1e-12:
-        axis = np.array([0.0, 0.0, -1.0])  # the light at the scene's centre: any orientation
-    axis /= float(np.linalg.norm(axis))
-    helper = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
-    return area_light_visibility(
-        ray_scene,
-        points,
-        normals,
-        centre - radius * (u + v),
-        2 * radius * u,
-        2 * radius * v,
-        samples_per_axis=int(params["samples_per_axis"]),  # type: ignore[call-overload]
-        offset=float(params["offset"]),  # type: ignore[arg-type]
-    )
-
-
 def _shadow_lights(scene: Scene, the_plan: Plan) -> list[tuple[object, object]] | None:
     """The scene's non-ambient lights with their shadow choices; None when none casts shadows
     and none has a receiver mask (:class:`blinn_phong.model.scene.LightLink`)."""
@@ -259,14 +221,14 @@ def light_visibilities(
     """Visibility of the visible fragments per non-ambient light; None when no light casts shadows.
 
     One evaluation per light and frame, by the plan's method for that light
-    (:func:`blinn_phong.shadows.visibility.light_visibility`, Embree area-light sampling for ``soft``),
+    (:func:`blinn_phong.shadows.methods.light_visibility`, Embree area-light sampling for ``soft``),
     at the fragments' world positions with their face normals. The world-space points, face
     normals and caster triangles are computed once per frame (one compiled pass with
     ``engine`` numba/auto, :func:`_fragment_surface`) and shared by every light; ray-traced
     lights share one BVH.
 
     Coloured shadows: where a light's method is ``ray_traced`` and a caster is transparent
-    (:func:`blinn_phong.shadows.visibility.caster_transmittance`: ``1 − opacity`` per channel for the
+    (:func:`blinn_phong.shadows.transmittance.caster_transmittance`: ``1 − opacity`` per channel for the
     partial-occlusion and absorption models, 1 for emission, 0 for opaque casters), that
     light's visibility is the per-channel fraction of its light that arrives
     (:func:`blinn_phong.shadows.raytrace.transmitted_light`), and the result is (N, L, 3) — the other
@@ -292,102 +254,6 @@ def light_visibilities(
     linked = scene.light_links is not None
     mesh_of = prepared.triangle_mesh[visible.fragments.triangle] if compiled or linked else None
     return _visibility_at(scene, lit, verts, world, normal, compiled, mesh_of)
-
-
-def _ray_target(light: object) -> tuple[np.ndarray, bool]:
-    """``(vector, positional)`` of a light's shadow rays, as the ray tracer takes them: the unit
-    direction towards a directional light, else the light's position."""
-    if isinstance(light, DirectionalLight):
-        towards = -np.asarray(light.direction, dtype=np.float64)
-        return towards / np.linalg.norm(towards), False
-    return np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
-
-
-def _ray_answers(
-    light: object,
-    world: np.ndarray,
-    normal: np.ndarray,
-    mesh_of: np.ndarray,
-    centre: np.ndarray,
-    tables: tuple[np.ndarray, ...],
-) -> np.ndarray:
-    """:func:`blinn_phong.shadows.ray_culling.rays_to_trace` for the hard shadow rays of ``light`` as the
-    ray tracer builds them (default offset, offset scale, BVH ``centre``)."""
-    from blinn_phong.shadows import raytrace  # Embree: imported only when used
-    from blinn_phong.shadows.ray_culling import rays_to_trace
-
-    vec, positional = _ray_target(light)
-    offset, scale = raytrace.HARD_SHADOW_OFFSET, raytrace.offset_scale()
-    return rays_to_trace(world, normal, mesh_of, vec, positional, centre, offset, scale, tables)
-
-
-def _traced_hard(
-    scene: Scene,
-    light: object,
-    tris: np.ndarray,
-    world: np.ndarray,
-    normal: np.ndarray,
-    mesh_of: np.ndarray,
-    culling: dict[object, object],
-) -> np.ndarray:
-    """Ray-traced hard visibility of one light, tracing only the rays geometry cannot answer.
-
-    :mod:`blinn_phong.shadows.ray_culling` proves most rays lit or shadowed (the answers Embree gives);
-    the rest go to :func:`blinn_phong.shadows.visibility.light_visibility` in one batch.
-    ``culling`` caches the frame's caster tables (and :func:`_planar_hard`'s plane heights)
-    between lights.
-    """
-    from blinn_phong.shadows import raytrace  # Embree: imported only when used
-    from blinn_phong.shadows.ray_culling import LIT, TRACE, caster_tables
-
-    bvh = raytrace.cached_ray_scene(tris)
-    if "tables" not in culling:
-        culling["tables"] = caster_tables(scene, bvh.centre)
-    answer = _ray_answers(light, world, normal, mesh_of, bvh.centre, culling["tables"])  # type: ignore[arg-type]
-    out = (answer == LIT).astype(np.float64)
-    index = np.flatnonzero(answer == TRACE)
-    if len(index):
-        p, n = world[index], normal[index]
-        with trusted_arrays(p, n):
-            out[index] = light_visibility("ray_traced", light, tris, p, n, engine="numba")  # type: ignore[arg-type]
-    return out
-
-
-def _planar_hard(
-    scene: Scene,
-    light: object,
-    tris: np.ndarray,
-    world: np.ndarray,
-    normal: np.ndarray,
-    mesh_of: np.ndarray,
-    plane: object,
-    culling: dict[object, object],
-) -> np.ndarray | None:
-    """Planar shadows (:func:`blinn_phong.shadows.visibility.light_visibility` ``"planar"``) where every
-    caster
-    lies between the plane and the light: the plane's points by :func:`_traced_hard` (the shadow
-    rays that method casts against the frame's BVH, most answered by the culling), every other
-    point lit. None where the casters are not all between (the method projects them instead)."""
-    from blinn_phong.shadows.visibility import _casters_between, _on_plane
-
-    pl = np.asarray(plane, dtype=np.float64)
-    if isinstance(light, DirectionalLight):
-        homogeneous = np.r_[-np.asarray(light.direction, dtype=np.float64), 0.0]
-    else:
-        homogeneous = np.r_[np.asarray(light.position, dtype=np.float64), 1.0]  # type: ignore[attr-defined]
-    key = ("plane", pl.tobytes())
-    if key not in culling:  # (else: the frame's other lights on the same plane)
-        height = tris @ pl[:3] + pl[3]
-        culling[key] = (height, np.abs(height).max(axis=1) > 1e-9 * max(float(np.abs(tris).max()), 1.0))
-    height, off_plane = culling[key]  # type: ignore[misc]
-    on_plane, q, q_normals = _on_plane(world, pl)
-    vis = np.ones(len(world))
-    if not (off_plane.any() and on_plane.any()):
-        return vis
-    if not _casters_between(height[off_plane], pl, homogeneous):
-        return None
-    vis[on_plane] = _traced_hard(scene, light, tris, q, q_normals, mesh_of[on_plane], culling)
-    return vis
 
 
 def _visibility_at(
@@ -435,60 +301,24 @@ def _unlinked_visibility_at(
     binning: tuple | None = None,
     aim: np.ndarray | None = None,
 ) -> np.ndarray:
-    """:func:`_visibility_at` of lights without links (``aim``: where soft lights face, as
-    :func:`_soft_visibility` takes it)."""
+    """:func:`_visibility_at` of lights without links (``aim``: where soft lights face): each
+    light by its method (:func:`blinn_phong.shadows.methods.frame_visibility`), the frame's
+    points, casters and BVH shared (:class:`blinn_phong.shadows.method.ShadowFrame`)."""
     tris = _world_triangles(scene, verts)
     if len(tris) == 0:  # no mesh casts shadows: every light reaches every fragment
         return np.ones((len(world), len(lit)))
     transmittance = caster_transmittance(scene)
-    coloured = transmittance is not None and any(c.method == "ray_traced" for _, c in lit)
-    out = np.empty((len(world), len(lit), 3) if coloured else (len(world), len(lit)))
-    ray_scene: list[object] = []
-    culling: dict[object, object] = {}
-    shadow_engine = "numba" if compiled else "numpy"
+    if not any(shadow_method(c.method).coloured for _, c in lit):  # type: ignore[attr-defined]
+        transmittance = None  # full shadows only: (N, L)
+    frame = ShadowFrame(scene, tris, world, normal, compiled, mesh_of, binning, aim, transmittance)
     one_bvh: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
-    if any(c.method in ("ray_traced", "soft", "planar") for _, c in lit):
+    if any(shadow_method(c.method).uses_rays for _, c in lit):  # type: ignore[attr-defined]
         from blinn_phong.shadows.raytrace import frame_triangles  # Embree: imported only when used
 
         one_bvh = frame_triangles(tris, _bvh_key(scene, tris))  # hashed once per geometry, not per light
     # world, normal and tris are this frame's own finite float64 arrays: checked once, here
     with trusted_arrays(world, normal, tris), one_bvh:
-        for i, (light, c) in enumerate(lit):
-            culled = compiled and mesh_of is not None  # the compiled engine: shadow rays culled
-            planar_rays = culled and c.method == "planar" and set(c.params) == {"plane"}
-            if c.method == "soft":
-                if not ray_scene:
-                    from blinn_phong.shadows.raytrace import (
-                        cached_ray_scene,  # Embree: imported only when used
-                    )
-
-                    ray_scene.append(cached_ray_scene(tris))  # the frame's one BVH, shared with hard shadows
-                column = _soft_visibility(light, c.params, ray_scene[0], world, normal, aim)
-            elif culled and c.method == "ray_traced" and not (coloured or c.params):
-                column = _traced_hard(scene, light, tris, world, normal, mesh_of, culling)
-            elif (
-                planar_rays
-                and (
-                    planar := _planar_hard(
-                        scene, light, tris, world, normal, mesh_of, c.params["plane"], culling
-                    )
-                )
-                is not None
-            ):
-                column = planar
-            elif coloured and c.method == "ray_traced":
-                column = light_visibility(
-                    c.method, light, tris, world, normal, transmittance=transmittance, **c.params
-                )  # type: ignore[arg-type]
-            else:
-                extra: dict[str, object] = {"camera": scene.camera} if c.method == "shadow_volume" else {}
-                if c.method == "shadow_volume" and binning is not None and "engine" not in c.params:
-                    extra["binning"] = binning
-                if c.method in ("shadow_map", "ray_traced") and "engine" not in c.params:
-                    extra["engine"] = shadow_engine
-                column = light_visibility(c.method, light, tris, world, normal, **c.params, **extra)  # type: ignore[arg-type]
-            out[:, i] = column[:, None] if coloured and column.ndim == 1 else column
-    return out
+        return frame_visibility(frame, lit)
 
 
 FrameResult = tuple[FrameImage, int]

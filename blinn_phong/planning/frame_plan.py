@@ -8,7 +8,6 @@ without effects — is :mod:`blinn_phong.frame.pipeline`; this module decides, i
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -17,9 +16,11 @@ from blinn_phong._checks import choice_error, number
 from blinn_phong.effects.oit import TRANSPARENCY_METHODS
 from blinn_phong.geometry.mesh_facts import point_triangle_distances
 from blinn_phong.model.fog import Fog
-from blinn_phong.model.scene import SHADINGS, AmbientLight, DirectionalLight, Scene
-from blinn_phong.planning.planner import Choice, Plan, coloured_shadow_reason, embree_available, plan
-from blinn_phong.shadows.visibility import PCF_KERNELS, SHADOW_METHODS
+from blinn_phong.model.scene import SHADINGS, AmbientLight, Scene
+from blinn_phong.planning.planner import Choice, Plan, coloured_shadow_reason, plan
+from blinn_phong.shadows.maps import PCF_KERNELS
+from blinn_phong.shadows.method import embree_available
+from blinn_phong.shadows.methods import SHADOW_METHODS, shadow_method
 
 __all__ = [
     "SHADOW_CHOICES",
@@ -27,7 +28,6 @@ __all__ = [
     "WBOIT_WEIGHTS",
     "Fog",
     "ShadowOptions",
-    "embree_available",
     "frame_plan",
     "needs_effects",
     "scene_with_planned_shading",
@@ -35,9 +35,9 @@ __all__ = [
 
 #: Transparency methods render() accepts: the plain z-buffer and every :mod:`blinn_phong.effects.oit` method.
 TRANSPARENCY_CHOICES: tuple[str, ...] = ("zbuffer", *TRANSPARENCY_METHODS)
-#: Shadow methods render() accepts per light: :data:`blinn_phong.shadows.visibility.SHADOW_METHODS` and
-# ``soft``.
-SHADOW_CHOICES: tuple[str, ...] = (*SHADOW_METHODS, "soft")
+#: Shadow methods render() accepts per light: every method of the registry
+#: (:data:`blinn_phong.shadows.methods.SHADOW_METHODS`).
+SHADOW_CHOICES: tuple[str, ...] = SHADOW_METHODS
 #: Weighted blended OIT weights available on rasterized fragments (they carry window depth):
 #: McGuire & Bavoil's eq. 10 and the depth-free α weight.
 WBOIT_WEIGHTS: tuple[str, ...] = ("eq10", "constant")
@@ -59,7 +59,7 @@ class ShadowOptions:
         resolution: shadow-map size in texels per side (None: the planner's, else 1024).
         constant_bias: shadow-map constant bias in window-depth units (None: 1e-4).
         slope_bias: shadow-map slope-scaled bias (None: 2.0), as ``glPolygonOffset``.
-        kernel: percentage-closer filter, one of :data:`blinn_phong.shadows.visibility.PCF_KERNELS`
+        kernel: percentage-closer filter, one of :data:`blinn_phong.shadows.maps.PCF_KERNELS`
             (None: nearest).
         plane: ``(a, b, c, d)`` receiving plane for ``planar`` (None: the planner's).
         samples: rays per point for ``soft``; a stratified grid is square, so ``m×m`` rays with
@@ -141,62 +141,40 @@ def _overridden(planned: Choice, what: str) -> str:
     return f"{what} (planner: {planned.method} — {planned.reason})"
 
 
-#: Shadow methods that cast rays with Embree (:mod:`blinn_phong.shadows.raytrace`); ``planar`` tests its
-#: points against the projected casters with it too.
-_NEEDS_EMBREE = ("ray_traced", "soft", "planar")
+#: The resolution of a shadow map standing in for a method that needs Embree, when the caller set none.
+STAND_IN_RESOLUTION = 2048
 
 
 def _shadow_choice(light: object, options: ShadowOptions, planned: Choice) -> Choice:
-    """The planner's choice for one light unless ``options.method`` overrides it, with full parameters."""
+    """The planner's choice for one light unless ``options.method`` overrides it, with full
+    parameters (each method's :meth:`~blinn_phong.shadows.method.ShadowMethod.params_for`)."""
     if isinstance(light, AmbientLight):
         return planned
-    method, reason = planned.method, planned.reason
-    if options.method not in _AUTO:
-        method = str(options.method)
-        if method != planned.method:
-            reason = _overridden(planned, "set by the caller")
-    if method == "soft" and (isinstance(light, DirectionalLight) or options.radius <= 0.0):
-        why = "a directional light" if isinstance(light, DirectionalLight) else "radius 0"
-        method, reason = (
-            "ray_traced",
-            f"soft shadows asked for, but {why} has no area: hard ray-traced shadows",
-        )
-    # The planner already picks shadow volumes where Embree is missing; a method the caller
-    # sets that needs Embree is replaced here, saying so.
+    method, reason = shadow_method(planned.method), planned.reason
     overridden = options.method not in _AUTO
-    if overridden and method in ("ray_traced", "planar") and not embree_available():
-        method, reason = (
-            "shadow_volume",
-            f"Embree (embreex) is not installed: shadow volumes, exact too, instead of {method} ({reason})",
+    if overridden:
+        method = shadow_method(str(options.method))
+        if method.name != planned.method:
+            reason = _overridden(planned, "set by the caller")
+    if method.stand_in is not None and (instead := method.stand_in(light, options)) is not None:
+        method, reason = shadow_method(instead[0]), instead[1]
+    # The planner already picks methods that cast no rays where Embree is missing; a method the
+    # caller sets that casts rays is replaced here by its stand-in, saying so.
+    while overridden and method.uses_rays and not embree_available():
+        stand_in = shadow_method(str(method.without_embree))
+        exact = ", exact too," if stand_in.exact else ""
+        reason = (
+            f"Embree (embreex) is not installed: {stand_in.title}{exact} instead of {method.name} ({reason})"
         )
-    if overridden and method in _NEEDS_EMBREE and not embree_available():
-        method, reason = (
-            "shadow_map",
-            f"Embree (embreex) is not installed: a shadow map instead of {method} ({reason})",
-        )
-        options = replace(options, resolution=options.resolution or 2048)
-    params: dict[str, object] = {}
-    if method == "shadow_map":
-        params["resolution"] = options.resolution or planned.params.get("resolution", 1024)
-        for name in ("constant_bias", "slope_bias", "kernel"):
-            if getattr(options, name) is not None:
-                params[name] = getattr(options, name)
-    elif method == "planar":
-        plane = options.plane if options.plane is not None else planned.params.get("plane")
-        if plane is None:
-            raise ValueError(
-                "shadows: 'planar' needs the receiving plane; pass ShadowOptions(method='planar', "
-                f"plane=(a, b, c, d)) (the planner chose {planned.method!r}, which gives none)"
-            )
-        params["plane"] = plane
-    elif method == "soft":
-        m = max(1, round(math.sqrt(options.samples)))
-        params = {"samples_per_axis": m, "radius": options.radius, "offset": options.offset}
-        if m * m != options.samples:
-            reason = f"{reason}; {options.samples} samples asked, {m}×{m} = {m * m} cast (strata are square)"
-    if method == planned.method and reason == planned.reason:
+        if "resolution" in stand_in.parameters and options.resolution is None:
+            options = replace(options, resolution=STAND_IN_RESOLUTION)
+        method = stand_in
+    params, note = method.params_for(options, planned)
+    if note:
+        reason = f"{reason}; {note}"
+    if method.name == planned.method and reason == planned.reason:
         return replace(planned, params=params)  # the planner's choice keeps its predictions
-    return Choice(method, reason, params)
+    return Choice(method.name, reason, params)
 
 
 #: A light closer than this to a caster's surface, relative to the scene's extent (the largest

@@ -37,7 +37,7 @@ Transparency (methods of :mod:`blinn_phong.effects.oit`):
   below the A-buffer's.
 * ``a_buffer`` — otherwise (surfaces may interpenetrate or overlap in depth): exact.
 
-Shadows, per light (:mod:`blinn_phong.shadows.visibility`, :mod:`blinn_phong.shadows.raytrace`):
+Shadows, per light (:mod:`blinn_phong.shadows.methods`, :mod:`blinn_phong.shadows.raytrace`):
 
 * ``none`` — ambient lights; or no mesh can shade another from this light: every caster's
   shadow volume (the cylinder or cone its bounding sphere sweeps away from the light)
@@ -113,6 +113,7 @@ from blinn_phong.model.scene import (
     SpotLight,
 )
 from blinn_phong.planning import calibration
+from blinn_phong.shadows.method import embree_available
 
 __all__ = [
     "DEFAULT_FRAME",
@@ -121,7 +122,6 @@ __all__ = [
     "Plan",
     "coloured_shadow_reason",
     "coordinate_tolerance",
-    "embree_available",
     "plan",
     "shadow_map_geometry",
     "traced_share",
@@ -136,7 +136,7 @@ class Choice:
 
     ``params`` are keyword arguments of the function that carries the method out:
     ``layers`` for :func:`blinn_phong.effects.oit.resolve_transparency`, ``plane`` or ``resolution``
-    for :func:`blinn_phong.shadows.visibility.light_visibility`. ``predicted_steps`` is the error the
+    for :func:`blinn_phong.shadows.methods.light_visibility`. ``predicted_steps`` is the error the
     calibrated model predicts (8-bit steps, in the concern's metric, see :func:`plan`; 0 for
     the exact method of a concern) and ``relative_cost`` the predicted time relative to that
     exact method (A-buffer, ray tracing, Phong); both None where no model applies.
@@ -643,7 +643,7 @@ class MapGeometry:
 
     Attributes:
         span: side of the square the map covers (the diameter of the sphere around every
-            vertex, as :func:`blinn_phong.shadows.visibility.light_shadow_maps` frames it).
+            vertex, as :func:`blinn_phong.shadows.maps.light_shadow_maps` frames it).
         feature: the thinnest caster seen from the light (:func:`_projected_width`).
         triangles: triangles in the scene (what the ray tracer's scene build scales with).
     """
@@ -818,12 +818,10 @@ def _see_through_casters(scene: Scene, casters: set[int]) -> list[int]:
     """The casters among ``casters`` that let some light through (coloured shadows when ray traced).
 
     Such a caster's shadow is the light times its transmittance per RGB channel
-    (:func:`blinn_phong.shadows.visibility.mesh_shadow_transmittance`); only ray tracing carries it, so the
+    (:func:`blinn_phong.shadows.transmittance.mesh_shadow_transmittance`); only ray tracing carries it, so the
     binary methods differ from it by up to the light's whole contribution times the transmittance.
     """
-    from blinn_phong.shadows.visibility import (
-        mesh_shadow_transmittance,  # one definition, shared with the renderer
-    )
+    from blinn_phong.shadows.transmittance import mesh_shadow_transmittance
 
     two_sided = scene.light_model.two_sided
     return sorted(a for a in casters if mesh_shadow_transmittance(scene.meshes[a], two_sided).any())
@@ -838,14 +836,13 @@ def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
 
     Returns:
         ``choice`` unchanged when its method is ``none`` or no caster lets light through
-        (:func:`blinn_phong.shadows.visibility.mesh_shadow_transmittance`); else with "; coloured shadows: …"
+        (:func:`blinn_phong.shadows.transmittance.mesh_shadow_transmittance`); else with
+        "; coloured shadows: …"
         (``ray_traced``) or "; transparent meshes … cast full shadows" (the binary methods) appended.
     """
     if choice.method == "none":
         return choice
-    from blinn_phong.shadows.visibility import (
-        mesh_shadow_transmittance,  # one definition, shared with the renderer
-    )
+    from blinn_phong.shadows.transmittance import mesh_shadow_transmittance
 
     two_sided = scene.light_model.two_sided
     lets_through = [
@@ -861,19 +858,6 @@ def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
                        f"meshes {which} keeps their transmittance per RGB channel")  # fmt: skip
     return replace(choice, reason=f"{choice.reason}; transparent meshes {which} cast full shadows "
                    f"({choice.method} is binary; coloured shadows are ray traced)")  # fmt: skip
-
-
-def embree_available() -> bool:
-    """True when ``embreex`` (Intel Embree) can be imported; Blender's own Python lacks it.
-
-    Ray-traced and planar shadows cast rays with it; without it the planner picks shadow
-    volumes, exact too, for hard shadows.
-    """
-    try:
-        import embreex  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 #: Why a plan without Embree uses shadow volumes (the start of the choice's reason).

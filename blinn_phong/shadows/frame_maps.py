@@ -14,7 +14,7 @@ points:
 
 A texel's depth is a minimum over the casters that cover it, so it does not depend on which
 other texels are rendered: every texel a look-up reads holds the value of the complete map,
-and the visibilities are those of :func:`blinn_phong.shadows.visibility.light_visibility` at the
+and the visibilities are those of :func:`blinn_phong.shadows.methods.light_visibility` at the
 points :func:`blinn_phong.geometry.raster_kernels.winner_surfaces_compiled` computes, bit for bit
 (``tests/effects/test_frame_maps.py``).
 """
@@ -31,11 +31,12 @@ import numpy as np
 
 from blinn_phong._scratch import ScratchPool, carve
 from blinn_phong.shadows import kernels as sk
-from blinn_phong.shadows.visibility import PCF_KERNELS, light_visibility, map_matrices
+from blinn_phong.shadows.maps import PCF_KERNELS, map_matrices
+from blinn_phong.shadows.methods import light_visibility
 
 __all__ = ["MAP_PARAMETERS", "MapStack", "frame_maps", "no_maps", "visible_triangles"]
 
-#: The shadow-map options of :func:`blinn_phong.shadows.visibility.light_visibility` a frame's lights set
+#: The shadow-map options of :func:`blinn_phong.shadows.methods.light_visibility` a frame's lights set
 #: (:class:`blinn_phong.planning.frame_plan.ShadowOptions`: no normal offset), and their defaults.
 MAP_PARAMETERS: dict[str, object] = {
     name: inspect.signature(light_visibility).parameters[name].default
@@ -118,7 +119,7 @@ def frame_maps(
 ) -> Iterator[MapStack]:
     """Render the shadow maps of a frame's lights into one stack, valid inside the ``with`` block.
 
-    Per light, the checks and maps of :func:`blinn_phong.shadows.visibility.light_visibility` with
+    Per light, the checks and maps of :func:`blinn_phong.shadows.methods.light_visibility` with
     ``method="shadow_map"`` and the compiled engine; a cube only over the texels that look-ups
     of the receiver triangles may read.
 

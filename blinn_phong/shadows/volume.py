@@ -123,6 +123,7 @@ from blinn_phong._checks import choice_error
 from blinn_phong._numba import use_compiled
 from blinn_phong._scratch import carve, carved_bytes
 from blinn_phong.model.scene import Camera, DirectionalLight, PointLight, SpotLight
+from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 
 __all__ = [
     "STENCIL_METHODS",
@@ -1838,7 +1839,7 @@ def shadow_volume_visibility(
 ) -> np.ndarray:
     """Hard-shadow visibility of receivers for one light by shadow volumes (1 = lit, 0 = shadowed).
 
-    Same meaning and shape as :func:`blinn_phong.shadows.visibility.light_visibility`.
+    Same meaning and shape as :func:`blinn_phong.shadows.methods.light_visibility`.
 
     Args:
         light: the light (a spot light shadows as a point light at its position).
@@ -1996,3 +1997,25 @@ def choose_stencil(
         return "zfail", "a receiver lies behind the camera"
     bounds = (float(px.min()), float(px.max()), float(py.min()), float(py.max())) if len(px) else ()
     return _choose(light, tris, _topology_with_key(tris)[1], view, projection, bounds)
+
+
+def _at_frame(frame: ShadowFrame, light: object, params: dict) -> np.ndarray:
+    extra: dict[str, object] = {"camera": frame.scene.camera}
+    if frame.binning is not None and "engine" not in params:
+        extra["binning"] = frame.binning
+    return shadow_volume_visibility(light, frame.tris, frame.world, frame.normal, **params, **extra)  # type: ignore[arg-type]
+
+
+METHOD = ShadowMethod(
+    name="shadow_volume",
+    title="shadow volumes",
+    summary="the casters' silhouettes extruded from the light, counted per point (Crow 1977): exact",
+    exact=True,
+    coloured=False,
+    uses_rays=False,
+    without_embree=None,
+    cost_model="shadow_volume",
+    parameters=("camera", "stencil", "offset", "engine", "binning"),
+    visibility=shadow_volume_visibility,
+    frame_visibility=_at_frame,
+)

@@ -14,7 +14,7 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong.model.primitives import box, grid_plane, uv_sphere
-from blinn_phong.planning.frame_plan import embree_available
+from blinn_phong.shadows.method import embree_available
 
 FLOOR = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)  # z = 0 → y = 0
 W, H = 96, 72

@@ -38,7 +38,7 @@ def _env(cache: Path, **extra: str) -> dict[str, str]:
 
 def test_cases_cover_every_method() -> None:
     from blinn_phong.effects.oit import TRANSPARENCY_METHODS
-    from blinn_phong.shadows.visibility import SHADOW_METHODS
+    from blinn_phong.shadows.methods import SHADOW_METHODS
 
     names = " ".join(name for name, _, _ in warmup.CASES)
     for method in (*SHADOW_METHODS, "soft", *TRANSPARENCY_METHODS):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from blinn_phong.model.scene import DirectionalLight, PointLight
+from blinn_phong.shadows.methods import light_visibility
 from blinn_phong.shadows.raytrace import RayScene, transmitted_light
-from blinn_phong.shadows.visibility import light_visibility
 
 from .geometry import box_triangles, quad_triangles
 

@@ -6,11 +6,11 @@ texels the *visible triangles* can be looked up in. Checked here:
 
 * the rectangles of :func:`blinn_phong.shadows.kernels.receiver_triangle_rects` hold every
   texel that a look-up of any point on the triangles reads — recomputed with numpy from the
-  formulas of :func:`blinn_phong.shadows.visibility.shadow_visibility` (``_reference_taps``) at random
+  formulas of :func:`blinn_phong.shadows.maps.shadow_visibility` (``_reference_taps``) at random
   points of the triangles, their corners and edges, for triangles inside one face's cone,
   across the borders of several faces, and passing next to the light;
 * the frame equals, bit for bit, the general path (each pixel's world point written, then
-  :func:`blinn_phong.shadows.visibility.light_visibility` per light, then the kernel reads the
+  :func:`blinn_phong.shadows.methods.light_visibility` per light, then the kernel reads the
   visibilities): the same points, the same maps wherever a look-up reads, the same
   operations per look-up, the same shadow-pass sum — deterministic by construction (no
   threaded reduction), for every light type, the PCF kernels, the biases, unshadowed
@@ -25,7 +25,7 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong._scratch import ScratchPool, carve, carved_bytes
-from blinn_phong.shadows.visibility import light_cameras
+from blinn_phong.shadows.maps import light_cameras
 
 from .test_shadow_kernels import SCENE  # the shadow-kernel tests' casters
 from .test_shadow_receiver_maps import POINT, RES, _reference_taps

@@ -20,7 +20,8 @@ from blinn_phong.frame.visibility import frame_fragments
 from blinn_phong.geometry.raster import interpolate
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import DirectionalLight, PointLight
-from blinn_phong.shadows.visibility import light_visibility, planar_shadow_mask
+from blinn_phong.shadows.methods import light_visibility
+from blinn_phong.shadows.planar import planar_shadow_mask
 
 from .geometry import box_triangles, quad_triangles
 

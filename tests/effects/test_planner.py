@@ -8,7 +8,7 @@ from blinn_phong.model.scene import AmbientLight, DirectionalLight, LightModel, 
 from blinn_phong.planning.calibration import shipped_models
 from blinn_phong.planning.frame_plan import Fog, ShadowOptions
 from blinn_phong.planning.planner import plan
-from blinn_phong.shadows.visibility import light_visibility
+from blinn_phong.shadows.methods import light_visibility
 
 from .scenes import (
     flat_cube,
@@ -445,9 +445,10 @@ def test_plan_is_the_plan_render_follows_for_kay_greenberg_and_the_default_shadi
 
 
 def test_soft_shadows_do_not_depend_on_the_camera_and_say_how_many_rays(monkeypatch):
-    from blinn_phong.frame.pipeline import _soft_visibility
-    from blinn_phong.planning.frame_plan import ShadowOptions, _shadow_choice, embree_available
+    from blinn_phong.planning.frame_plan import ShadowOptions, _shadow_choice
     from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows.method import embree_available
+    from blinn_phong.shadows.soft import soft_visibility
 
     if not embree_available():
         pytest.skip("soft shadows cast rays with embreex")
@@ -459,10 +460,11 @@ def test_soft_shadows_do_not_depend_on_the_camera_and_say_how_many_rays(monkeypa
         raytrace, "area_light_visibility", lambda _s, _p, _n, *square, **_kw: squares.append(square)
     )
     params = {"samples_per_axis": 3, "radius": 0.4, "offset": 1e-3}
-    ray_scene = raytrace.RayScene(world_triangles(scene))
-    _soft_visibility(light, params, ray_scene, points, normals)
+    tris = world_triangles(scene)
+    ray_scene = raytrace.RayScene(tris)
+    soft_visibility(light, tris, points, normals, **params, ray_scene=ray_scene)
     near = points[:, 0] < 0  # what another camera might see
-    _soft_visibility(light, params, ray_scene, points[near], normals[near])
+    soft_visibility(light, tris, points[near], normals[near], **params, ray_scene=ray_scene)
     for a, b in zip(*squares, strict=True):
         np.testing.assert_array_equal(a, b)  # the same square light, whatever is visible
     corner, edge_u, edge_v = squares[0]

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.planning.frame_plan import embree_available
 from blinn_phong.planning.planner import plan
+from blinn_phong.shadows.method import embree_available
 from testbeds.planner_fuzz import TOLERANCES, check, random_scene, silhouette_tie_mask, terminator_mask
 
 pytestmark = pytest.mark.skipif(

@@ -11,7 +11,7 @@ light inside a sphere, scenes far from the origin where the offsets grow, float3
 import numpy as np
 import pytest
 
-from blinn_phong.frame.pipeline import _traced_hard, _world_triangles, _world_vertices
+from blinn_phong.frame.pipeline import _world_triangles, _world_vertices
 from blinn_phong.frame.prepared import prepare_scene
 from blinn_phong.geometry.raster_kernels import (
     nearest_winners_compiled,
@@ -19,7 +19,7 @@ from blinn_phong.geometry.raster_kernels import (
     winner_surfaces_compiled,
 )
 from blinn_phong.model.scene import Camera, Mesh, PointLight, Scene, look_at
-from blinn_phong.shadows.visibility import light_visibility
+from blinn_phong.shadows.methods import light_visibility
 
 from .volume_scenes import LIGHTS, casters, outside_camera, scene_with, sphere_mesh
 
@@ -41,14 +41,16 @@ def _surfaces(scene: Scene, width: int = 160, height: int = 120):
 def _check(scene: Scene, light) -> tuple[float, int]:
     """Assert culled == traced for ``light``; return the fraction of rays answered without Embree
     and the number answered "shadowed"."""
-    from blinn_phong.frame.pipeline import _ray_answers
     from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows.method import ShadowFrame
     from blinn_phong.shadows.ray_culling import LIT, SHADOWED, TRACE, caster_tables
+    from blinn_phong.shadows.ray_traced import _ray_answers, traced_hard
 
     points, normals, mesh_of, tris = _surfaces(scene)
     assert len(points) > 1000
     full = light_visibility("ray_traced", light, tris, points, normals, engine="numba")
-    culled = _traced_hard(scene, light, tris, points, normals, mesh_of, {})
+    frame = ShadowFrame(scene, tris, points, normals, True, mesh_of)
+    culled = traced_hard(frame, light, points, normals, mesh_of)
     np.testing.assert_array_equal(culled, full)
     centre = raytrace.cached_ray_scene(tris).centre
     answer = _ray_answers(light, points, normals, mesh_of, centre, caster_tables(scene, centre))
@@ -110,13 +112,14 @@ def test_point_light_inside_a_sphere_and_float32_coordinates():
 def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
     # Planar shadows with every caster between the plane and the light cast the plane's shadow
     # rays against the frame's BVH; the frame answers most of them by culling. Same answers.
-    from blinn_phong.frame.pipeline import _planar_hard
+    from blinn_phong.shadows.method import ShadowFrame
+    from blinn_phong.shadows.planar import planar_hard
 
     light = LIGHTS[light_name]
     scene = scene_with(casters("pair"), light, outside_camera())
     points, normals, mesh_of, tris = _surfaces(scene)
     plane = (0.0, 0.0, 1.0, 0.0)  # the ground quad of scene_with, z = 0
-    got = _planar_hard(scene, light, tris, points, normals, mesh_of, plane, {})
+    got = planar_hard(ShadowFrame(scene, tris, points, normals, True, mesh_of), light, plane)
     assert got is not None
     want = light_visibility("planar", light, tris, points, normals, plane=plane)
     np.testing.assert_array_equal(got, want)
@@ -124,4 +127,4 @@ def test_planar_shadows_by_culled_rays_equal_the_planar_method(light_name):
     # a caster below the plane is not between it and the light: the frame leaves it to the method
     sunk = scene_with([sphere_mesh((0.0, 0.0, -1.5), 0.7)], light, outside_camera())
     points, normals, mesh_of, tris = _surfaces(sunk)
-    assert _planar_hard(sunk, light, tris, points, normals, mesh_of, plane, {}) is None
+    assert planar_hard(ShadowFrame(sunk, tris, points, normals, True, mesh_of), light, plane) is None

@@ -19,7 +19,7 @@ import pytest
 import blinn_phong as bp
 from blinn_phong.frame.lighting import lights_in_eye_space, shade
 from blinn_phong.model.primitives import grid_plane
-from blinn_phong.shadows.visibility import caster_transmittance, shadow_transmittance
+from blinn_phong.shadows.transmittance import caster_transmittance, shadow_transmittance
 
 SIZE = 64  # pixels; the view spans x, y ∈ [-2, 2], 1/16 unit per pixel
 

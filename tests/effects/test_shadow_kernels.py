@@ -1,7 +1,7 @@
 """The compiled shadow kernels against the numpy reference, and ray-traced shadows far from the origin.
 
 * Shadow maps: :mod:`blinn_phong.shadows.kernels` renders the maps and looks them up with the
-  same formulas as the numpy reference in :mod:`blinn_phong.shadows.visibility`. The only arithmetic
+  same formulas as the numpy reference in :mod:`blinn_phong.shadows.maps`. The only arithmetic
   that differs is the 4×4 transform (a BLAS product in the reference, a fixed summation
   order in the kernel), so map depths agree to 1e-12 (observed: ≤ 1e-13) and coverage is
   identical; look-ups agree to 1e-9 (bilinear weights: observed ≤ 2e-13) with the usual
@@ -18,17 +18,13 @@ import pytest
 
 from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows import raytrace
+from blinn_phong.shadows.maps import PCF_KERNELS, light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.methods import light_visibility
 from blinn_phong.shadows.raytrace import (
     RayScene,
     area_light_visibility,
     directional_light_visibility,
     point_light_visibility,
-)
-from blinn_phong.shadows.visibility import (
-    PCF_KERNELS,
-    light_shadow_maps,
-    light_visibility,
-    shadow_map_visibility,
 )
 
 from .geometry import box_triangles, quad_triangles, uv_sphere_triangles
@@ -178,7 +174,7 @@ def test_visibility_at_inside_another_compiled_kernel(kind):
     import numba
 
     from blinn_phong.shadows.kernels import visibility_at
-    from blinn_phong.shadows.visibility import shadow_lookup
+    from blinn_phong.shadows.maps import shadow_lookup
 
     @numba.njit
     def shade(points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel):

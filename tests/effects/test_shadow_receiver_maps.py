@@ -11,10 +11,10 @@ and each look-up reads only texels inside its face's rectangle, so:
   (:func:`light_shadow_maps` then :func:`shadow_map_visibility`, both compiled). This is
   deterministic by construction: the same double-precision operations per texel and per point,
   a minimum that does not depend on the drawing order, no threaded reduction;
-* they agree with the numpy reference (:mod:`blinn_phong.shadows.visibility`) as the other compiled
+* they agree with the numpy reference (:mod:`blinn_phong.shadows.maps`) as the other compiled
   kernels do (1e-9; tests/effects/test_shadow_kernels.py explains the bound);
 * the rectangles hold every texel the reference's taps read: recomputed here with numpy from
-  the formulas of :func:`blinn_phong.shadows.visibility.shadow_visibility` (face of the major axis, normal
+  the formulas of :func:`blinn_phong.shadows.maps.shadow_visibility` (face of the major axis, normal
   offset, projection, the taps of each kernel clamped to the map).
 """
 
@@ -22,13 +22,8 @@ import numpy as np
 import pytest
 
 from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
-from blinn_phong.shadows.visibility import (
-    PCF_KERNELS,
-    light_cameras,
-    light_shadow_maps,
-    light_visibility,
-    shadow_map_visibility,
-)
+from blinn_phong.shadows.maps import PCF_KERNELS, light_cameras, light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.methods import light_visibility
 
 from .test_shadow_kernels import SCENE, surface_samples  # the shadow-kernel tests' scene
 

@@ -6,14 +6,9 @@ import numpy as np
 import pytest
 
 from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.shadows.maps import PCF_KERNELS, light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.planar import planar_shadow_mask, planar_shadow_matrix
 from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility
-from blinn_phong.shadows.visibility import (
-    PCF_KERNELS,
-    light_shadow_maps,
-    planar_shadow_mask,
-    planar_shadow_matrix,
-    shadow_map_visibility,
-)
 
 from .geometry import box_triangles, ground_points, quad_triangles, ray_box_distance
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
+from blinn_phong.shadows.maps import light_shadow_maps
 from blinn_phong.shadows.raytrace import world_triangles
-from blinn_phong.shadows.visibility import light_shadow_maps
 from oracles.gl_common import to_unorm8
 from testbeds.shadow_scenes import away_from_shadow_edges, two_spheres_over_ground
 
@@ -45,7 +45,7 @@ LIGHT_SETS = {
     ],
     "spot": [bp.SpotLight((0.0, 5.0, 1.0), (0.0, -1.0, -0.2), cutoff=50.0, color=(0.9, 0.9, 0.8))],
 }
-SLOPE = {"nearest": 2.0, "bilinear": 3.0, "box3": 3.0, "box5": 5.0}  # 1 + 2h: shadows.visibility
+SLOPE = {"nearest": 2.0, "bilinear": 3.0, "box3": 3.0, "box5": 5.0}  # 1 + 2h: shadows.maps
 
 
 @pytest.mark.parametrize("lights", list(LIGHT_SETS))

@@ -71,8 +71,8 @@ def _held_out_shadow_scene() -> tuple[bp.Scene, float]:
 
 
 def test_shadow_map_model_bounds_a_held_out_scene() -> None:
+    from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
     from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, world_triangles
-    from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
 
     scene, r_min = _held_out_shadow_scene()
     light = scene.lights[0]
@@ -153,8 +153,8 @@ def test_the_planner_keeps_transparency_within_the_tolerance(tolerance: float) -
 
 @pytest.mark.parametrize("tolerance", [1.0, 16.0, 64.0])
 def test_the_planner_keeps_shadows_within_the_tolerance(tolerance: float) -> None:
+    from blinn_phong.shadows.methods import light_visibility
     from blinn_phong.shadows.raytrace import world_triangles
-    from blinn_phong.shadows.visibility import light_visibility
 
     scene, _ = _held_out_shadow_scene()
     light = scene.lights[0]

@@ -22,7 +22,7 @@ import pytest
 
 import blinn_phong as bp
 from blinn_phong.model.primitives import grid_plane, uv_sphere
-from blinn_phong.planning.frame_plan import embree_available
+from blinn_phong.shadows.method import embree_available
 
 STEP = 1.0 / 255.0
 

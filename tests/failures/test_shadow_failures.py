@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import blinn_phong as bp
-from blinn_phong.shadows.visibility import light_shadow_maps, shadow_map_visibility
+from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
 from testbeds.error_metrics import error_metrics, has_nonfinite
 
 LIGHT = bp.DirectionalLight((0.5, 0.0, -1.0))

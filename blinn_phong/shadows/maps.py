@@ -1,4 +1,4 @@
-"""Shadow maps for directional, spot and point lights; planar projected ("fake") shadows.
+"""Shadow maps for directional, spot and point lights (the ``shadow_map`` method).
 
 Shadow mapping (Williams, "Casting curved shadows on curved surfaces", SIGGRAPH '78):
 render the scene's depth from the light with :func:`blinn_phong.geometry.raster.rasterize`, then a
@@ -22,12 +22,6 @@ surface point is lit when its own light-space depth is not behind the stored dep
   away in x and y meets the receiver's own depth up to ``2·h·m`` away, so wider kernels need
   ``slope_bias ≳ 1 + 2h`` (h = 1 for bilinear, (k − 1)/2 for box k) to stay free of acne.
 
-Planar projected shadows (Blinn, "Me and my (fake) shadow", IEEE CG&A 8(1) 1988): the
-matrix ``M = (π·l) I − l πᵀ`` flattens geometry onto the plane ``π = (a, b, c, d)`` from
-the homogeneous light ``l`` (w = 0 directional, w = 1 positional). Cheap, exact on that
-one plane, and only there: no shadows on other receivers, and casters on the far side of
-the plane or behind the light still cast.
-
 Engines: every shadow-map function takes ``engine``: ``numpy`` runs the code in this module
 (the readable reference), ``numba`` the compiled twins of :mod:`blinn_phong.shadows.kernels`
 (same formulas; depths within 1e-12, visibilities within 1e-9), ``auto`` (the default) the
@@ -41,15 +35,12 @@ caster was drawn.
 
 from __future__ import annotations
 
-import contextlib
-import contextvars
-import weakref
-from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from blinn_phong._numba import ENGINES, numba_available, use_compiled
+from blinn_phong._numba import numba_available, use_compiled
 from blinn_phong.geometry.raster import rasterize
 from blinn_phong.model.scene import (
     DirectionalLight,
@@ -59,28 +50,8 @@ from blinn_phong.model.scene import (
     orthographic_matrix,
     perspective_matrix,
 )
-
-__all__ = [
-    "ENGINES",
-    "PCF_KERNELS",
-    "SHADOW_METHODS",
-    "ShadowLookup",
-    "ShadowMap",
-    "caster_transmittance",
-    "light_cameras",
-    "light_shadow_maps",
-    "light_visibility",
-    "map_matrices",
-    "mesh_shadow_transmittance",
-    "planar_shadow_mask",
-    "planar_shadow_matrix",
-    "render_shadow_map",
-    "shadow_lookup",
-    "shadow_map_visibility",
-    "shadow_transmittance",
-    "shadow_visibility",
-    "trusted_arrays",
-]
+from blinn_phong.shadows._inputs import checked_points, checked_triangles, homogeneous
+from blinn_phong.shadows.method import ShadowMethod
 
 #: The percentage-closer filtering kernels :func:`shadow_visibility` accepts.
 PCF_KERNELS: tuple[str, ...] = ("nearest", "bilinear", "box3", "box5", "box7")
@@ -102,47 +73,6 @@ class ShadowMap:
         return self.depth.shape  # type: ignore[return-value]
 
 
-#: ids of float64 arrays already checked by the light_visibility call running in this context
-_CHECKED: contextvars.ContextVar[frozenset[int]] = contextvars.ContextVar("checked", default=frozenset())
-
-
-@contextlib.contextmanager
-def trusted_arrays(*arrays: np.ndarray) -> Iterator[None]:
-    """Inside the block the shadow functions skip the shape and finiteness checks of these arrays.
-
-    For a caller that made them itself (the frame pipeline's world points, face normals and
-    caster triangles, finite float64 arrays of the right shapes): a 1.3 M-point frame then checks
-    its points once, not once per light. Arrays not listed are checked as usual.
-    """
-    token = _CHECKED.set(_CHECKED.get() | frozenset(id(a) for a in arrays))
-    try:
-        yield
-    finally:
-        _CHECKED.reset(token)
-
-
-def _triangles(name: str, value: np.ndarray) -> np.ndarray:
-    tris = np.asarray(value)
-    if id(tris) in _CHECKED.get():
-        return tris
-    if tris.dtype.kind not in "fiu" or tris.ndim != 3 or tris.shape[1:] != (3, 3):
-        raise ValueError(f"{name} must be a real array of shape (n, 3, 3), got {tris.dtype} {tris.shape}")
-    if not np.all(np.isfinite(tris)):
-        raise ValueError(f"{name} must be finite, got NaN or Inf")
-    return tris.astype(np.float64, copy=False)
-
-
-def _points(name: str, value: np.ndarray) -> np.ndarray:
-    arr = np.asarray(value)
-    if id(arr) in _CHECKED.get():
-        return arr
-    if arr.dtype.kind not in "fiu" or arr.ndim != 2 or arr.shape[1] != 3:
-        raise ValueError(f"{name} must be a real array of shape (n, 3), got {arr.dtype} {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got NaN or Inf")
-    return arr.astype(np.float64, copy=False)
-
-
 def _lookup_normals(
     p: np.ndarray, normals: np.ndarray | None, normal_offset: float, kernel: str
 ) -> np.ndarray | None:
@@ -153,14 +83,10 @@ def _lookup_normals(
         return None
     if normals is None:
         raise ValueError("normals are required when normal_offset != 0")
-    n = _points("normals", normals)
+    n = checked_points("normals", normals)
     if n.shape != p.shape:
         raise ValueError(f"normals must have the shape of points {p.shape}, got {n.shape}")
     return n
-
-
-def _homogeneous(points: np.ndarray) -> np.ndarray:
-    return np.concatenate([points, np.ones((len(points), 1))], axis=1)
 
 
 def render_shadow_map(
@@ -189,7 +115,7 @@ def render_shadow_map(
     Returns:
         :class:`ShadowMap` with the biased nearest depth per texel (1 where empty).
     """
-    tris = _triangles("world_triangles", world_triangles)
+    tris = checked_triangles("world_triangles", world_triangles)
     if not isinstance(resolution, int | np.integer) or resolution < 1:
         raise ValueError(f"resolution must be an integer >= 1, got {resolution!r}")
     if constant_bias < 0 or slope_bias < 0:
@@ -201,7 +127,7 @@ def render_shadow_map(
 
         depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
         return ShadowMap(depth_map, np.asarray(view, float), np.asarray(projection, float))
-    clip = _homogeneous(tris.reshape(-1, 3)) @ vp.T
+    clip = homogeneous(tris.reshape(-1, 3)) @ vp.T
     index = np.arange(len(clip)).reshape(-1, 3)
     frags = rasterize(clip, index, res, res)
     depth = np.ones(res * res)
@@ -259,7 +185,7 @@ def shadow_visibility(
     Returns:
         (n,) float64 visibility in [0, 1].
     """
-    p = _points("points", points)
+    p = checked_points("points", points)
     n = _lookup_normals(p, normals, normal_offset, kernel)
     if use_compiled(engine):
         from blinn_phong.shadows.kernels import lookup_compiled
@@ -282,7 +208,7 @@ def shadow_visibility(
         n = np.where((towards < 0)[:, None], -n, n)
         p = p + normal_offset * n
     res_y, res_x = shadow_map.depth.shape
-    clip = _homogeneous(p) @ (shadow_map.projection @ shadow_map.view).T
+    clip = homogeneous(p) @ (shadow_map.projection @ shadow_map.view).T
     w = clip[:, 3]
     front = w > 0
     ndc = clip[:, :3] / np.where(front, w, 1.0)[:, None]
@@ -367,7 +293,7 @@ def light_shadow_maps(
     Returns:
         A list with one :class:`ShadowMap` (directional, spot) or six (point).
     """
-    tris = _triangles("world_triangles", world_triangles)
+    tris = checked_triangles("world_triangles", world_triangles)
     cameras = light_cameras(light, tris)
     if (
         len(cameras) == 6
@@ -411,7 +337,7 @@ def light_cameras(
     Returns:
         One (view, projection) pair, or six for a cube.
     """
-    tris = _triangles("world_triangles", world_triangles)
+    tris = checked_triangles("world_triangles", world_triangles)
     centre, radius = _bounds(tris)
     if isinstance(light, DirectionalLight):
         d = np.asarray(light.direction, dtype=np.float64)
@@ -465,7 +391,7 @@ def shadow_map_visibility(
     Returns:
         (n,) float64 visibility in [0, 1].
     """
-    p = _points("points", points)
+    p = checked_points("points", points)
     if len(maps) == 1:
         return shadow_visibility(
             maps[0], p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
@@ -580,257 +506,6 @@ def shadow_lookup(
     )
 
 
-def planar_shadow_matrix(
-    plane: np.ndarray | tuple[float, ...], light: np.ndarray | tuple[float, ...]
-) -> np.ndarray:
-    """Blinn's projection onto a plane from a light: ``M = (π·l) I − l πᵀ``.
-
-    Args:
-        plane: ``(a, b, c, d)`` with the plane ``a·x + b·y + c·z + d = 0`` (world space).
-        light: homogeneous light ``(x, y, z, w)``: w = 1 for a point light at (x, y, z),
-            w = 0 for a directional light whose light lies towards (x, y, z).
-
-    Returns:
-        4×4 matrix acting on homogeneous column vectors; divide by w after applying it.
-    """
-    pl = np.asarray(plane, dtype=np.float64)
-    lt = np.asarray(light, dtype=np.float64)
-    if pl.shape != (4,) or lt.shape != (4,) or not (np.all(np.isfinite(pl)) and np.all(np.isfinite(lt))):
-        raise ValueError(f"plane and light must each be 4 finite numbers, got {plane!r} and {light!r}")
-    if np.linalg.norm(pl[:3]) == 0:
-        raise ValueError(f"plane normal (a, b, c) must not be zero, got {plane!r}")
-    dot = float(pl @ lt)
-    if dot == 0:
-        raise ValueError("the light lies in the plane (or is parallel to it): no projection exists")
-    return dot * np.eye(4) - np.outer(lt, pl)
-
-
-def planar_shadow_mask(
-    occluder_triangles: np.ndarray,
-    plane: np.ndarray | tuple[float, ...],
-    light: np.ndarray | tuple[float, ...],
-    points: np.ndarray,
-) -> np.ndarray:
-    """Fake shadows: which points of the plane fall inside the flattened occluders.
-
-    Args:
-        occluder_triangles: (n, 3, 3) world-space triangles of the shadow casters.
-        plane: ``(a, b, c, d)``, see :func:`planar_shadow_matrix`.
-        light: homogeneous light, see :func:`planar_shadow_matrix`.
-        points: (m, 3) points on the plane.
-
-    Returns:
-        (m,) float64 visibility: 0 inside a projected occluder, 1 elsewhere.
-    """
-    tris = _triangles("occluder_triangles", occluder_triangles)
-    p = _points("points", points)
-    m = planar_shadow_matrix(plane, light)
-    proj = _homogeneous(tris.reshape(-1, 3)) @ m.T
-    w = proj[:, 3].reshape(-1, 3)
-    # a vertex level with a point light projects to infinity: such triangles are dropped
-    finite = np.all(
-        np.abs(w) > 1e-12 * np.abs(proj[:, :3]).reshape(-1, 9).max(axis=1, initial=1.0)[:, None], axis=1
-    )
-    proj = proj.reshape(-1, 3, 4)[finite]
-    flat = proj[:, :, :3] / proj[:, :, 3:4]
-    # point-in-triangle for every point at once: a short ray across the plane through the
-    # flattened triangles, answered by Embree's BVH (edge-on, zero-area triangles never hit)
-    from blinn_phong.shadows.raytrace import RayScene
-
-    nrm = np.asarray(plane, dtype=np.float64)[:3]
-    nrm = nrm / np.linalg.norm(nrm)
-    if len(flat) == 0 or len(p) == 0:
-        return np.ones(len(p))
-    scale = max(float(np.abs(np.concatenate([flat.reshape(-1, 3), p])).max()), 1.0)
-    h = 1e-3 * scale
-    shadowed = RayScene(flat).occluded(p + h * nrm, np.broadcast_to(-nrm, p.shape), 2 * h)
-    return 1.0 - shadowed.astype(np.float64)
-
-
-def shadow_transmittance(material: object) -> np.ndarray:
-    """(3,) RGB fraction of light a surface of ``material`` lets through, for shadow rays.
-
-    By the material's transparency model (docs/transparency_models.md): an opaque material
-    (``not material.transparent``) 0; ``partial_occlusion`` — the surface covers the fraction α,
-    so ``1 − α`` of the light passes (Porter & Duff's ``over`` for the light); ``absorption`` —
-    the grey filter ``T = 1 − α`` the renderer gives it; ``emission`` — it only adds light and
-    hides nothing: 1. A material whose opacity varies over the surface (a base-colour texture, an
-    alpha clip, Kay–Greenberg) has no single transmittance: 0, a full shadow, as before coloured
-    shadows existed. Specular wash-out depends on the viewer, not the light: the base opacity counts.
-
-    Args:
-        material: a :class:`blinn_phong.model.scene.Material`.
-
-    Returns:
-        (3,) float64 in [0, 1].
-    """
-    if not material.transparent or material.textured or material.kay_greenberg is not None:  # type: ignore[attr-defined]
-        return np.zeros(3)
-    if material.transparency_model == "emission":  # type: ignore[attr-defined]
-        return np.ones(3)
-    return np.full(3, 1.0 - float(material.opacity))  # type: ignore[attr-defined]
-
-
-def mesh_shadow_transmittance(mesh: object, two_sided: bool) -> np.ndarray:
-    """(3,) RGB transmittance of a mesh as a shadow caster: :func:`shadow_transmittance` of its material.
-
-    Under two-sided lighting (``two_sided``) a mesh whose back material lets through other light
-    than its front one casts a full shadow (0): a shadow ray may cross either side.
-    """
-    t = shadow_transmittance(mesh.material)  # type: ignore[attr-defined]
-    back = mesh.back_material  # type: ignore[attr-defined]
-    if two_sided and back is not None and not np.array_equal(t, shadow_transmittance(back)):
-        return np.zeros(3)
-    return t
-
-
-def caster_transmittance(scene: object) -> np.ndarray | None:
-    """(T, 3) per-triangle RGB transmittance of a scene's shadow casters, or None when every caster is opaque.
-
-    Triangles of the meshes with ``casts_shadows``, in scene order (the order of the frame's
-    caster triangles), each with :func:`mesh_shadow_transmittance` of its mesh.
-
-    Args:
-        scene: a :class:`blinn_phong.model.scene.Scene`.
-
-    Returns:
-        (T, 3) float64 in [0, 1], or None.
-    """
-    two_sided = scene.light_model.two_sided  # type: ignore[attr-defined]
-    parts, any_light = [], False
-    for mesh in scene.meshes:  # type: ignore[attr-defined]
-        if not mesh.casts_shadows:
-            continue
-        t = mesh_shadow_transmittance(mesh, two_sided)
-        any_light = any_light or bool(np.any(t > 0))
-        parts.append(np.broadcast_to(t, (len(mesh.triangles), 3)))
-    if not any_light:
-        return None
-    return np.ascontiguousarray(np.concatenate(parts))
-
-
-#: Shadow methods :func:`light_visibility` dispatches (the planner's shadow choices).
-SHADOW_METHODS: tuple[str, ...] = ("none", "planar", "shadow_map", "ray_traced", "shadow_volume")
-
-
-def light_visibility(
-    method: str,
-    light: DirectionalLight | PointLight | SpotLight,
-    world_triangles: np.ndarray,
-    points: np.ndarray,
-    normals: np.ndarray,
-    *,
-    resolution: int = 1024,
-    constant_bias: float = 1e-4,
-    slope_bias: float = 2.0,
-    kernel: str = "nearest",
-    plane: np.ndarray | tuple[float, ...] | None = None,
-    caster_triangles: np.ndarray | None = None,
-    normal_offset: float = 0.0,
-    engine: str = "auto",
-    transmittance: np.ndarray | None = None,
-    **volume_options: object,
-) -> np.ndarray:
-    """Visibility of points for one light by a named method (a planner choice).
-
-    Args:
-        method: one of :data:`SHADOW_METHODS`.
-        light: the light.
-        world_triangles: (n, 3, 3) every triangle of the scene, world space.
-        points: (m, 3) world-space receiver points.
-        normals: (m, 3) their normals.
-        resolution: shadow-map size for ``shadow_map``.
-        constant_bias: see :func:`render_shadow_map`.
-        slope_bias: see :func:`render_shadow_map`.
-        kernel: PCF kernel for ``shadow_map``.
-        plane: ``(a, b, c, d)`` receiving plane for ``planar``.
-        caster_triangles: casters for ``planar`` (default: every triangle not in the plane).
-        normal_offset: receiver offset along the normal for ``shadow_map`` (world units).
-        engine: ``shadow_map`` maps and look-ups by the numpy reference (``numpy``), the
-            compiled kernels (``numba``) or ``auto``; see :func:`render_shadow_map`.
-        transmittance: optional (n, 3) per-triangle RGB transmittance in [0, 1] (1 − α for
-            partial occlusion, the per-channel transmittance for absorption, 0 for opaque):
-            transparent casters then cast coloured shadows
-            (:func:`blinn_phong.shadows.raytrace.transmitted_light`) and the result is (m, 3).
-            Only ``none`` and ``ray_traced`` accept it.
-        volume_options: for ``shadow_volume``: the keyword arguments of
-            :func:`blinn_phong.shadows.volume.shadow_volume_visibility` (``camera``, ``method``...).
-
-    Returns:
-        (m,) float64 visibility in [0, 1]; (m, 3) per channel when ``transmittance`` is given.
-    """
-    p = _points("points", points)
-    if volume_options and method != "shadow_volume":
-        raise TypeError(f"light_visibility: {sorted(volume_options)} are for shadow_volume, not {method}")
-    if transmittance is not None:
-        if method == "none":
-            return np.ones((len(p), 3))
-        if method != "ray_traced":
-            raise ValueError(
-                f"transmittance: coloured shadows are ray traced; method {method!r} casts full "
-                "shadows only (use 'ray_traced' or pass transmittance=None)"
-            )
-        from blinn_phong.shadows.raytrace import cached_ray_scene, transmitted_light
-
-        tris = _triangles("world_triangles", world_triangles)
-        scene = cached_ray_scene(tris)
-        if isinstance(light, DirectionalLight):
-            return transmitted_light(scene, p, normals, -np.asarray(light.direction), transmittance)
-        return transmitted_light(scene, p, normals, light.position, transmittance, positional=True)
-    if method == "none":
-        return np.ones(len(p))
-    tris = _triangles("world_triangles", world_triangles)
-    # p and tris are checked: the functions called below need not check them again
-    token = _CHECKED.set(frozenset((id(p), id(tris))))
-    try:
-        return _light_visibility_checked(
-            method, light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, plane,
-            caster_triangles, normal_offset, engine, volume_options,
-        )  # fmt: skip
-    finally:
-        _CHECKED.reset(token)
-
-
-#: The last :func:`_on_plane` answer: (weak reference to the points, plane bytes, result). The
-#: lights of a frame test the same points against the same plane; the weak reference makes sure
-#: the points are the very same array, still alive (an id alone could be reused).
-_ON_PLANE: list[tuple[object, bytes, tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
-
-
-def _on_plane(p: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(mask, points, normals): the points within ``1e-6·max|p|`` of the plane (the receivers of
-    planar shadows), and the plane's normal for each, contiguous; reused for the frame's next light."""
-    key = plane.tobytes()
-    for ref, k, result in _ON_PLANE:
-        if k == key and ref() is p:  # type: ignore[operator]
-            return result
-    scale = max(float(-p.min()), float(p.max()), 1.0) if len(p) else 1.0
-    mask = np.abs(p @ plane[:3] + plane[3]) <= 1e-6 * scale
-    q = p[mask]
-    normals = np.empty_like(q)
-    normals[:] = plane[:3]
-    result = (mask, q, normals)
-    try:
-        _ON_PLANE[:] = [(weakref.ref(p), key, result)]
-    except TypeError:  # an array that takes no weak reference: not kept
-        _ON_PLANE.clear()
-    return result
-
-
-def _casters_between(height: np.ndarray, plane: np.ndarray, light: np.ndarray) -> bool:
-    """True when every caster corner (signed ``height`` above ``plane``) lies on the light's side of
-    the plane and, for a positional light, below the light's own height."""
-    if len(height) == 0:
-        return False
-    side = float(plane @ light)  # > 0: the light is on the positive side (w = 0: its direction)
-    if side == 0:
-        return False
-    h = height if side > 0 else -height
-    if h.min() < 0:
-        return False
-    return bool(light[3] == 0 or h.max() < abs(side))
-
-
 def _receiver_visibility(
     light: DirectionalLight | PointLight | SpotLight,
     tris: np.ndarray,
@@ -897,86 +572,53 @@ def map_matrices(
     )
 
 
-def _light_visibility_checked(
-    method: str,
+def map_visibility(
     light: DirectionalLight | PointLight | SpotLight,
     tris: np.ndarray,
     p: np.ndarray,
-    normals: np.ndarray,
-    resolution: int,
-    constant_bias: float,
-    slope_bias: float,
-    kernel: str,
-    plane: np.ndarray | tuple[float, ...] | None,
-    caster_triangles: np.ndarray | None,
-    normal_offset: float,
-    engine: str,
-    volume_options: dict[str, object],
+    normals: np.ndarray | None,
+    *,
+    resolution: int = 1024,
+    constant_bias: float = 1e-4,
+    slope_bias: float = 2.0,
+    kernel: str = "nearest",
+    normal_offset: float = 0.0,
+    engine: str = "auto",
 ) -> np.ndarray:
-    if method == "ray_traced":
-        from blinn_phong.shadows.raytrace import (
-            cached_ray_scene,
-            directional_light_visibility,
-            point_light_visibility,
+    """(m,) visibility of the (m, 3) points ``p`` by ``light``'s shadow map(s) of the (n, 3, 3)
+    casters ``tris`` (both checked by the caller): :func:`light_shadow_maps` then
+    :func:`shadow_map_visibility` (numpy), or with the compiled engine only the texels the
+    look-ups read (:func:`_receiver_visibility`, bit-identical)."""
+    if use_compiled(engine):
+        return _receiver_visibility(
+            light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, normal_offset
         )
+    maps = light_shadow_maps(
+        light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias, engine=engine
+    )
+    return shadow_map_visibility(
+        light, maps, p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
+    )
 
-        scene = cached_ray_scene(tris)  # one BVH for every light of a frame
-        if isinstance(light, DirectionalLight):
-            return directional_light_visibility(
-                scene, p, normals, -np.asarray(light.direction), engine=engine
-            )
-        return point_light_visibility(scene, p, normals, light.position, engine=engine)
-    if method == "shadow_volume":
-        from blinn_phong.shadows.volume import shadow_volume_visibility
 
-        return shadow_volume_visibility(light, tris, p, normals, **volume_options)  # type: ignore[arg-type]
-    if method == "shadow_map":
-        if use_compiled(engine):
-            return _receiver_visibility(
-                light, tris, p, normals, resolution, constant_bias, slope_bias, kernel, normal_offset
-            )
-        maps = light_shadow_maps(
-            light, tris, resolution, constant_bias=constant_bias, slope_bias=slope_bias, engine=engine
-        )
-        return shadow_map_visibility(
-            light, maps, p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
-        )
-    if method == "planar":
-        if plane is None:
-            raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
-        pl = np.asarray(plane, dtype=np.float64)
-        if isinstance(light, DirectionalLight):
-            homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
-        else:
-            homogeneous_light = np.r_[np.asarray(light.position), 1.0]
-        on_plane, q, q_normals = _on_plane(p, pl)
-        vis = np.ones(len(p))
-        between = False
-        if caster_triangles is None:
-            height = tris @ pl[:3] + pl[3]  # (n, 3) signed heights (times |(a, b, c)|) of the corners
-            off_plane = np.abs(height).max(axis=1) > 1e-9 * max(np.abs(tris).max(), 1.0)
-            caster_triangles = tris[off_plane]
-            between = _casters_between(height[off_plane], pl, homogeneous_light)
-        if not (len(caster_triangles) and on_plane.any()):
-            return vis
-        if between:
-            # every caster lies between the plane and the light: a point of the plane is inside a
-            # flattened caster exactly when its segment (ray) to the light crosses that caster, so
-            # the frame's one BVH answers it (cached_ray_scene, shared with every other light)
-            # instead of a new BVH of flattened triangles per light
-            from blinn_phong.shadows.raytrace import (
-                cached_ray_scene,
-                directional_light_visibility,
-                point_light_visibility,
-            )
+def _choice_params(options: Any, planned: Any) -> tuple[dict, str]:
+    params: dict[str, object] = {"resolution": options.resolution or planned.params.get("resolution", 1024)}
+    for name in ("constant_bias", "slope_bias", "kernel"):
+        if getattr(options, name) is not None:
+            params[name] = getattr(options, name)
+    return params, ""
 
-            scene = cached_ray_scene(tris)
-            towards = homogeneous_light[:3]
-            if homogeneous_light[3] == 0:
-                vis[on_plane] = directional_light_visibility(scene, q, q_normals, towards, engine=engine)
-            else:
-                vis[on_plane] = point_light_visibility(scene, q, q_normals, towards, engine=engine)
-            return vis
-        vis[on_plane] = planar_shadow_mask(caster_triangles, pl, homogeneous_light, q)
-        return vis
-    raise ValueError(f"method must be one of {SHADOW_METHODS}, got {method!r}")
+
+METHOD = ShadowMethod(
+    name="shadow_map",
+    title="a shadow map",
+    summary="the scene's depth from the light, looked up per point (Williams 1978), with bias and PCF",
+    exact=False,
+    coloured=False,
+    uses_rays=False,
+    without_embree=None,
+    cost_model="shadow_map",
+    parameters=("resolution", "constant_bias", "slope_bias", "kernel", "normal_offset", "engine"),
+    visibility=map_visibility,
+    choice_params=_choice_params,
+)
