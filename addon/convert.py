@@ -30,18 +30,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from blinn_phong.model.scene import (
-    AmbientLight,
-    Camera,
-    DirectionalLight,
-    LightLink,
-    LightModel,
-    Material,
-    Mesh,
-    PointLight,
-    Scene,
-    SpotLight,
-)
+from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Camera, LightLink, LightModel, Material, Mesh, Scene
 
 from . import compat, mapping, textures
 from .options import RenderOptions

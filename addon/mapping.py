@@ -23,7 +23,7 @@ from typing import Literal
 
 import numpy as np
 
-from blinn_phong.model.scene import orthographic_matrix
+from blinn_phong.model.transforms import orthographic_matrix
 
 __all__ = [
     "BLENDER_EMPTY_DEPTH",

@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from blinn_phong import Cryptomatte, Fog, LightGroups, ShadowOptions, render
-from blinn_phong.model.scene import AmbientLight, Scene
+from blinn_phong.model.lights import AmbientLight
+from blinn_phong.model.scene import Scene
 from compositing._kernel_cache import compile_clock
 
 from .options import SHADOW_SETTINGS, TRANSPARENCY_SETTINGS, RenderOptions, deep_output_problem
@@ -65,7 +66,9 @@ def warm_kernels(requested: str = "AUTO") -> float:
     kernels, _warning = kernel_engine(requested)
     if kernels != "numba" or kernels in _WARMED:
         return 0.0
-    from blinn_phong.model.scene import Camera, DirectionalLight, Mesh, orthographic_matrix
+    from blinn_phong.model.lights import DirectionalLight
+    from blinn_phong.model.scene import Camera, Mesh
+    from blinn_phong.model.transforms import orthographic_matrix
 
     started = time.perf_counter()
     tiny = Scene(

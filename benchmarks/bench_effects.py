@@ -42,8 +42,10 @@ from blinn_phong.effects.oit import (
 )
 from blinn_phong.frame.render import prepare_scene, shade_fragments
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.model.primitives import grid_plane, uv_sphere
-from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.model.scene import Camera, Material, Mesh, Scene
+from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows.maps import light_shadow_maps, shadow_map_visibility
 from blinn_phong.shadows.planar import planar_shadow_mask
 from blinn_phong.shadows.raytrace import (

@@ -41,8 +41,10 @@ import numpy as np
 from benchmarks._util import machine_info, save_figure, time_interleaved, write_json
 from blinn_phong.frame.render import prepare_scene, render
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.model.primitives import grid_plane, uv_sphere
-from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
+from blinn_phong.model.scene import Camera, Material, Mesh, Scene
+from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows import volume as sv
 from blinn_phong.shadows.methods import light_visibility
 

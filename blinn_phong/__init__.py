@@ -26,22 +26,10 @@ from blinn_phong.frame.render import (
 )
 from blinn_phong.frame.visibility import visible_fragments
 from blinn_phong.geometry.raster import Fragments, interpolate, rasterize, resolve_nearest
-from blinn_phong.model.scene import (
-    AmbientLight,
-    Camera,
-    DirectionalLight,
-    LightLink,
-    LightModel,
-    Material,
-    Mesh,
-    PointLight,
-    Scene,
-    SpotLight,
-    look_at,
-    orthographic_matrix,
-    perspective_matrix,
-)
+from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Camera, LightLink, LightModel, Material, Mesh, Scene
 from blinn_phong.model.texture import Texture
+from blinn_phong.model.transforms import look_at, orthographic_matrix, perspective_matrix
 from blinn_phong.planning.frame_plan import Fog, ShadowOptions
 from blinn_phong.planning.planner import Choice, Plan, plan
 from compositing._kernel_cache import register_package

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from blinn_phong.frame.lighting import lights_in_eye_space
-from blinn_phong.model.scene import AmbientLight, Scene
+from blinn_phong.model.lights import AmbientLight
+from blinn_phong.model.scene import Scene
 from blinn_phong.shadows.maps import PCF_KERNELS, light_cameras
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer, blinn_phong_main, compile_program, world_triangles

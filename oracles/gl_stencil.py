@@ -33,7 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, Scene, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Scene
 from oracles.egl import gl_context
 from oracles.gl_common import Framebuffer, world_triangles
 

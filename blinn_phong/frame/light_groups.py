@@ -39,8 +39,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from blinn_phong.model.lights import AmbientLight
 from blinn_phong.model.linking import links_of_lights
-from blinn_phong.model.scene import AmbientLight, Material, Scene
+from blinn_phong.model.scene import Material, Scene
 
 __all__ = ["LightGroups"]
 

@@ -20,7 +20,8 @@ with ``u ⊙ v = max(u·v, 0)``,
   coordinates); it differs from the world-space distance when the view matrix scales or shears;
 * ``spot_i = (-l_i ⊙ s_i)^exponent`` if ``-l_i·s_i >= cos(cutoff)``, else 0; 1 for non-spots;
 * ``vis_i`` an optional per-point, per-light visibility in [0, 1] (shadows), 1 by default;
-* ``I_amb`` the :class:`~blinn_phong.model.scene.AmbientLight` radiances, ``a_cs`` the scene's global ambient.
+* ``I_amb`` the :class:`~blinn_phong.model.lights.AmbientLight` radiances, ``a_cs`` the scene's global
+  ambient.
 
 Alpha is the material opacity (the alpha of ``d_cm``). Colours are linear and
 not clamped here; the GL-compatibility clamp is the separate, explicit
@@ -45,16 +46,8 @@ import numpy as np
 
 from blinn_phong._checks import float_array
 from blinn_phong._numba import use_compiled
-from blinn_phong.geometry.normals import normalize
-from blinn_phong.model.scene import (
-    AmbientLight,
-    DirectionalLight,
-    Light,
-    LightModel,
-    Material,
-    PointLight,
-    SpotLight,
-)
+from blinn_phong.model.lights import Light
+from blinn_phong.model.scene import LightModel, Material
 
 __all__ = [
     "UNIT_NORMAL_TOLERANCE",
@@ -112,30 +105,17 @@ def lights_in_eye_space(lights: Sequence[Light], view: np.ndarray) -> EyeLights:
     AmbientLights are summed into ``ambient_lights``.
     """
     view = np.asarray(view, dtype=np.float64)
-    rot = view[:3, :3]
     rows = []
     ambient_sum = np.zeros(3)
     for index, light in enumerate(lights):
-        if isinstance(light, AmbientLight):
+        eye_space = getattr(light, "eye_space", None)
+        if eye_space is None:
+            raise TypeError(f"lights[{index}]: unsupported light type {type(light).__name__}")
+        row = eye_space(view)
+        if row is None:  # an ambient light: no position, its radiance joins the ambient term
             ambient_sum += np.asarray(light.radiance)
             continue
-        spot_dir = np.zeros(3)
-        cos_cut, exponent = -np.inf, 0.0
-        if isinstance(light, DirectionalLight):
-            towards = normalize(rot @ -np.asarray(light.direction))
-            pos = np.r_[towards, 0.0]
-            att = (1.0, 0.0, 0.0)
-        elif isinstance(light, PointLight | SpotLight):
-            pos = view @ np.r_[light.position, 1.0]
-            att = (light.constant, light.linear, light.quadratic)
-            if isinstance(light, SpotLight):
-                spot_dir = normalize(rot @ np.asarray(light.direction))
-                cos_cut, exponent = np.cos(np.radians(light.cutoff)), light.exponent
-        else:
-            raise TypeError(f"lights[{index}]: unsupported light type {type(light).__name__}")
-        rows.append(
-            (pos, spot_dir, cos_cut, exponent, att, light.ambient, light.diffuse, light.specular, index)
-        )
+        rows.append((*row, light.ambient, light.diffuse, light.specular, index))
     n = len(rows)
 
     def col(i: int, shape: tuple[int, ...]) -> np.ndarray:

@@ -64,8 +64,9 @@ from blinn_phong.geometry.raster_kernels import (
     setup_triangles_compiled,
     winner_surfaces_compiled,
 )
+from blinn_phong.model.lights import AmbientLight
 from blinn_phong.model.linking import holdout_meshes, linked_visibility, lit_links
-from blinn_phong.model.scene import AmbientLight, Camera, Scene
+from blinn_phong.model.scene import Camera, Scene
 from blinn_phong.planning.planner import Plan
 from blinn_phong.shadows.method import ShadowFrame
 from blinn_phong.shadows.methods import frame_visibility, shadow_method, trusted_arrays

@@ -28,7 +28,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from blinn_phong.geometry.normals import vertex_normals
-from blinn_phong.model.scene import DirectionalLight, Mesh, PointLight, Scene, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Mesh, Scene
 
 __all__ = ["coordinate_tolerance", "point_triangle_distances"]
 
@@ -535,7 +536,7 @@ def _may_shadow(
         if float(np.min(receiver.world @ oriented[:3]) + oriented[3]) >= limit:
             return False
     r = caster.radius + receiver.radius
-    if isinstance(light, DirectionalLight):
+    if not light.positional:
         d = np.asarray(light.direction)  # the direction light travels
         w = receiver.centre - caster.centre
         along = float(w @ d)
@@ -560,7 +561,7 @@ def _light_side_distance(
 ) -> tuple[np.ndarray, float]:
     """Plane oriented towards the light, and the light's signed distance (inf if directional)."""
     n, d = plane[:3], plane[3]
-    if isinstance(light, DirectionalLight):
+    if not light.positional:
         towards = -np.asarray(light.direction)
         if float(n @ towards) < 0:
             n, d = -n, -d

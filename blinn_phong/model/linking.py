@@ -35,7 +35,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from blinn_phong.model.scene import AmbientLight, LightLink, Scene
+from blinn_phong.model.lights import AmbientLight
+from blinn_phong.model.scene import LightLink, Scene
 
 __all__ = ["blocker_scene", "holdout_meshes", "linked_visibility", "links_of_lights", "lit_links"]
 

@@ -44,34 +44,26 @@ naming the field, the expectation and the value received.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
-from blinn_phong._checks import check_frame_size, choice_error, colour3, float_array, number, vector3
+from blinn_phong._checks import check_frame_size, choice_error, colour3, float_array, number
+from blinn_phong.model.lights import LIGHT_TYPES, AmbientLight, Colour, Light
 from blinn_phong.model.texture import Texture
+from blinn_phong.model.transforms import orthographic_matrix, perspective_matrix
 
 __all__ = [
-    "AmbientLight",
     "Camera",
-    "DirectionalLight",
-    "Light",
     "LightLink",
     "LightModel",
     "Material",
     "Mesh",
-    "PointLight",
     "Scene",
-    "SpotLight",
-    "look_at",
-    "orthographic_matrix",
-    "perspective_matrix",
     "prepare_render_inputs",
 ]
 
-Colour = tuple[float, float, float]
 Shading = Literal["flat", "gouraud", "phong"]
 SHADINGS: tuple[str, ...] = ("flat", "gouraud", "phong")
 TransparencyModel = Literal["partial_occlusion", "emission", "absorption"]
@@ -189,189 +181,6 @@ class Material:
     def textured(self) -> bool:
         """True when fragments need the texture stage (a base colour texture or an alpha clip)."""
         return self.base_color_texture is not None or self.alpha_clip is not None
-
-
-# --------------------------------------------------------------------------- lights
-
-
-def _light_colours(
-    cls: str, color: object, intensity: object, ambient: object, diffuse: object, specular: object
-) -> tuple[Colour, Colour, Colour]:
-    """Resolve 'one colour × intensity' or explicit OpenGL-style ambient/diffuse/specular colours."""
-    base = np.asarray(colour3(color, f"{cls}.color")) * number(intensity, f"{cls}.intensity", low=0.0)
-    base3 = (float(base[0]), float(base[1]), float(base[2]))
-    amb = (0.0, 0.0, 0.0) if ambient is None else colour3(ambient, f"{cls}.ambient")
-    dif = base3 if diffuse is None else colour3(diffuse, f"{cls}.diffuse")
-    spe = base3 if specular is None else colour3(specular, f"{cls}.specular")
-    return amb, dif, spe
-
-
-def _attenuation(cls: str, constant: object, linear: object, quadratic: object) -> tuple[float, float, float]:
-    kc = number(constant, f"{cls}.constant", low=0.0)
-    kl = number(linear, f"{cls}.linear", low=0.0)
-    kq = number(quadratic, f"{cls}.quadratic", low=0.0)
-    if kc == 0.0 and kl == 0.0 and kq == 0.0:
-        raise ValueError(f"{cls}: attenuation (constant, linear, quadratic) must not all be 0, got (0, 0, 0)")
-    return kc, kl, kq
-
-
-@dataclass(frozen=True)
-class AmbientLight:
-    """A uniform ambient light: adds ``a_cm · color · intensity`` everywhere (no direction)."""
-
-    color: Colour = (1.0, 1.0, 1.0)
-    intensity: float = 1.0
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "color", colour3(self.color, "AmbientLight.color"))
-        object.__setattr__(self, "intensity", number(self.intensity, "AmbientLight.intensity", low=0.0))
-
-    @property
-    def radiance(self) -> Colour:
-        """``color · intensity`` (linear RGB)."""
-        c = np.asarray(self.color) * self.intensity
-        return (float(c[0]), float(c[1]), float(c[2]))
-
-
-@dataclass(frozen=True, init=False)
-class DirectionalLight:
-    """A light at infinity shining along ``direction`` (world space; OpenGL position w = 0).
-
-    ``direction`` is the direction the light *travels* (from the light into the scene):
-    the default ``(0, 0, -1)`` shines down -Z. OpenGL stores the opposite vector, the
-    direction *towards* the light, as ``GL_POSITION = (x, y, z, 0)``; the GL equivalent
-    of ``DirectionalLight(direction=d)`` is ``glLightfv(GL_POSITION, (-d, 0))``.
-
-    Colours: either ``color`` × ``intensity`` for diffuse and specular (ambient 0),
-    or explicit ``ambient``/``diffuse``/``specular`` as ``glLight`` takes them
-    (an explicit value overrides the one derived from ``color``).
-    """
-
-    direction: tuple[float, float, float]
-    ambient: Colour
-    diffuse: Colour
-    specular: Colour
-
-    def __init__(
-        self,
-        direction: object = (0.0, 0.0, -1.0),
-        color: object = (1.0, 1.0, 1.0),
-        intensity: object = 1.0,
-        *,
-        ambient: object = None,
-        diffuse: object = None,
-        specular: object = None,
-    ) -> None:
-        object.__setattr__(self, "direction", vector3(direction, "DirectionalLight.direction", unit=True))
-        a, d, s = _light_colours("DirectionalLight", color, intensity, ambient, diffuse, specular)
-        object.__setattr__(self, "ambient", a)
-        object.__setattr__(self, "diffuse", d)
-        object.__setattr__(self, "specular", s)
-
-
-@dataclass(frozen=True, init=False)
-class PointLight:
-    """A positional light with attenuation ``1 / (kc + kl·d + kq·d²)``.
-
-    ``position`` is given in world space and moved to eye space by the camera's view
-    matrix (as ``glLight`` does with the current modelview). ``d`` is the **eye-space**
-    distance between the lit point and the light, as in OpenGL (§2.14.1, ``‖VP_pli‖``
-    in eye coordinates); it equals the world-space distance only when the view matrix
-    is rigid (rotation and translation), and differs under a scaled or sheared view.
-    OpenGL equivalent: ``GL_POSITION = (position, 1)``, ``GL_CONSTANT_ATTENUATION`` etc.
-
-    Colours as for :class:`DirectionalLight`. ``constant``, ``linear``,
-    ``quadratic`` must be >= 0 and not all zero (OpenGL 2.1 §2.14.1, eq. 2.4).
-    """
-
-    position: tuple[float, float, float]
-    ambient: Colour
-    diffuse: Colour
-    specular: Colour
-    constant: float
-    linear: float
-    quadratic: float
-
-    def __init__(
-        self,
-        position: object = (0.0, 0.0, 1.0),
-        color: object = (1.0, 1.0, 1.0),
-        intensity: object = 1.0,
-        *,
-        constant: object = 1.0,
-        linear: object = 0.0,
-        quadratic: object = 0.0,
-        ambient: object = None,
-        diffuse: object = None,
-        specular: object = None,
-    ) -> None:
-        object.__setattr__(self, "position", vector3(position, "PointLight.position"))
-        a, d, s = _light_colours("PointLight", color, intensity, ambient, diffuse, specular)
-        object.__setattr__(self, "ambient", a)
-        object.__setattr__(self, "diffuse", d)
-        object.__setattr__(self, "specular", s)
-        kc, kl, kq = _attenuation("PointLight", constant, linear, quadratic)
-        object.__setattr__(self, "constant", kc)
-        object.__setattr__(self, "linear", kl)
-        object.__setattr__(self, "quadratic", kq)
-
-
-@dataclass(frozen=True, init=False)
-class SpotLight:
-    """A positional light restricted to a cone around ``direction`` (world space).
-
-    Inside the cone (angle between the light→point direction and ``direction``
-    at most ``cutoff`` degrees) the factor is ``cos(angle)^exponent``; outside it
-    is 0 (OpenGL 2.1 §2.14.1). ``cutoff`` is in (0, 90] degrees, ``exponent`` >= 0.
-    ``direction`` is where the spot points, the same sense as ``GL_SPOT_DIRECTION``.
-    Attenuation (eye-space distance) and colours as for :class:`PointLight`.
-    """
-
-    position: tuple[float, float, float]
-    direction: tuple[float, float, float]
-    cutoff: float
-    exponent: float
-    ambient: Colour
-    diffuse: Colour
-    specular: Colour
-    constant: float
-    linear: float
-    quadratic: float
-
-    def __init__(
-        self,
-        position: object = (0.0, 0.0, 1.0),
-        direction: object = (0.0, 0.0, -1.0),
-        cutoff: object = 45.0,
-        exponent: object = 0.0,
-        color: object = (1.0, 1.0, 1.0),
-        intensity: object = 1.0,
-        *,
-        constant: object = 1.0,
-        linear: object = 0.0,
-        quadratic: object = 0.0,
-        ambient: object = None,
-        diffuse: object = None,
-        specular: object = None,
-    ) -> None:
-        object.__setattr__(self, "position", vector3(position, "SpotLight.position"))
-        object.__setattr__(self, "direction", vector3(direction, "SpotLight.direction", unit=True))
-        object.__setattr__(
-            self, "cutoff", number(cutoff, "SpotLight.cutoff (degrees)", low=0.0, high=90.0, low_open=True)
-        )
-        object.__setattr__(self, "exponent", number(exponent, "SpotLight.exponent", low=0.0))
-        a, d, s = _light_colours("SpotLight", color, intensity, ambient, diffuse, specular)
-        object.__setattr__(self, "ambient", a)
-        object.__setattr__(self, "diffuse", d)
-        object.__setattr__(self, "specular", s)
-        kc, kl, kq = _attenuation("SpotLight", constant, linear, quadratic)
-        object.__setattr__(self, "constant", kc)
-        object.__setattr__(self, "linear", kl)
-        object.__setattr__(self, "quadratic", kq)
-
-
-Light = AmbientLight | DirectionalLight | PointLight | SpotLight
-LIGHT_TYPES = (AmbientLight, DirectionalLight, PointLight, SpotLight)
 
 
 @dataclass(frozen=True)
@@ -537,88 +346,6 @@ class Mesh:
 
 
 # --------------------------------------------------------------------------- camera
-
-
-def look_at(eye: object, target: object, up: object = (0.0, 1.0, 0.0)) -> np.ndarray:
-    """The 4×4 view matrix of ``gluLookAt(eye, target, up)`` (world → eye space).
-
-    The eye goes to the origin, ``target - eye`` to -Z and ``up`` (projected) to +Y.
-    Source: the ``gluLookAt`` reference page (OpenGL 2.1 GLU), matrix ``M · T(-eye)``
-    with rows s, u, -f.
-
-    Raises:
-        ValueError: eye == target, or ``up`` parallel to the viewing direction.
-    """
-    e = np.asarray(vector3(eye, "look_at eye"))
-    t = np.asarray(vector3(target, "look_at target"))
-    u = np.asarray(vector3(up, "look_at up", unit=True))
-    f = t - e
-    if np.linalg.norm(f) == 0.0:
-        raise ValueError(f"look_at: eye and target must differ, both are {tuple(e.tolist())}")
-    f = f / np.linalg.norm(f)
-    s = np.cross(f, u)
-    if np.linalg.norm(s) < 1e-12:
-        raise ValueError(
-            f"look_at: up {tuple(u.tolist())} is parallel to the viewing direction {tuple(f.tolist())}"
-        )
-    s = s / np.linalg.norm(s)
-    uu = np.cross(s, f)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = s, uu, -f
-    m[:3, 3] = -m[:3, :3] @ e
-    return m
-
-
-def perspective_matrix(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
-    """``gluPerspective(fov_y, aspect, near, far)`` (eye → clip), ``fov_y`` in degrees.
-
-    ``f = cot(fov_y/2)``; rows ``(f/aspect,0,0,0), (0,f,0,0), (0,0,(far+near)/(near-far),
-    2·far·near/(near-far)), (0,0,-1,0)`` (GLU reference page).
-
-    Raises:
-        ValueError: near <= 0, far <= near, fov_y outside (0, 180), aspect <= 0.
-    """
-    fov_y = number(fov_y, "Camera fov_y (degrees)", low=0.0, high=180.0, low_open=True)
-    if fov_y == 180.0:
-        raise ValueError("Camera fov_y (degrees): expected a value in (0, 180), got 180.0")
-    aspect = number(aspect, "Camera aspect", low=0.0, low_open=True)
-    near = number(near, "Camera near", low=0.0, low_open=True)
-    far = number(far, "Camera far", low=0.0, low_open=True)
-    if far <= near:
-        raise ValueError(f"Camera far: expected far > near = {near}, got {far}")
-    f = 1.0 / math.tan(math.radians(fov_y) / 2.0)
-    m = np.zeros((4, 4))
-    m[0, 0] = f / aspect
-    m[1, 1] = f
-    m[2, 2] = (far + near) / (near - far)
-    m[2, 3] = 2.0 * far * near / (near - far)
-    m[3, 2] = -1.0
-    return m
-
-
-def orthographic_matrix(
-    left: float, right: float, bottom: float, top: float, near: float, far: float
-) -> np.ndarray:
-    """``glOrtho(left, right, bottom, top, near, far)`` (eye → clip), OpenGL 2.1 §2.11.1 eq. for Ortho.
-
-    Raises:
-        ValueError: left == right, bottom == top or near == far.
-    """
-    vals = [
-        number(v, f"Camera {n}")
-        for v, n in zip(
-            (left, right, bottom, top, near, far),
-            ("left", "right", "bottom", "top", "near", "far"),
-            strict=True,
-        )
-    ]
-    l, r, b, t, n, f = vals
-    if l == r or b == t or n == f:
-        raise ValueError(f"orthographic: need left != right, bottom != top, near != far; got {tuple(vals)}")
-    m = np.eye(4)
-    m[0, 0], m[1, 1], m[2, 2] = 2 / (r - l), 2 / (t - b), -2 / (f - n)
-    m[0, 3], m[1, 3], m[2, 3] = -(r + l) / (r - l), -(t + b) / (t - b), -(f + n) / (f - n)
-    return m
 
 
 @dataclass(frozen=True, eq=False)

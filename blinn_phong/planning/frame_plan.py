@@ -16,7 +16,8 @@ from blinn_phong._checks import choice_error, number
 from blinn_phong.effects.oit import TRANSPARENCY_METHODS
 from blinn_phong.geometry.mesh_facts import point_triangle_distances
 from blinn_phong.model.fog import Fog
-from blinn_phong.model.scene import SHADINGS, AmbientLight, Scene
+from blinn_phong.model.lights import AmbientLight
+from blinn_phong.model.scene import SHADINGS, Scene
 from blinn_phong.planning.planner import Choice, Plan, coloured_shadow_reason, plan
 from blinn_phong.shadows.maps import PCF_KERNELS
 from blinn_phong.shadows.method import embree_available

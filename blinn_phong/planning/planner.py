@@ -103,15 +103,8 @@ from blinn_phong.geometry.mesh_facts import (
     _screen_rect_and_depth,
     coordinate_tolerance,
 )
-from blinn_phong.model.scene import (
-    AmbientLight,
-    DirectionalLight,
-    Material,
-    Mesh,
-    PointLight,
-    Scene,
-    SpotLight,
-)
+from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Material, Mesh, Scene
 from blinn_phong.planning import calibration
 from blinn_phong.shadows.method import embree_available
 
@@ -426,7 +419,7 @@ def _mesh_light_factor(
     max(att)·max(spot)``. Directional lights: 1. Infinite when the denominator can be 0 on the
     mesh (``k_c = 0`` and a surface at the light); 0 for an empty mesh.
     """
-    if isinstance(light, DirectionalLight):
+    if not light.positional:
         return 1.0
     if f.n_tris == 0 or len(f.world) == 0:
         return 0.0
@@ -453,7 +446,7 @@ def _light_factors(scene: Scene, facts: list[_MeshFacts]) -> np.ndarray:
     view = np.asarray(scene.camera.view, dtype=np.float64) if scene.camera is not None else np.eye(4)
     out = np.ones((len(facts), len(scene.lights)))
     for j, light in enumerate(scene.lights):
-        if isinstance(light, AmbientLight | DirectionalLight):
+        if not light.positional:  # ambient and directional lights do not attenuate
             continue
         for i, f in enumerate(facts):
             out[i, j] = _mesh_light_factor(light, f, view)
@@ -757,7 +750,7 @@ def _plan_shadow(
     exact = _exact_shadow(what, models, frame, sum(f.n_tris for f in facts), tolerance, worst, share)
     if tolerance <= 0:
         return exact
-    if not isinstance(light, DirectionalLight):
+    if light.positional:
         return replace(
             exact, reason=f"{exact.reason}; the shadow-map models are calibrated for directional lights only"
         )
@@ -1043,7 +1036,7 @@ def _plan_shading(
     mesh = scene.meshes[index]
     if mesh.shading is not None:
         return Choice(mesh.shading, "set on the mesh by the caller")
-    positional = [type(light).__name__ for light in scene.lights if isinstance(light, PointLight | SpotLight)]
+    positional = [type(light).__name__ for light in scene.lights if light.positional]
     infinite_viewer = not scene.light_model.local_viewer
     if not facts[index].flat_normals:
         choice = Choice("phong", "normals vary across faces: per-pixel shading is the reference")

@@ -42,14 +42,7 @@ import numpy as np
 
 from blinn_phong._numba import numba_available, use_compiled
 from blinn_phong.geometry.raster import rasterize
-from blinn_phong.model.scene import (
-    DirectionalLight,
-    PointLight,
-    SpotLight,
-    look_at,
-    orthographic_matrix,
-    perspective_matrix,
-)
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows._inputs import checked_points, checked_triangles, homogeneous
 from blinn_phong.shadows.method import ShadowMethod
 
@@ -339,29 +332,11 @@ def light_cameras(
     """
     tris = checked_triangles("world_triangles", world_triangles)
     centre, radius = _bounds(tris)
-    if isinstance(light, DirectionalLight):
-        d = np.asarray(light.direction, dtype=np.float64)
-        eye = centre - d * 2 * radius
-        view = look_at(eye, centre, _up_for(d))
-        proj = orthographic_matrix(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5)
-        return [(view, proj)]
-    if not isinstance(light, PointLight | SpotLight):
+    if not getattr(light, "casts_shadows", False):
         raise TypeError(
             f"light must be a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}"
         )
-    pos = np.asarray(light.position, dtype=np.float64)
-    far = float(np.linalg.norm(centre - pos)) + radius
-    near = max(far * 1e-3, 1e-6)
-    if isinstance(light, SpotLight) and light.cutoff <= 80.0:
-        d = np.asarray(light.direction, dtype=np.float64)
-        return [(look_at(pos, pos + d, _up_for(d)), perspective_matrix(2 * light.cutoff, 1.0, near, far))]
-    proj = perspective_matrix(90.0, 1.0, near, far)
-    cameras = []
-    for axis, sign, up in _CUBE_FACES:
-        d = np.zeros(3)
-        d[axis] = sign
-        cameras.append((look_at(pos, pos + d, up), proj))
-    return cameras
+    return light.shadow_cameras(centre, radius)  # type: ignore[union-attr]
 
 
 def shadow_map_visibility(
@@ -396,7 +371,7 @@ def shadow_map_visibility(
         return shadow_visibility(
             maps[0], p, normals, normal_offset=normal_offset, kernel=kernel, engine=engine
         )
-    if len(maps) != 6 or isinstance(light, DirectionalLight):
+    if len(maps) != 6 or not light.positional:
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
     if use_compiled(engine):
         n = _lookup_normals(p, normals, normal_offset, kernel)
@@ -482,7 +457,7 @@ def shadow_lookup(
     """
     if kernel not in PCF_KERNELS:
         raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
-    if len(maps) not in (1, 6) or (len(maps) == 6 and isinstance(light, DirectionalLight)):
+    if len(maps) not in (1, 6) or (len(maps) == 6 and not light.positional):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
     from blinn_phong.shadows.kernels import KERNEL_CODES
 

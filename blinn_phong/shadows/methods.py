@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows import maps, planar, ray_traced, soft, volume
 from blinn_phong.shadows._inputs import checked_points, checked_triangles, trusted_arrays
 from blinn_phong.shadows.method import ShadowFrame, ShadowMethod

@@ -19,11 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from blinn_phong.model.scene import (
-    DirectionalLight,
-    PointLight,
-    SpotLight,
-)
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows._inputs import checked_points, checked_triangles, homogeneous
 from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 
@@ -151,10 +147,7 @@ def planar_visibility(
     if plane is None:
         raise ValueError("planar shadows need the receiving plane (a, b, c, d)")
     pl = np.asarray(plane, dtype=np.float64)
-    if isinstance(light, DirectionalLight):
-        homogeneous_light = np.r_[-np.asarray(light.direction), 0.0]
-    else:
-        homogeneous_light = np.r_[np.asarray(light.position), 1.0]
+    homogeneous_light = light.homogeneous()  # type: ignore[attr-defined]
     on_plane, q, q_normals = _on_plane(p, pl)
     vis = np.ones(len(p))
     between = False
@@ -197,10 +190,7 @@ def planar_hard(frame: ShadowFrame, light: object, plane: object) -> np.ndarray 
 
     tris, world = frame.tris, frame.world
     pl = np.asarray(plane, dtype=np.float64)
-    if isinstance(light, DirectionalLight):
-        homogeneous_light = np.r_[-np.asarray(light.direction, dtype=np.float64), 0.0]
-    else:
-        homogeneous_light = np.r_[np.asarray(light.position, dtype=np.float64), 1.0]  # type: ignore[attr-defined]
+    homogeneous_light = light.homogeneous()  # type: ignore[attr-defined]
     key = ("plane", pl.tobytes())
     if key not in frame.cache:  # (else: the frame's other lights on the same plane)
         height = tris @ pl[:3] + pl[3]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows._inputs import trusted_arrays
 from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 
@@ -20,10 +20,10 @@ from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 def ray_target(light: object) -> tuple[np.ndarray, bool]:
     """``(vector, positional)`` of a light's shadow rays, as the ray tracer takes them: the unit
     direction towards a directional light, else the light's position."""
-    if isinstance(light, DirectionalLight):
-        towards = -np.asarray(light.direction, dtype=np.float64)
-        return towards / np.linalg.norm(towards), False
-    return np.asarray(light.position, dtype=np.float64), True  # type: ignore[attr-defined]
+    h = light.homogeneous()  # type: ignore[attr-defined]
+    if h[3] == 0:
+        return h[:3] / np.linalg.norm(h[:3]), False
+    return h[:3], True
 
 
 def hard_visibility(
@@ -49,13 +49,12 @@ def hard_visibility(
     )
 
     scene = cached_ray_scene(tris)  # one BVH for every light of a frame
+    h = light.homogeneous()  # (−direction, 0) or (position, 1)
     if transmittance is not None:
-        if isinstance(light, DirectionalLight):
-            return transmitted_light(scene, p, normals, -np.asarray(light.direction), transmittance)
-        return transmitted_light(scene, p, normals, light.position, transmittance, positional=True)
-    if isinstance(light, DirectionalLight):
-        return directional_light_visibility(scene, p, normals, -np.asarray(light.direction), engine=engine)
-    return point_light_visibility(scene, p, normals, light.position, engine=engine)
+        return transmitted_light(scene, p, normals, h[:3], transmittance, positional=light.positional)
+    if light.positional:
+        return point_light_visibility(scene, p, normals, h[:3], engine=engine)
+    return directional_light_visibility(scene, p, normals, h[:3], engine=engine)
 
 
 def _ray_answers(

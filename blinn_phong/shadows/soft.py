@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import PointLight, SpotLight
 from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 
 
@@ -44,8 +44,8 @@ def soft_visibility(
         corners = ray_scene.triangles.reshape(-1, 3)  # type: ignore[attr-defined]
         aim = (corners.min(axis=0) + corners.max(axis=0)) / 2
     axis = aim - centre
-    if isinstance(light, SpotLight):
-        axis = np.array(light.direction, dtype=np.float64)
+    if light.axis is not None:  # a spot light faces along its axis
+        axis = np.array(light.axis, dtype=np.float64)
     if float(np.linalg.norm(axis)) < 1e-12:
         axis = np.array([0.0, 0.0, -1.0])  # the light at the scene's centre: any orientation
     axis /= float(np.linalg.norm(axis))
@@ -88,9 +88,9 @@ def _choice_params(options: Any, planned: Any) -> tuple[dict, str]:
 
 
 def _stand_in(light: object, options: Any) -> tuple[str, str] | None:
-    if not (isinstance(light, DirectionalLight) or options.radius <= 0.0):
+    if light.positional and options.radius > 0.0:  # type: ignore[attr-defined]
         return None
-    why = "a directional light" if isinstance(light, DirectionalLight) else "radius 0"
+    why = "radius 0" if light.positional else f"a {type(light).__name__} (at infinity)"  # type: ignore[attr-defined]
     return "ray_traced", f"soft shadows asked for, but {why} has no area: hard ray-traced shadows"
 
 

@@ -122,7 +122,8 @@ import numpy as np
 from blinn_phong._checks import choice_error
 from blinn_phong._numba import use_compiled
 from blinn_phong._scratch import carve, carved_bytes
-from blinn_phong.model.scene import Camera, DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Camera
 from blinn_phong.shadows.method import ShadowFrame, ShadowMethod
 
 __all__ = [
@@ -169,11 +170,11 @@ def _points(name: str, value: object, check_finite: bool = True) -> np.ndarray:
 
 def _light(light: object) -> tuple[np.ndarray, bool]:
     """(position or direction of travel, is_directional)."""
-    if isinstance(light, DirectionalLight):
-        d = np.asarray(light.direction, dtype=np.float64)
-        return d / np.linalg.norm(d), True
-    if isinstance(light, PointLight | SpotLight):
-        return np.asarray(light.position, dtype=np.float64), False
+    if getattr(light, "casts_shadows", False):
+        h = light.homogeneous()  # type: ignore[attr-defined]  # (−direction, 0) or (position, 1)
+        if h[3] == 0:
+            return -h[:3] / np.linalg.norm(h[:3]), True
+        return h[:3], False
     raise TypeError(
         f"light: expected a DirectionalLight, PointLight or SpotLight, got {type(light).__name__}"
     )
@@ -1811,7 +1812,7 @@ def zpass_is_safe(
 
 def _default_camera(points: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A perspective view that sees every receiver (for z-fail, whose count needs no particular eye)."""
-    from blinn_phong.model.scene import look_at, perspective_matrix
+    from blinn_phong.model.transforms import look_at, perspective_matrix
 
     pts = np.concatenate([points, tris.reshape(-1, 3)]) if len(tris) else points
     lo, hi = pts.min(axis=0), pts.max(axis=0)

@@ -97,7 +97,9 @@ def _read_exr(path: Path) -> np.ndarray:
 
 
 def _hand_scene():
-    from blinn_phong.model.scene import Camera, DirectionalLight, LightModel, Material, Mesh, Scene, look_at
+    from blinn_phong.model.lights import DirectionalLight
+    from blinn_phong.model.scene import Camera, LightModel, Material, Mesh, Scene
+    from blinn_phong.model.transforms import look_at
 
     def euler(rx: float, ry: float, rz: float) -> np.ndarray:
         cx, sx, cy, sy, cz, sz = (

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from addon import mapping
-from blinn_phong.model.scene import perspective_matrix
+from blinn_phong.model.transforms import perspective_matrix
 
 # numpy 2 renamed trapz to trapezoid (numpy 1.26, for Blender 4.2–5.0, has only trapz).
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz

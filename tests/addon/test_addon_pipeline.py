@@ -11,7 +11,9 @@ import pytest
 
 from addon.pipeline import RenderOptions, render_frame
 from blinn_phong.frame.render import render
-from blinn_phong.model.scene import Camera, DirectionalLight, LightModel, Material, Scene, look_at
+from blinn_phong.model.lights import DirectionalLight
+from blinn_phong.model.scene import Camera, LightModel, Material, Scene
+from blinn_phong.model.transforms import look_at
 from tests.meshes import square
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest, sample_offsets
-from blinn_phong.model.scene import look_at, perspective_matrix
+from blinn_phong.model.transforms import look_at, perspective_matrix
 
 
 def _grid_mesh(n: int, jitter: float, seed: int) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,8 @@ import pytest
 
 from blinn_phong._numba import numba_available
 from blinn_phong.frame.lighting import lights_in_eye_space, shade, shade_many
-from blinn_phong.model.scene import DirectionalLight, LightModel, Material, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import LightModel, Material
 
 # --------------------------------------------------------------------------- shade() input checks
 

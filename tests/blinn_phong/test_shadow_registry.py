@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import DirectionalLight, PointLight
+from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.planning.frame_plan import ShadowOptions, _shadow_choice
 from blinn_phong.planning.planner import Choice
 from blinn_phong.shadows import method as method_module

@@ -8,7 +8,8 @@ from blinn_phong.effects.oit import transparency_pass
 from blinn_phong.frame.render import prepare_scene, shade_fragments
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.model.primitives import box, uv_sphere
-from blinn_phong.model.scene import Camera, LightModel, Material, Mesh, Scene, look_at
+from blinn_phong.model.scene import Camera, LightModel, Material, Mesh, Scene
+from blinn_phong.model.transforms import look_at
 
 TOP_VIEW = look_at((0.0, 0.0, 10.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0))
 

@@ -10,7 +10,7 @@ the ray offset), so each is under a known set of filters.
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import DirectionalLight, PointLight
+from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.shadows.methods import light_visibility
 from blinn_phong.shadows.raytrace import RayScene, transmitted_light
 

@@ -10,7 +10,7 @@ import pytest
 
 from blinn_phong.effects.oit import resolve_a_buffer, resolve_in_draw_order
 from blinn_phong.model.fog import apply_fog
-from blinn_phong.model.scene import orthographic_matrix
+from blinn_phong.model.transforms import orthographic_matrix
 from blinn_phong.shadows.maps import render_shadow_map
 
 pytestmark = pytest.mark.mesa

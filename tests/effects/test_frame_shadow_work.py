@@ -18,8 +18,8 @@ from blinn_phong.frame.pipeline import _fragment_surface, _world_triangles, _wor
 from blinn_phong.frame.prepared import prepare_scene
 from blinn_phong.frame.visibility import frame_fragments
 from blinn_phong.geometry.raster import interpolate
+from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.model.primitives import grid_plane, uv_sphere
-from blinn_phong.model.scene import DirectionalLight, PointLight
 from blinn_phong.shadows.methods import light_visibility
 from blinn_phong.shadows.planar import planar_shadow_mask
 

@@ -226,7 +226,8 @@ def test_bad_fragments_are_rejected():
 
 
 def test_a_buffer_on_rasterized_interpenetrating_quads_matches_the_plane_equations():
-    from blinn_phong.model.scene import AmbientLight, Scene
+    from blinn_phong.model.lights import AmbientLight
+    from blinn_phong.model.scene import Scene
 
     from .scenes import horizontal_quad, ortho_camera, quad, render_transparency
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from blinn_phong.frame.render import render
-from blinn_phong.model.scene import AmbientLight, DirectionalLight, LightModel, Material, Mesh, PointLight
+from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight
+from blinn_phong.model.scene import LightModel, Material, Mesh
 from blinn_phong.planning.calibration import shipped_models
 from blinn_phong.planning.frame_plan import Fog, ShadowOptions
 from blinn_phong.planning.planner import plan

@@ -15,7 +15,8 @@ import pytest
 
 from blinn_phong.frame.lighting import _light_direction, lights_in_eye_space
 from blinn_phong.frame.render import render
-from blinn_phong.model.scene import DirectionalLight, Material, Mesh, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.scene import Material, Mesh
 from blinn_phong.planning.frame_plan import Fog
 from blinn_phong.planning.planner import (
     _fog_range,

@@ -17,7 +17,7 @@ import pytest
 
 import blinn_phong.planning.planner as planner
 from blinn_phong.frame.render import render
-from blinn_phong.model.scene import AmbientLight, DirectionalLight, PointLight
+from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight
 from blinn_phong.planning import calibration
 from blinn_phong.planning.frame_plan import frame_plan
 from blinn_phong.planning.planner import plan

@@ -18,7 +18,9 @@ from blinn_phong.geometry.raster_kernels import (
     setup_triangles_compiled,
     winner_surfaces_compiled,
 )
-from blinn_phong.model.scene import Camera, Mesh, PointLight, Scene, look_at
+from blinn_phong.model.lights import PointLight
+from blinn_phong.model.scene import Camera, Mesh, Scene
+from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows.methods import light_visibility
 
 from .volume_scenes import LIGHTS, casters, outside_camera, scene_with, sphere_mesh

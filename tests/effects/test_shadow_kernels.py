@@ -16,7 +16,7 @@
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows import raytrace
 from blinn_phong.shadows.maps import PCF_KERNELS, light_shadow_maps, shadow_map_visibility
 from blinn_phong.shadows.methods import light_visibility

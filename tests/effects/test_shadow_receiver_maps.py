@@ -21,7 +21,7 @@ and each look-up reads only texels inside its face's rectangle, so:
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows.maps import PCF_KERNELS, light_cameras, light_shadow_maps, shadow_map_visibility
 from blinn_phong.shadows.methods import light_visibility
 

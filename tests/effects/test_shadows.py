@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows.maps import PCF_KERNELS, light_shadow_maps, shadow_map_visibility
 from blinn_phong.shadows.planar import planar_shadow_mask, planar_shadow_matrix
 from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility

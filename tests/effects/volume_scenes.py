@@ -6,18 +6,10 @@ import numpy as np
 
 from blinn_phong.frame.render import prepare_scene
 from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
+from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.model.primitives import uv_sphere
-from blinn_phong.model.scene import (
-    Camera,
-    DirectionalLight,
-    LightModel,
-    Material,
-    Mesh,
-    PointLight,
-    Scene,
-    SpotLight,
-    look_at,
-)
+from blinn_phong.model.scene import Camera, LightModel, Material, Mesh, Scene
+from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows.raytrace import RayScene, directional_light_visibility, point_light_visibility
 
 from .scenes import flat_cube, horizontal_quad, world_triangles

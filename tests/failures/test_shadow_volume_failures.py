@@ -18,7 +18,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blinn_phong.model.scene import Camera, DirectionalLight, Mesh, PointLight, look_at
+from blinn_phong.model.lights import DirectionalLight, PointLight
+from blinn_phong.model.scene import Camera, Mesh
+from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows.volume import (
     analyse_topology,
     shadow_volume_triangles,
