@@ -294,8 +294,8 @@ def _box_mesh(lid: bool, colour=(0.8, 0.6, 0.4), opacity: float = 1.0) -> Mesh:
 
 
 def test_a_closed_uv_sphere_is_convex_and_needs_no_shadow_work():
+    from blinn_phong.geometry.mesh_facts import _mesh_facts
     from blinn_phong.model.primitives import uv_sphere
-    from blinn_phong.planning.planner import _mesh_facts
 
     for segments, rings in ((64, 32), (317, 159)):  # 3 968 and 100 172 triangles
         p, t, n = uv_sphere(segments, rings)
@@ -315,7 +315,7 @@ def test_a_closed_uv_sphere_is_convex_and_needs_no_shadow_work():
 
 
 def test_a_cube_with_split_vertices_is_welded_closed_and_convex():
-    from blinn_phong.planning.planner import _mesh_facts
+    from blinn_phong.geometry.mesh_facts import _mesh_facts
 
     facts = _mesh_facts(flat_cube((0, 0, 0), 0.8))
     assert facts.closed and facts.convex
@@ -354,7 +354,8 @@ def test_an_open_box_shades_its_own_floor_under_two_sided_lighting(two_sided):
 
 
 def test_the_radiance_bound_includes_attenuation_above_one():
-    from blinn_phong.planning.planner import _light_factor_bound, _max_radiance, _mesh_facts
+    from blinn_phong.geometry.mesh_facts import _mesh_facts
+    from blinn_phong.planning.bounds import _light_factor_bound, _max_radiance
 
     # a point light 0.5 above a quad at z = 0: the nearest distance to its bounding box is 0.5,
     # so att ≤ 1/(0.01 + 1·0.25) = 3.846 — and the quad's centre reaches it exactly

@@ -15,18 +15,18 @@ import pytest
 
 from blinn_phong.frame.lighting import _light_direction, lights_in_eye_space
 from blinn_phong.frame.render import render
+from blinn_phong.geometry.mesh_facts import _mesh_facts
 from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.model.scene import Material, Mesh
-from blinn_phong.planning.frame_plan import Fog
-from blinn_phong.planning.planner import (
+from blinn_phong.planning.bounds import (
     _fog_range,
     _light_factor_bound,
     _light_factors,
-    _mesh_facts,
     _shadow_weight,
     _triangle_distances,
-    plan,
 )
+from blinn_phong.planning.frame_plan import Fog
+from blinn_phong.planning.planner import plan
 from testbeds.planner_fuzz import random_scene
 
 from .scenes import flat_cube, horizontal_quad, ortho_camera, perspective_camera, quad, scene_of
@@ -234,7 +234,7 @@ def test_fog_scales_the_shadow_bound_and_the_rendered_shadow_stays_within_it():
 
 
 def test_fog_bounds_the_colour_behind_peeled_layers_by_its_closed_form():
-    from blinn_phong.planning.planner import _fogged_radiance_bound, _max_radiance
+    from blinn_phong.planning.bounds import _fogged_radiance_bound, _max_radiance
 
     glow = Material(emission=(1.5, 1.5, 1.5), diffuse=(0.2, 0.2, 0.2), specular=(0, 0, 0), opacity=0.5)
     panes = [

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import blinn_phong.planning.planner as planner
+import blinn_phong.planning.shadow_plan as shadow_plan
 from blinn_phong.frame.render import render
 from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight
 from blinn_phong.planning import calibration
@@ -98,7 +99,7 @@ def test_where_volumes_are_predicted_cheaper_the_plan_picks_them_and_matches_emb
 @pytest.mark.parametrize("light", [DirectionalLight((0.2, 0.1, -1.0)), PointLight((0.6, 0.4, 4.0))])
 def test_without_embree_the_plan_picks_shadow_volumes_and_says_why(monkeypatch, light):
     scene = _stacked_balls(light)
-    monkeypatch.setattr(planner, "embree_available", lambda: False)
+    monkeypatch.setattr(shadow_plan, "embree_available", lambda: False)
     for tolerance in (0.0, 8.0):
         choice = plan(scene, tolerance, width=32, height=32).shadows[0]  # a small frame
         assert choice.method == "shadow_volume", choice
@@ -115,7 +116,7 @@ def test_without_embree_planar_shadows_become_shadow_volumes(monkeypatch):
         [FLOOR, horizontal_quad(0.5, half=0.4)], [DirectionalLight((0.2, 0.1, -1.0))], perspective_camera()
     )
     assert plan(scene).shadows[0].method == "planar"
-    monkeypatch.setattr(planner, "embree_available", lambda: False)
+    monkeypatch.setattr(shadow_plan, "embree_available", lambda: False)
     choice = plan(scene).shadows[0]
     assert choice.method == "shadow_volume" and "instead of planar" in choice.reason, choice
 
