@@ -140,9 +140,21 @@ def passes_from_winners(
         height: image height.
         width: image width.
     """
-    pixel = np.flatnonzero(winner >= 0)
-    mesh = triangle_mesh[source[winner[pixel]]]
-    return _passes(request, pixel, mesh, np.ones(len(pixel), np.float32), height, width)
+    # One surface per pixel, coverage 1: each layer's first pass holds (ID, 1) where covered and
+    # zeros elsewhere, written whole (what coverage_passes gives for these entries, without
+    # ranking or scattering); the other passes are zeros.
+    covered = winner >= 0
+    mesh = triangle_mesh[source][np.where(covered, winner, 0)]  # (one gather over the pixels)
+    out: dict[str, np.ndarray] = {}
+    for layer in request.names:
+        names = pass_names(layer, request.levels)
+        first = np.zeros((height, width, 4), np.float32)
+        flat = first.reshape(-1, 4)
+        flat[:, 0] = np.where(covered, request.ids(layer)[mesh], np.float32(0.0))
+        flat[:, 1] = covered
+        out[names[0]] = first
+        out.update((name, np.zeros((height, width, 4), np.float32)) for name in names[1:])
+    return out
 
 
 def passes_from_fragments(
