@@ -127,7 +127,7 @@ $(VENV52)/.synced: $(LOCK52)
 # core tests on numpy 2.
 test-blender52: $(VENV52)/.synced
 	BLINN_PHONG_TEST_EXTENSION=1 $(VENV52)/bin/python -m pytest -q -m blender
-	$(VENV52)/bin/python -m pytest -q -m "not blender" tests/blinn_phong tests/compositing tests/effects
+	$(VENV52)/bin/python -m pytest -q -m "not blender" tests/blinn_phong tests/compositing tests/effects tests/mesa tests/planning
 
 clean:
 	rm -rf $(VENV) $(VENV42) $(VENV45) $(VENV52) $(OUT) .pytest_cache .ruff_cache

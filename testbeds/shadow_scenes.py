@@ -1,6 +1,6 @@
 """The shadow-mapping scene measured against Mesa, and the masks its comparisons use.
 
-Shared by ``benchmarks/bench_shadows_mesa.py`` and ``tests/effects/test_shadows_vs_mesa.py``.
+Shared by ``benchmarks/bench_shadows_mesa.py`` and ``tests/mesa/test_shadows_vs_mesa.py``.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ def two_spheres_over_ground(
 
     ``rings`` defaults to ``segments // 2 + 1``; ``lights`` to a sun and a point light.
     The scene of ``benchmarks/bench_shadows_mesa.py`` and, with small spheres, of
-    tests/effects/test_shadows_vs_mesa.py.
+    tests/mesa/test_shadows_vs_mesa.py.
     """
     import blinn_phong as bp
     from blinn_phong.model.primitives import grid_plane, uv_sphere

@@ -2,7 +2,7 @@
 the lighting equation, the attenuation at a mesh's nearest distance from a light, the spot cone
 at its smallest angle, fog), how much a light's shadow can change a pixel, and how many
 transparent layers can stack. Each bound is an upper bound, tested against rendered images
-(tests/effects/test_planner_bounds.py)."""
+(tests/planning/test_planner_bounds.py)."""
 
 from __future__ import annotations
 

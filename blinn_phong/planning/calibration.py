@@ -151,7 +151,7 @@ def predict_depth_peeling(models: dict, k: int, alpha_min: float, brightest: flo
     The measured ``c`` (the largest measured/bound ratio, 0.52 on the calibration scenes)
     is the slack those scenes leave; an opaque surface of radiance ``B`` right behind the
     peeled layers reaches the bound itself (``c = 1``, e.g. 0.72 measured in
-    ``tests/effects/test_planner.py``), so the prediction never uses less than 1.
+    ``tests/planning/test_planner.py``), so the prediction never uses less than 1.
     """
     return 255.0 * depth_peeling_factor(models) * brightest * (1.0 - alpha_min) ** k
 

@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import renderer_scenes
-from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
 from blinn_phong.model.texture import Texture
+from tests.blinn_phong import renderer_scenes
+from tests.pixels import interior_mask
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 

@@ -27,12 +27,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import renderer_scenes
-from test_renderer_vs_mesa import interior_mask
 
 import blinn_phong as bp
 from blinn_phong.model.texture import Texture
 from oracles.gl_common import to_unorm8
+from tests.blinn_phong import renderer_scenes
+from tests.pixels import interior_mask
 
 pytestmark = pytest.mark.mesa
 

@@ -28,8 +28,7 @@ from blinn_phong.planning.bounds import (
 from blinn_phong.planning.frame_plan import Fog
 from blinn_phong.planning.planner import plan
 from testbeds.planner_fuzz import random_scene
-
-from .scenes import flat_cube, horizontal_quad, ortho_camera, perspective_camera, quad, scene_of
+from tests.effects.scenes import flat_cube, horizontal_quad, ortho_camera, perspective_camera, quad, scene_of
 
 
 def _on_triangles(tris: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:

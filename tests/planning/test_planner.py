@@ -10,8 +10,7 @@ from blinn_phong.planning.calibration import shipped_models
 from blinn_phong.planning.frame_plan import Fog, ShadowOptions
 from blinn_phong.planning.planner import plan
 from blinn_phong.shadows.methods import light_visibility
-
-from .scenes import (
+from tests.effects.scenes import (
     flat_cube,
     horizontal_quad,
     perspective_camera,

@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 from blinn_phong.shadows.volume import shadow_volume_visibility
-
-from .volume_scenes import (
+from tests.effects.volume_scenes import (
     HEIGHT,
     LIGHTS,
     WIDTH,

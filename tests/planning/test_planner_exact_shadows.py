@@ -22,9 +22,8 @@ from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight
 from blinn_phong.planning import calibration
 from blinn_phong.planning.frame_plan import frame_plan
 from blinn_phong.planning.planner import plan
-
-from .scenes import horizontal_quad, perspective_camera, scene_of, sphere
-from .volume_scenes import boundary_band
+from tests.effects.scenes import horizontal_quad, perspective_camera, scene_of, sphere
+from tests.effects.volume_scenes import boundary_band
 
 FLOOR = horizontal_quad(-1.0, half=3.0, colour=(0.2, 0.3, 0.4))
 
