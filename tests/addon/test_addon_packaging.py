@@ -146,7 +146,7 @@ def test_install_zip_into_bpy_as_a_user(built_zip: Path, tmp_path: Path) -> None
     assert {pkg, pkg + ".mapping", pkg + ".blinn_phong.model.scene", pkg + ".compositing.factors"} <= set(
         got["imported"]
     )
-    assert got["ortho_module"] == pkg + ".blinn_phong.model.scene"
+    assert got["ortho_module"] == pkg + ".blinn_phong.model.transforms"
     assert got["top_level_loaded"] == []
 
 
