@@ -215,8 +215,27 @@ class DirectionalLight:
         return [(view, orthographic_matrix(-radius, radius, -radius, radius, radius * 0.5, radius * 3.5))]
 
 
+class _Positional:
+    """What every light at a point shares (mixed into :class:`PointLight` and :class:`SpotLight`)."""
+
+    position: tuple[float, float, float]
+
+    #: At a point: rays diverge from it; distance attenuates it.
+    positional: ClassVar[bool] = True
+    casts_shadows: ClassVar[bool] = True
+
+    def homogeneous(self) -> np.ndarray:
+        """(4,) ``GL_POSITION = (position, 1)``."""
+        return np.r_[np.asarray(self.position, dtype=np.float64), 1.0]
+
+    def direction_to(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) unit direction from each of the (n, 3) points towards the light (zero at the
+        light itself), and (n,) world-space distance."""
+        return _positional_direction_to(np.asarray(self.position, dtype=np.float64), points)
+
+
 @dataclass(frozen=True, init=False)
-class PointLight:
+class PointLight(_Positional):
     """A positional light with attenuation ``1 / (kc + kl·d + kq·d²)``.
 
     ``position`` is given in world space and moved to eye space by the camera's view
@@ -261,19 +280,6 @@ class PointLight:
         object.__setattr__(self, "linear", kl)
         object.__setattr__(self, "quadratic", kq)
 
-    #: At a point: rays diverge from it; distance attenuates it.
-    positional: ClassVar[bool] = True
-    casts_shadows: ClassVar[bool] = True
-
-    def homogeneous(self) -> np.ndarray:
-        """(4,) ``GL_POSITION = (position, 1)``."""
-        return np.r_[np.asarray(self.position, dtype=np.float64), 1.0]
-
-    def direction_to(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 3) unit direction from each of the (n, 3) points towards the light (zero at the
-        light itself), and (n,) world-space distance."""
-        return _positional_direction_to(np.asarray(self.position, dtype=np.float64), points)
-
     @property
     def axis(self) -> None:
         """None: a point light shines in every direction (no cone)."""
@@ -295,7 +301,7 @@ class PointLight:
 
 
 @dataclass(frozen=True, init=False)
-class SpotLight:
+class SpotLight(_Positional):
     """A positional light restricted to a cone around ``direction`` (world space).
 
     Inside the cone (angle between the light→point direction and ``direction``
@@ -346,19 +352,6 @@ class SpotLight:
         object.__setattr__(self, "constant", kc)
         object.__setattr__(self, "linear", kl)
         object.__setattr__(self, "quadratic", kq)
-
-    #: At a point: rays diverge from it; distance attenuates it.
-    positional: ClassVar[bool] = True
-    casts_shadows: ClassVar[bool] = True
-
-    def homogeneous(self) -> np.ndarray:
-        """(4,) ``GL_POSITION = (position, 1)``."""
-        return np.r_[np.asarray(self.position, dtype=np.float64), 1.0]
-
-    def direction_to(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, 3) unit direction from each of the (n, 3) points towards the light (zero at the
-        light itself), and (n,) world-space distance."""
-        return _positional_direction_to(np.asarray(self.position, dtype=np.float64), points)
 
     @property
     def axis(self) -> tuple[float, float, float]:

@@ -42,7 +42,7 @@ import numpy as np
 
 from blinn_phong._numba import numba_available, use_compiled
 from blinn_phong.geometry.raster import rasterize
-from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.lights import CUBE_FACES, DirectionalLight, PointLight, SpotLight
 from blinn_phong.shadows._inputs import checked_points, checked_triangles, homogeneous
 from blinn_phong.shadows.method import ShadowMethod
 
@@ -245,21 +245,6 @@ def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
     return centre, radius
 
 
-def _up_for(direction: np.ndarray) -> np.ndarray:
-    return np.array([0.0, 1.0, 0.0]) if abs(direction[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-
-
-#: Cube-map faces: (axis, sign) of the major axis, and the look-at up vector per face.
-_CUBE_FACES = (
-    (0, 1.0, (0.0, -1.0, 0.0)),
-    (0, -1.0, (0.0, -1.0, 0.0)),
-    (1, 1.0, (0.0, 0.0, 1.0)),
-    (1, -1.0, (0.0, 0.0, -1.0)),
-    (2, 1.0, (0.0, -1.0, 0.0)),
-    (2, -1.0, (0.0, -1.0, 0.0)),
-)
-
-
 def light_shadow_maps(
     light: DirectionalLight | PointLight | SpotLight,
     world_triangles: np.ndarray,
@@ -320,7 +305,7 @@ def light_cameras(
     sphere (centre ``c``, radius ``r``; eye at ``c − 2r·d``, depth range [0.5r, 3.5r]).
     Spot (cut-off ≤ 80°): a perspective camera at the light along its axis, field of view
     twice the cut-off. Point (or wider spot): six 90° cube faces in the order of
-    ``_CUBE_FACES`` (+x, −x, +y, −y, +z, −z; OpenGL 4.6 §8.13 table 8.19). Perspective
+    ``CUBE_FACES`` (+x, −x, +y, −y, +z, −z; OpenGL 4.6 §8.13 table 8.19). Perspective
     cameras span ``near = 10⁻³·far`` to ``far`` = distance to the farthest bounding-sphere point.
 
     Args:
@@ -397,7 +382,7 @@ def shadow_map_visibility(
     axis = np.argmax(np.abs(rel), axis=1)
     sign = np.sign(rel[np.arange(len(p)), axis])
     vis = np.ones(len(p))
-    for face, (ax, sg, _) in enumerate(_CUBE_FACES):
+    for face, (ax, sg, _) in enumerate(CUBE_FACES):
         sel = (axis == ax) & (sign == sg)
         if np.any(sel):
             nrm = None if normals is None else np.asarray(normals)[sel]

@@ -120,3 +120,18 @@ def exr_passes(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], dict[
         channels[stem] = [names_[i] for i in ranked]
         pixels[stem] = [pixels[stem][i] for i in ranked]  # type: ignore[index]
     return {k: np.stack(v, axis=-1) for k, v in pixels.items()}, header, channels
+
+
+def engine_scene(width: int, height: int) -> str:
+    """Lines of a bpy script: an empty factory scene with the engine's properties, engine and UI
+    registered, rendering ``width``×``height`` at 100 % (``scene`` is bound; ``bpy``, ``compat``,
+    ``engine``, ``properties`` and ``render_ui`` must be imported before)."""
+    return f"""
+bpy.ops.wm.read_factory_settings(use_empty=True)
+properties.register()
+engine.register()
+render_ui.register()
+scene = bpy.context.scene
+scene.render.resolution_x, scene.render.resolution_y = {width}, {height}
+scene.render.resolution_percentage = 100
+"""

@@ -24,24 +24,22 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813
 import pytest
-from addon_testing import exr_passes, run_bpy
+from addon_testing import engine_scene, exr_passes, run_bpy
 
 from compositing.cryptomatte import matte, name_hash, name_id
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
 
-SCRIPT = """
+SCRIPT = (
+    """
 import math, sys
 import bpy
 from addon import compat, engine, properties, render_ui
 
 out = sys.argv[1]
-bpy.ops.wm.read_factory_settings(use_empty=True)
-properties.register()
-engine.register()
-render_ui.register()
-scene = bpy.context.scene
-scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 32, 24, 100
+"""
+    + engine_scene(32, 24)
+    + """
 scene.render.film_transparent = True
 layer = scene.view_layers[0]
 layer.use_pass_cryptomatte_object = True
@@ -107,6 +105,7 @@ engine.unregister()
 properties.unregister()
 emit({"outputs": outputs, "layer_names": layer_names})
 """
+)
 
 
 def _layer(pixels: dict[str, np.ndarray], stem: str) -> list[np.ndarray]:

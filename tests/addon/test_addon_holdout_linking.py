@@ -29,22 +29,20 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio  # noqa: N813 (the library's documented alias)
 import pytest
-from addon_testing import run_bpy
+from addon_testing import engine_scene, run_bpy
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow, pytest.mark.timeout(600)]
 
-SCRIPT = """
+SCRIPT = (
+    """
 import math, sys
 import bpy
 from addon import compat, engine, properties, render_ui
 
 out = sys.argv[1]
-bpy.ops.wm.read_factory_settings(use_empty=True)
-properties.register()
-engine.register()
-render_ui.register()
-scene = bpy.context.scene
-scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 64, 48, 100
+"""
+    + engine_scene(64, 48)
+    + """
 compat.set_image_format(scene.render.image_settings, "OPEN_EXR", "32")
 scene.render.image_settings.color_mode = "RGBA"
 scene.cycles.samples = 1
@@ -153,6 +151,7 @@ engine.unregister()
 properties.unregister()
 emit({"done": True})
 """
+)
 
 
 def _read(path: Path) -> np.ndarray:
