@@ -180,7 +180,7 @@ def _fragment_surface(
     verts = np.concatenate(world_vertices) if world_vertices else np.zeros((0, 3))
     faces = face_normals(verts, prepared.triangles)
     if compiled:
-        from blinn_phong.shadows.kernels import fragment_surface
+        from blinn_phong.shadows.ray_setup_kernels import fragment_surface
 
         n = len(fragments)
         points = np.empty((n, 3))

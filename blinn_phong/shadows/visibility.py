@@ -197,7 +197,7 @@ def render_shadow_map(
     res = int(resolution)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     if use_compiled(engine):
-        from blinn_phong.shadows.kernels import depth_map_compiled
+        from blinn_phong.shadows.map_render_kernels import depth_map_compiled
 
         depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
         return ShadowMap(depth_map, np.asarray(view, float), np.asarray(projection, float))
@@ -262,7 +262,7 @@ def shadow_visibility(
     p = _points("points", points)
     n = _lookup_normals(p, normals, normal_offset, kernel)
     if use_compiled(engine):
-        from blinn_phong.shadows.kernels import lookup_compiled
+        from blinn_phong.shadows.map_lookup_kernels import lookup_compiled
 
         vp = shadow_map.projection @ shadow_map.view
         return lookup_compiled(
@@ -315,7 +315,8 @@ def shadow_visibility(
 
 def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
     if numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
-        from blinn_phong.shadows.kernels import corner_bounds  # the same minimum and maximum, in one pass
+        # the same minimum and maximum, in one pass
+        from blinn_phong.shadows.map_render_kernels import corner_bounds
 
         lo, hi = corner_bounds(world_triangles)
     else:
@@ -379,7 +380,7 @@ def light_shadow_maps(
             raise ValueError(
                 f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
             )
-        from blinn_phong.shadows.kernels import cube_maps_compiled
+        from blinn_phong.shadows.map_render_kernels import cube_maps_compiled
 
         # the six faces in one (6, R, R) block, rendered one face per thread; the look-up
         # then reads the block without a copy
@@ -474,7 +475,7 @@ def shadow_map_visibility(
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
     if use_compiled(engine):
         n = _lookup_normals(p, normals, normal_offset, kernel)
-        from blinn_phong.shadows.kernels import lookup_compiled
+        from blinn_phong.shadows.map_lookup_kernels import lookup_compiled
 
         base = maps[0].depth.base
         same_block = (
@@ -558,7 +559,7 @@ def shadow_lookup(
         raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
     if len(maps) not in (1, 6) or (len(maps) == 6 and isinstance(light, DirectionalLight)):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
-    from blinn_phong.shadows.kernels import KERNEL_CODES
+    from blinn_phong.shadows.map_lookup_kernels import KERNEL_CODES
 
     base = maps[0].depth.base
     same_block = (
@@ -847,7 +848,7 @@ def _receiver_visibility(
     (:func:`blinn_phong.shadows.kernels.receiver_visibility_compiled`)."""
     vps, views, light_position = map_matrices(light, tris, resolution, constant_bias, slope_bias)
     n = _lookup_normals(p, normals, normal_offset, kernel)
-    from blinn_phong.shadows.kernels import receiver_visibility_compiled
+    from blinn_phong.shadows.map_receiver_kernels import receiver_visibility_compiled
 
     return receiver_visibility_compiled(
         tris,
