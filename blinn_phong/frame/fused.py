@@ -372,7 +372,12 @@ def _row_kernels() -> None:
         m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
         n_lit = m_first.shape[0]
         no_faces = np.zeros(0, np.int8)
-        n_cov = 0
+        # nearest_run's integers and flag as int64 / bool variables, never literals: a literal
+        # (0, False) is a type of its own, and would compile specialisations of nearest_run
+        # apart from the one the general path's look-up (_lookup_nearest_share) compiles
+        zero = np.int64(0)
+        no_reuse = no_faces.shape[0] != 0
+        n_cov = zero
         for col in range(width):
             o = index[row * width + col]
             if o < 0:
@@ -395,8 +400,8 @@ def _row_kernels() -> None:
             cube = 1 if m_faces[i_light] == 6 else 0
             if m_kernel[i_light] == 0:
                 _nearest_run(
-                    r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
-                    r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
+                    r_pts, zero, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, no_reuse,
+                    r_vis, i_light, zero, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
                 )  # fmt: skip
                 continue
             for j in range(n_cov):

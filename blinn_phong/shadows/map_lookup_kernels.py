@@ -27,6 +27,8 @@ import os
 import numba
 import numpy as np
 
+from compositing._threads import in_shares
+
 __all__ = ["KERNEL_CODES", "lookup_compiled", "nearest_run", "stacked_visibility", "visibility_at"]
 
 #: PCF kernel codes shared with :mod:`blinn_phong.shadows.visibility` (index into its PCF_KERNELS).
@@ -70,7 +72,7 @@ def _window(nxd, nyd, nzd, res_x, res_y):  # pragma: no cover - compiled
     return x, y, z, True
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # a call, not inlined: compiled once for every caller
 def _locate(
     px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, base=0
 ):  # pragma: no cover - compiled
@@ -100,7 +102,7 @@ def _locate(
     return f, x, y, z, found
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # a call, not inlined: compiled once for every caller
 def _filtered(depth, f, x, y, z, kernel, res_x, res_y):  # pragma: no cover - compiled
     # the percentage-closer filter of ``kernel`` at texel coordinates (x, y), receiver depth z
     if kernel == 0:
@@ -140,8 +142,9 @@ def visibility_at(
     """
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
+    first = np.int64(0)  # an int64 as stacked_visibility's base, not a literal: one _locate for both
     f, x, y, z, found = _locate(
-        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
+        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, first
     )
     if not found:
         return 1.0
@@ -187,12 +190,13 @@ def _taps_inside(rects, f, x, y, kernel, res_x, res_y):  # pragma: no cover - co
     return rects[f, 0] <= r_lo and r_hi <= rects[f, 1] and rects[f, 2] <= c_lo and c_hi <= rects[f, 3]
 
 
-@numba.njit(parallel=True, cache=True)
-def _lookup(
-    points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
-):  # pragma: no cover
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _lookup_share(
+    share, points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
+):  # pragma: no cover - compiled
+    # out[i] = visibility_at of the points i of ``share`` (a serial loop: shares on threads)
     with_normals = normal_offset != 0.0
-    for i in numba.prange(points.shape[0]):
+    for i in share:
         nx = normals[i, 0] if with_normals else 0.0
         ny = normals[i, 1] if with_normals else 0.0
         nz = normals[i, 2] if with_normals else 0.0
@@ -202,11 +206,11 @@ def _lookup(
         )  # fmt: skip
 
 
-#: Points per block of :func:`_lookup_nearest`.
+#: Points per block of :func:`_lookup_nearest_share`.
 _BLOCK = 512
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy")  # a call, not inlined: nearest_run calls it twice
 def _project_run(points, lo, hi, vp, f, qx, qy, qz, cws, base):  # pragma: no cover - compiled
     # clip coordinates of points lo..hi-1 by face f's matrix and their quotients by w, into the
     # block's scratch rows (i − base); a tight loop of independent divisions, no branches
@@ -304,26 +308,32 @@ def nearest_run(
         out[i + shift, col] = _lit(depth, base + f, math.floor(x), math.floor(y), z, res_x, res_y)
 
 
-@numba.njit(parallel=True, cache=True, error_model="numpy")
-def _lookup_nearest(points, depth, vp, face_mode, light_pos, out, n_chunks, known):  # pragma: no cover
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _lookup_nearest_share(
+    share, points, depth, vp, face_mode, light_pos, out, n_chunks, known
+):  # pragma: no cover - compiled
     # visibility_at with the nearest kernel and no normal offset, per block of points
-    # (nearest_run); ``out``: (n, 1); ``known``: the points' cube faces when the receiver
-    # pre-pass found them (int8, −1: none), else empty.
+    # (nearest_run), for the chunks of points in ``share`` (of n_chunks); ``out``: (n, 1);
+    # ``known``: the points' cube faces when the receiver pre-pass found them (int8, −1:
+    # none), else empty.
     n = points.shape[0]
     reuse = known.shape[0] == n
     every = np.zeros((0, 4), np.int64)  # every texel a look-up reads is rendered
     miss = np.zeros(1, np.int64)
-    for ch in numba.prange(n_chunks):
-        qx = np.empty(_BLOCK)
-        qy = np.empty(_BLOCK)
-        qz = np.empty(_BLOCK)
-        cws = np.empty(_BLOCK)
-        faces = np.zeros(_BLOCK, np.int64)
+    # nearest_run's integers as int64 variables, not literals: a literal argument (0) would
+    # compile a specialisation of nearest_run apart from the fused frame pass's (map_row)
+    zero = np.int64(0)
+    qx = np.empty(_BLOCK)
+    qy = np.empty(_BLOCK)
+    qz = np.empty(_BLOCK)
+    cws = np.empty(_BLOCK)
+    faces = np.zeros(_BLOCK, np.int64)
+    for ch in share:
         hi = (ch + 1) * n // n_chunks
         for b0 in range(ch * n // n_chunks, hi, _BLOCK):
             b1 = min(b0 + _BLOCK, hi)
             nearest_run(
-                points, b0, b1, depth, vp, 0, face_mode, light_pos, known, reuse, out, 0, 0,
+                points, b0, b1, depth, vp, zero, face_mode, light_pos, known, reuse, out, zero, zero,
                 qx, qy, qz, cws, faces, every, miss,
             )  # fmt: skip
 
@@ -396,6 +406,8 @@ def _look_up(
     if normal_offset == 0.0 and code == 0:
         n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))
         known = np.zeros(0, np.int8) if faces is None else faces
-        _lookup_nearest(points, depth, vps, face_mode, light_position, out.reshape(-1, 1), n_chunks, known)
+        args = (points, depth, vps, face_mode, light_position, out.reshape(-1, 1), n_chunks, known)
+        in_shares(_lookup_nearest_share, n_chunks, *args)
     else:
-        _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
+        args = (points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
+        in_shares(_lookup_share, len(points), *args)

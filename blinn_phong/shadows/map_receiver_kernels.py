@@ -20,27 +20,40 @@ import numpy as np
 
 from blinn_phong.shadows.map_lookup_kernels import KERNEL_CODES, _cube_face, _look_up, _threads
 from blinn_phong.shadows.map_render_kernels import _full_rects, _render_maps
+from compositing._threads import in_shares
 
 __all__ = ["receiver_triangle_rects", "receiver_visibility_compiled"]
 
 
-@numba.njit(parallel=True, cache=True)
 def _receiver_rects(
-    points, normals, n_faces, res, vp, view_z, face_mode, light_pos, normal_offset, kernel, n_chunks, faces
-):  # pragma: no cover - compiled
+    points: np.ndarray, normals: np.ndarray, n_faces: int, res: int, vp: np.ndarray,
+    view_z: np.ndarray, face_mode: int, light_pos: np.ndarray, normal_offset: float, kernel: int,
+    n_chunks: int, faces: np.ndarray,
+) -> np.ndarray:  # fmt: skip
     # per face, a rectangle (r0, r1, c0, c1) holding every texel the look-ups of the points read
     # (r0 > r1: none). The face and the normal offset are chosen as visibility_at chooses them
     # (exactly: a point must be counted in its own face); the projection is then bounded from
     # outside: one reciprocal instead of three divisions (a few ulp off), no depth test, the
     # frustum test widened by 1e-9, and two texels of margin beyond the taps' reach, so the
-    # rectangle can only be larger than the exact one. Per chunk of points in parallel: the
+    # rectangle can only be larger than the exact one. Per chunk of points (shares on threads): the
     # extreme normalised coordinates per face, merged and turned into texels at the end. Each
     # point's cube face (−1: none) is written to ``faces`` (int8) for the look-up.
+    part = np.empty((n_chunks, n_faces, 4))  # min x, max x, min y, max y (normalised device)
+    args = (points, normals, n_faces, vp, view_z, face_mode, light_pos, normal_offset, n_chunks, faces, part)
+    in_shares(_receiver_extremes_share, n_chunks, *args)
+    return _rects_from_extremes(part, res, kernel)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _receiver_extremes_share(
+    share, points, normals, n_faces, vp, view_z, face_mode, light_pos, normal_offset, n_chunks, faces, part
+):  # pragma: no cover - compiled
+    # part[ch] for the chunks ch of ``share`` (of n_chunks): the extreme normalised device
+    # coordinates per face of the chunk's points (_receiver_rects)
     n = points.shape[0]
     with_normals = normal_offset != 0.0
-    part = np.empty((n_chunks, n_faces, 4))  # min x, max x, min y, max y (normalised device)
     lim = 1.0 + 1e-9
-    for ch in numba.prange(n_chunks):
+    for ch in share:
         for f in range(n_faces):
             part[ch, f, 0] = np.inf
             part[ch, f, 1] = -np.inf
@@ -90,7 +103,6 @@ def _receiver_rects(
             y_hi = max(y_hi, nyd)
         part[ch, cur, 0], part[ch, cur, 1] = x_lo, x_hi
         part[ch, cur, 2], part[ch, cur, 3] = y_lo, y_hi
-    return _rects_from_extremes(part, res, kernel)
 
 
 @numba.njit(cache=True)
@@ -125,7 +137,7 @@ def _rects_from_extremes(part, res, kernel):  # pragma: no cover - compiled
     return rects
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # a call, not inlined: _triangle_rects calls it twice
 def _extend(part, f, vp, x, y, z, floor_w):  # pragma: no cover - compiled
     # widen face f's extremes by the projection of world point (x, y, z); False where its clip
     # w is below floor_w (too near the light's plane for a bounded projection)

@@ -44,20 +44,7 @@ __all__ = ["corner_bounds", "cube_maps_compiled", "depth_map_compiled"]
 _SX, _SY, _SZ, _EA, _AREA, _EB, _EC, _BIAS, _ETL, _EXAREA, _NREC = 0, 3, 6, 9, 12, 13, 16, 19, 20, 23, 24
 
 
-@numba.njit(cache=True, inline="always")
-def _snap_setup(
-    x0c, y0c, z0c, w0c, x1c, y1c, z1c, w1c, x2c, y2c, z2c, w2c, res, rec, box, s
-):  # pragma: no cover - compiled
-    # clip corners of one (sub-)triangle (scalars); fills slot s; False when it draws nothing
-    if not (w0c > 0 and w1c > 0 and w2c > 0):
-        return False
-    return _snap_ndc(
-        x0c / w0c, y0c / w0c, z0c / w0c, x1c / w1c, y1c / w1c, z1c / w1c,
-        x2c / w2c, y2c / w2c, z2c / w2c, res, rec, box, s,
-    )  # fmt: skip
-
-
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # a call, not inlined: two call sites in _setup_range
 def _snap_ndc(nx0, ny0, nz0, nx1, ny1, nz1, nx2, ny2, nz2, res, rec, box, s):  # pragma: no cover - compiled
     # normalised device corners (w > 0) of one (sub-)triangle; fills slot s; False when it draws nothing
     scale = 256.0
@@ -204,9 +191,12 @@ def _setup_range(world, t0, t1, vp, res, slope_bias, rect, rec, box, base):  # p
                     r = corners[q][j]
                     for ch in range(4):
                         cv[j, ch] = w[r, 0] * c[0, ch] + w[r, 1] * c[1, ch] + w[r, 2] * c[2, ch]
-                drawn = _snap_setup(
-                    cv[0, 0], cv[0, 1], cv[0, 2], cv[0, 3], cv[1, 0], cv[1, 1], cv[1, 2], cv[1, 3],
-                    cv[2, 0], cv[2, 1], cv[2, 2], cv[2, 3], res, rec, box, k,
+                w0, w1, w2 = cv[0, 3], cv[1, 3], cv[2, 3]
+                if not (w0 > 0 and w1 > 0 and w2 > 0):
+                    continue
+                drawn = _snap_ndc(
+                    cv[0, 0] / w0, cv[0, 1] / w0, cv[0, 2] / w0, cv[1, 0] / w1, cv[1, 1] / w1, cv[1, 2] / w1,
+                    cv[2, 0] / w2, cv[2, 1] / w2, cv[2, 2] / w2, res, rec, box, k,
                 )  # fmt: skip
                 if drawn and _overlaps(box, k, rect):
                     k += 1
@@ -263,20 +253,18 @@ def _setup_tasks(
             )
 
 
-@numba.njit(cache=True)
-def _slots(filled, n, slots):  # pragma: no cover - compiled
-    # the slots drawn per face ``slots`` (F, 2n; the first count[f] of row f), in chunk order;
-    # returns count (F,)
+def _slots(filled: np.ndarray, n: int, slots: np.ndarray) -> np.ndarray:
+    """The slots drawn per face into ``slots`` (F, 2n; the first count[f] of row f), in chunk
+    order: chunk ``ch`` of ``C`` filled ``filled[f, ch]`` slots from ``2·(ch·n // C)`` on.
+    Returns count (F,)."""
     n_faces, n_chunks = filled.shape
-    count = np.zeros(n_faces, np.int64)
+    bases = 2 * (np.arange(n_chunks, dtype=np.int64) * n // n_chunks)
+    count = filled.sum(axis=1)
     for f in range(n_faces):
-        k = 0
-        for ch in range(n_chunks):
-            base = 2 * (ch * n // n_chunks)
-            for s in range(base, base + filled[f, ch]):
-                slots[f, k] = s
-                k += 1
-        count[f] = k
+        lengths = filled[f]
+        # slot k of the face's list lies in chunk ch: bases[ch] + (k − the slots of chunks before ch)
+        before = np.cumsum(lengths) - lengths
+        slots[f, : count[f]] = np.repeat(bases - before, lengths) + np.arange(count[f])
     return count
 
 
