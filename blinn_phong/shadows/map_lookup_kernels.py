@@ -72,7 +72,7 @@ def _window(nxd, nyd, nzd, res_x, res_y):  # pragma: no cover - compiled
     return x, y, z, True
 
 
-@numba.njit(cache=True)  # a call, not inlined: compiled once for every caller
+@numba.njit(cache=True, inline="always")
 def _locate(
     px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, base=0
 ):  # pragma: no cover - compiled
@@ -102,7 +102,7 @@ def _locate(
     return f, x, y, z, found
 
 
-@numba.njit(cache=True)  # a call, not inlined: compiled once for every caller
+@numba.njit(cache=True, inline="always")
 def _filtered(depth, f, x, y, z, kernel, res_x, res_y):  # pragma: no cover - compiled
     # the percentage-closer filter of ``kernel`` at texel coordinates (x, y), receiver depth z
     if kernel == 0:
@@ -142,9 +142,8 @@ def visibility_at(
     """
     res_y = float(depth.shape[1])
     res_x = float(depth.shape[2])
-    first = np.int64(0)  # an int64 as stacked_visibility's base, not a literal: one _locate for both
     f, x, y, z, found = _locate(
-        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y, first
+        px, py, pz, nx, ny, nz, vp, view_z, face_mode, light_pos, normal_offset, res_x, res_y
     )
     if not found:
         return 1.0
@@ -190,13 +189,16 @@ def _taps_inside(rects, f, x, y, kernel, res_x, res_y):  # pragma: no cover - co
     return rects[f, 0] <= r_lo and r_hi <= rects[f, 1] and rects[f, 2] <= c_lo and c_hi <= rects[f, 3]
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _lookup_share(
-    share, points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
+@numba.njit(parallel=True, cache=True)
+def _lookup(
+    points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
 ):  # pragma: no cover - compiled
-    # out[i] = visibility_at of the points i of ``share`` (a serial loop: shares on threads)
+    # out[i] = visibility_at of every point. A numba-parallel loop, not shares on threads: numba
+    # compiles a parallel loop's body knowing its arrays do not alias, and this body runs 2×
+    # faster so (the percentage-closer taps); it costs about 2 s of compilation, paid only by
+    # look-ups with a normal offset or a filter outside the fused frame pass.
     with_normals = normal_offset != 0.0
-    for i in share:
+    for i in numba.prange(points.shape[0]):
         nx = normals[i, 0] if with_normals else 0.0
         ny = normals[i, 1] if with_normals else 0.0
         nz = normals[i, 2] if with_normals else 0.0
@@ -409,5 +411,4 @@ def _look_up(
         args = (points, depth, vps, face_mode, light_position, out.reshape(-1, 1), n_chunks, known)
         in_shares(_lookup_nearest_share, n_chunks, *args)
     else:
-        args = (points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
-        in_shares(_lookup_share, len(points), *args)
+        _lookup(points, normals, depth, vps, view_z, face_mode, light_position, normal_offset, code, out)
