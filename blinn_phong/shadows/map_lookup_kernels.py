@@ -39,7 +39,7 @@ def _threads() -> int:
     return max(1, int(os.environ.get("NUMBA_NUM_THREADS", os.cpu_count() or 1)))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)  # a call, not inlined: six call sites in _filtered
 def _lit(depth, f, col, row, z, res_x, res_y):  # pragma: no cover - compiled
     c = min(max(col, 0.0), res_x - 1.0)
     r = min(max(row, 0.0), res_y - 1.0)
