@@ -194,7 +194,7 @@ def _lookup(
     points, normals, depth, vp, view_z, face_mode, light_pos, normal_offset, kernel, out
 ):  # pragma: no cover - compiled
     # out[i] = visibility_at of every point. A numba-parallel loop, not shares on threads: numba
-    # compiles a parallel loop's body knowing its arrays do not alias, and this body runs 2×
+    # compiles a parallel loop's body knowing its arrays do not alias, and this body runs 2–3.5×
     # faster so (the percentage-closer taps); it costs about 2 s of compilation, paid only by
     # look-ups with a normal offset or a filter outside the fused frame pass.
     with_normals = normal_offset != 0.0
@@ -403,7 +403,8 @@ def _look_up(
 ) -> None:
     """``out[i]`` = :func:`visibility_at` of every point (blocked: the nearest tap, no normal offset).
 
-    ``faces``: the points' cube faces from :func:`_receiver_rects`, or None.
+    ``faces``: the points' cube faces from
+    :func:`blinn_phong.shadows.map_receiver_kernels._receiver_rects`, or None.
     """
     if normal_offset == 0.0 and code == 0:
         n_chunks = max(1, min(len(points) // _BLOCK + 1, 8 * _threads()))

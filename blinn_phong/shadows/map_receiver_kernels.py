@@ -259,9 +259,9 @@ def receiver_triangle_rects(
 
     A bound from the receivers' triangles rather than their points (the pre-pass of
     :func:`receiver_visibility_compiled` needs the points): each triangle's part inside a
-    face's cone (the points :func:`visibility_at` looks up in that face), projected, with a
-    margin past rounding and two texels beyond the taps' reach. For look-ups without a normal
-    offset.
+    face's cone (the points :func:`.map_lookup_kernels.visibility_at` looks up in that face),
+    projected, with a margin past rounding and two texels beyond the taps' reach. For look-ups
+    without a normal offset.
 
     Args:
         corners: (n, 3, 3) float64 world-space receiver triangles.
@@ -299,11 +299,12 @@ def receiver_visibility_compiled(
 ) -> np.ndarray:
     """Shadow-map visibility of points, a cube's faces rendered only where their look-ups read.
 
-    The value of :func:`lookup_compiled` on the maps of :func:`depth_map_compiled` /
-    :func:`cube_maps_compiled`, bit for bit. For a cube (F = 6) a first parallel pass over the
-    points finds, per face, a rectangle holding every texel their percentage-closer taps read
-    (the look-up's face choice, and its projection bounded from outside); a face no point
-    reads is not rendered at all, the others only over their rectangle, and only with the
+    The value of :func:`.map_lookup_kernels.lookup_compiled` on the maps of
+    :func:`.map_render_kernels.depth_map_compiled` / :func:`.map_render_kernels.cube_maps_compiled`,
+    bit for bit. For a cube (F = 6) a first pass over the points (shares on threads) finds,
+    per face, a rectangle holding every texel their percentage-closer taps read (the
+    look-up's face choice, and its projection bounded from outside); a face no point reads
+    is not rendered at all, the others only over their rectangle, and only with the
     triangles whose texel box meets it. A texel's depth is a minimum over the triangles that
     cover it, so it is the same whether or not the texels around it are rendered. A single
     map is rendered whole.
