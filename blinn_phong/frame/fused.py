@@ -7,7 +7,7 @@ equation), fogged by the colour stage's compiled fog
 (:func:`blinn_phong.frame.resolve_kernels._fog_function`) and written into the float32 frame
 buffers in one pass over the rows, with the operations of the separate stages in their order (the
 same images, no (N, 3) arrays). Frames whose shadowed lights are all shadow-mapped look the maps
-up in the same pass (``map_row``, :mod:`blinn_phong.shadows.kernels`).
+up in the same pass (``map_row``, :mod:`blinn_phong.shadows.map_lookup_kernels`).
 
 The row function (``plain_row``) is serial; the short loop over a share of rows releases the GIL
 and the shares run on threads (:mod:`compositing._threads`): numba's parallel transformation of
@@ -37,7 +37,7 @@ _interpolated: object = None
 #: The colour stage's fog (:func:`blinn_phong.frame.resolve_kernels._fog_function`), set by
 #: :func:`_row_kernels`.
 _fogged: object = None
-#: The shadow-map look-ups (shadow_kernels.stacked_visibility per point, nearest_run per run of
+#: The shadow-map look-ups (map_lookup_kernels.stacked_visibility per point, nearest_run per run of
 #: points), set by :func:`_row_kernels`.
 _stacked_visibility: object = None
 _nearest_run: object = None
@@ -71,14 +71,15 @@ def _row_kernels() -> None:
     # kernel inlines code from lighting.py, so the hash of that file is a closure constant:
     # editing the equation invalidates the cached kernel.
     _point_terms = lighting.point_terms()
-    # the shadow-map look-ups (shadow_kernels.nearest_run and stacked_visibility): their file is stamped too
-    from blinn_phong.shadows import kernels as shadow_kernels
+    # the shadow-map look-ups (map_lookup_kernels.nearest_run and stacked_visibility, with the
+    # helpers they inline, all in that module): their file is stamped too
+    from blinn_phong.shadows import map_lookup_kernels
 
     global _stacked_visibility, _nearest_run
-    _stacked_visibility = shadow_kernels.stacked_visibility
-    _nearest_run = shadow_kernels.nearest_run
+    _stacked_visibility = map_lookup_kernels.stacked_visibility
+    _nearest_run = map_lookup_kernels.nearest_run
     digest = hashlib.sha256()
-    for module in (lighting, shadow_kernels):
+    for module in (lighting, map_lookup_kernels):
         with open(module.__file__, "rb") as source:
             digest.update(source.read())
     lighting_stamp = int(digest.hexdigest()[:15], 16)
@@ -365,13 +366,18 @@ def _row_kernels() -> None:
     ):  # fmt: skip  # pragma: no cover - compiled
         # The row's covered pixels first: each winner's depth and barycentrics (read back by
         # plain_row), its world point (as winner_surface) and its visibility per light
-        # (shadow_kernels.visibility_at, opaque winners only, no normal offset), in runs over the
-        # row (shadow_kernels.nearest_run: tight loops of divisions), or per point
+        # (map_lookup_kernels.visibility_at, opaque winners only, no normal offset), in runs over the
+        # row (map_lookup_kernels.nearest_run: tight loops of divisions), or per point
         # (stacked_visibility: the PCF kernels). Compiled only for frames with shadow maps.
         m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
         n_lit = m_first.shape[0]
         no_faces = np.zeros(0, np.int8)
-        n_cov = 0
+        # nearest_run's integers and flag as int64 / bool variables, never literals: a literal
+        # (0, False) is a type of its own, and would compile specialisations of nearest_run
+        # apart from the one the general path's look-up (_lookup_nearest_share) compiles
+        zero = np.int64(0)
+        no_reuse = no_faces.shape[0] != 0
+        n_cov = zero
         for col in range(width):
             o = index[row * width + col]
             if o < 0:
@@ -394,8 +400,8 @@ def _row_kernels() -> None:
             cube = 1 if m_faces[i_light] == 6 else 0
             if m_kernel[i_light] == 0:
                 _nearest_run(
-                    r_pts, 0, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, False,
-                    r_vis, i_light, 0, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
+                    r_pts, zero, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, no_reuse,
+                    r_vis, i_light, zero, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
                 )  # fmt: skip
                 continue
             for j in range(n_cov):
@@ -413,7 +419,7 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
     """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself.
 
     Two variants of the short loop over a share of rows, so that a frame without shadow maps
-    does not compile the shadow-map look-ups (``map_row``, ``shadow_kernels.nearest_run`` and
+    does not compile the shadow-map look-ups (``map_row``, ``map_lookup_kernels.nearest_run`` and
     ``stacked_visibility``, about 5 s of compilation): the branch on the constant ``with_maps``
     is removed before numba types the function, and the variants are cached apart (their names
     and closure values differ). Both call the same row function (compiled once)."""
@@ -634,7 +640,7 @@ def shade_plain_winners_compiled(
     shadow-mapped (``visibility`` None): a :class:`blinn_phong.shadows.frame_maps.MapStack` of the maps
     of every non-ambient light and the (V, 3) float64 world positions of the prepared scene's
     vertices. Each pixel's world point (as :func:`winner_surfaces_compiled` computes it) is
-    looked up in the maps as it is shaded (:func:`blinn_phong.shadows.kernels.stacked_visibility`),
+    looked up in the maps as it is shaded (:func:`blinn_phong.shadows.map_lookup_kernels.stacked_visibility`),
     and the shadow pass is the mean of its visibilities
     (:func:`blinn_phong.frame.resolve.shadow_pass_values`).
 

@@ -177,13 +177,14 @@ def _fragment_surface(
 
     The point is the perspective-correct interpolation of the world-space corners (equal to the
     interpolated eye-space point mapped back by the inverse view matrix: the map is affine and
-    the barycentrics sum to 1). Compiled: one pass (:func:`blinn_phong.shadows.kernels.fragment_surface`);
+    the barycentrics sum to 1). Compiled: one pass
+    (:func:`blinn_phong.shadows.ray_setup_kernels.fragment_surface`);
     numpy: :func:`blinn_phong.geometry.raster.interpolate` and a gather.
     """
     verts = np.concatenate(world_vertices) if world_vertices else np.zeros((0, 3))
     faces = face_normals(verts, prepared.triangles)
     if compiled:
-        from blinn_phong.shadows.kernels import fragment_surface
+        from blinn_phong.shadows.ray_setup_kernels import fragment_surface
 
         n = len(fragments)
         points = np.empty((n, 3))

@@ -2,13 +2,13 @@
 
 When every shadowed light of an opaque one-sample frame uses a shadow map, the fused kernel
 (:func:`blinn_phong.frame.fused.shade_plain_winners_compiled`) looks each pixel's world point up in
-the maps as it shades it (:func:`blinn_phong.shadows.kernels.visibility_at`), so the frame
+the maps as it shades it (:func:`blinn_phong.shadows.map_lookup_kernels.visibility_at`), so the frame
 needs no world-point array and no visibility array. The maps must exist first, without the
 points:
 
 * a single map (directional light, narrow spot) is rendered whole, as always;
 * a cube (point light) is rendered only over the texels the visible triangles can be looked
-  up in (:func:`blinn_phong.shadows.kernels.receiver_triangle_rects`: each visible triangle's
+  up in (:func:`blinn_phong.shadows.map_receiver_kernels.receiver_triangle_rects`: each visible triangle's
   part in each face's cone, projected) — a bound from the z-buffer's winning triangles, found
   in one pass over the winners (:func:`visible_triangles`), instead of from the points.
 
@@ -30,7 +30,9 @@ import numba
 import numpy as np
 
 from blinn_phong._scratch import ScratchPool, carve
-from blinn_phong.shadows import kernels as sk
+from blinn_phong.shadows.map_lookup_kernels import KERNEL_CODES
+from blinn_phong.shadows.map_receiver_kernels import receiver_triangle_rects
+from blinn_phong.shadows.map_render_kernels import _full_rects, _render_maps
 from blinn_phong.shadows.maps import PCF_KERNELS, map_matrices
 from blinn_phong.shadows.methods import light_visibility
 
@@ -51,7 +53,7 @@ class MapStack(NamedTuple):
     ``view_projection`` (F, 4, 4) world → clip; ``view_z`` (F, 3) row 2 of each world → light-eye
     matrix; per non-ambient light (L): ``first`` (L,) int64 its first map in the stack (−1: no
     shadow), ``faces`` (L,) int64 1 or 6, ``light_position`` (L, 3) (a cube's light),
-    ``kernel`` (L,) int64 codes of :data:`blinn_phong.shadows.kernels.KERNEL_CODES`;
+    ``kernel`` (L,) int64 codes of :data:`blinn_phong.shadows.map_lookup_kernels.KERNEL_CODES`;
     ``rects`` (F, 4) int64 each map's rendered texels ``(r0, r1, c0, c1)``; ``miss`` (1,) int64,
     set to 1 by a look-up whose taps leave them (a point farther off its triangle than the
     bound allows: the frame is then shaded again by the general path). Look-ups take no
@@ -183,16 +185,15 @@ def _render_stack(
     for i, o, vps, views, light_position in settings:
         f = len(vps)
         first[i], faces[i] = at, f
-        kernel[i] = sk.KERNEL_CODES[str(o["kernel"])]
+        kernel[i] = KERNEL_CODES[str(o["kernel"])]
         if light_position is not None:
             position[i] = light_position
         if light_position is not None:
-            rects = sk.receiver_triangle_rects(receivers, vps, light_position, res, str(o["kernel"]))
+            rects = receiver_triangle_rects(receivers, vps, light_position, res, str(o["kernel"]))
         else:
-            rects = sk._full_rects(f, res)
-        sk._render_maps(
-            world, vps, rects, float(o["constant_bias"]), float(o["slope_bias"]), depth[at : at + f]
-        )  # type: ignore[arg-type]
+            rects = _full_rects(f, res)
+        constant, slope = float(o["constant_bias"]), float(o["slope_bias"])  # type: ignore[arg-type]
+        _render_maps(world, vps, rects, constant, slope, depth[at : at + f])
         rects_all[at : at + f] = rects
         vp_all[at : at + f] = vps
         vz_all[at : at + f] = views[:, 2, :3]

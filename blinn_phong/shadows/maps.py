@@ -23,10 +23,11 @@ surface point is lit when its own light-space depth is not behind the stored dep
   ``slope_bias ≳ 1 + 2h`` (h = 1 for bilinear, (k − 1)/2 for box k) to stay free of acne.
 
 Engines: every shadow-map function takes ``engine``: ``numpy`` runs the code in this module
-(the readable reference), ``numba`` the compiled twins of :mod:`blinn_phong.shadows.kernels`
+(the readable reference), ``numba`` the compiled twins of
+:mod:`blinn_phong.shadows.map_render_kernels` and :mod:`blinn_phong.shadows.map_lookup_kernels`
 (same formulas; depths within 1e-12, visibilities within 1e-9), ``auto`` (the default) the
-compiled ones when numba imports. :func:`light_visibility` also accepts per-triangle RGB
-transmittances, for coloured shadows of transparent casters (ray traced).
+compiled ones when numba imports. :func:`blinn_phong.shadows.methods.light_visibility` also accepts
+per-triangle RGB transmittances, for coloured shadows of transparent casters (ray traced).
 
 Image conventions: shadow maps are (height, width) arrays of window depth in [0, 1],
 row 0 at the top (as :func:`~blinn_phong.geometry.raster.rasterize` returns them), 1 where no
@@ -102,7 +103,7 @@ def render_shadow_map(
         constant_bias: window-depth units added to every caster fragment (≥ 0).
         slope_bias: multiple of the triangle's depth slope per texel added (≥ 0).
         engine: ``numpy`` (the reference: :func:`~blinn_phong.geometry.raster.rasterize` and a
-            scatter-min), ``numba`` (:func:`blinn_phong.shadows.kernels.depth_map_compiled`,
+            scatter-min), ``numba`` (:func:`blinn_phong.shadows.map_render_kernels.depth_map_compiled`,
             same formulas, depths within 1e-12) or ``auto`` (numba when it imports).
 
     Returns:
@@ -116,7 +117,7 @@ def render_shadow_map(
     res = int(resolution)
     vp = np.asarray(projection, dtype=np.float64) @ np.asarray(view, dtype=np.float64)
     if use_compiled(engine):
-        from blinn_phong.shadows.kernels import depth_map_compiled
+        from blinn_phong.shadows.map_render_kernels import depth_map_compiled
 
         depth_map = depth_map_compiled(tris, vp, res, float(constant_bias), float(slope_bias))
         return ShadowMap(depth_map, np.asarray(view, float), np.asarray(projection, float))
@@ -173,7 +174,7 @@ def shadow_visibility(
             side facing the light) before projection.
         kernel: one of :data:`PCF_KERNELS`.
         engine: ``numpy`` (this function's reference code), ``numba``
-            (:func:`blinn_phong.shadows.kernels.lookup_compiled`) or ``auto``.
+            (:func:`blinn_phong.shadows.map_lookup_kernels.lookup_compiled`) or ``auto``.
 
     Returns:
         (n,) float64 visibility in [0, 1].
@@ -181,7 +182,7 @@ def shadow_visibility(
     p = checked_points("points", points)
     n = _lookup_normals(p, normals, normal_offset, kernel)
     if use_compiled(engine):
-        from blinn_phong.shadows.kernels import lookup_compiled
+        from blinn_phong.shadows.map_lookup_kernels import lookup_compiled
 
         vp = shadow_map.projection @ shadow_map.view
         return lookup_compiled(
@@ -234,7 +235,8 @@ def shadow_visibility(
 
 def _bounds(world_triangles: np.ndarray) -> tuple[np.ndarray, float]:
     if numba_available() and world_triangles.flags.c_contiguous and len(world_triangles):
-        from blinn_phong.shadows.kernels import corner_bounds  # the same minimum and maximum, in one pass
+        # the same minimum and maximum, in one pass
+        from blinn_phong.shadows.map_render_kernels import corner_bounds
 
         lo, hi = corner_bounds(world_triangles)
     else:
@@ -283,7 +285,7 @@ def light_shadow_maps(
             raise ValueError(
                 f"biases must be >= 0, got constant_bias={constant_bias}, slope_bias={slope_bias}"
             )
-        from blinn_phong.shadows.kernels import cube_maps_compiled
+        from blinn_phong.shadows.map_render_kernels import cube_maps_compiled
 
         # the six faces in one (6, R, R) block, rendered one face per thread; the look-up
         # then reads the block without a copy
@@ -360,7 +362,7 @@ def shadow_map_visibility(
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
     if use_compiled(engine):
         n = _lookup_normals(p, normals, normal_offset, kernel)
-        from blinn_phong.shadows.kernels import lookup_compiled
+        from blinn_phong.shadows.map_lookup_kernels import lookup_compiled
 
         base = maps[0].depth.base
         same_block = (
@@ -394,7 +396,7 @@ def shadow_map_visibility(
 
 @dataclass(frozen=True, eq=False)
 class ShadowLookup:
-    """The arrays :func:`blinn_phong.shadows.kernels.visibility_at` reads, for one light's maps.
+    """The arrays :func:`blinn_phong.shadows.map_lookup_kernels.visibility_at` reads, for one light's maps.
 
     A compiled shading kernel looks shadows up per fragment with
     ``visibility_at(px, py, pz, nx, ny, nz, *lookup.arguments())`` (world point, normal),
@@ -444,7 +446,7 @@ def shadow_lookup(
         raise ValueError(f"kernel must be one of {PCF_KERNELS}, got {kernel!r}")
     if len(maps) not in (1, 6) or (len(maps) == 6 and not light.positional):
         raise ValueError(f"expected 1 map, or 6 cube faces for a point light, got {len(maps)}")
-    from blinn_phong.shadows.kernels import KERNEL_CODES
+    from blinn_phong.shadows.map_lookup_kernels import KERNEL_CODES
 
     base = maps[0].depth.base
     same_block = (
@@ -479,10 +481,10 @@ def _receiver_visibility(
 ) -> np.ndarray:
     """Compiled ``shadow_map`` visibility: :func:`light_shadow_maps` then :func:`shadow_map_visibility`,
     same checks and bit-identical values, with only the texels the look-ups read rendered
-    (:func:`blinn_phong.shadows.kernels.receiver_visibility_compiled`)."""
+    (:func:`blinn_phong.shadows.map_receiver_kernels.receiver_visibility_compiled`)."""
     vps, views, light_position = map_matrices(light, tris, resolution, constant_bias, slope_bias)
     n = _lookup_normals(p, normals, normal_offset, kernel)
-    from blinn_phong.shadows.kernels import receiver_visibility_compiled
+    from blinn_phong.shadows.map_receiver_kernels import receiver_visibility_compiled
 
     return receiver_visibility_compiled(
         tris,

@@ -9,7 +9,7 @@ A frame's hard ray-traced shadows cast one ray per visible sample and light
 geometry alone proves: a ground plane's samples far from every object are lit, the dark side of
 a convex object is shadowed by it, samples deep in a ball's shadow are shadowed. This module
 finds them with a few float64 tests per ray, so that Embree traces only the rest. The ray is the
-one :func:`blinn_phong.shadows.kernels.hard_shadow_rays` builds: origin ``o = p + s·eff·n`` (``n``
+one :func:`blinn_phong.shadows.ray_setup_kernels.hard_shadow_rays` builds: origin ``o = p + s·eff·n`` (``n``
 the unit face normal, ``s = ±1`` towards the light, ``eff = max(offset, ulps·‖p − c₀‖∞)``, ``c₀``
 the BVH's centre), unit direction ``d`` from ``o`` towards the light, ``0 < t < t_max``.
 
@@ -224,7 +224,7 @@ def _rays_to_trace_kernel_share(
     for i in share:
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         nx, ny, nz = normals[i, 0], normals[i, 1], normals[i, 2]
-        # the ray of shadow_kernels.hard_shadow_rays, in float64
+        # the ray of ray_setup_kernels.hard_shadow_rays, in float64
         mag = max(abs(px - centre[0]), abs(py - centre[1]), abs(pz - centre[2]))
         eff = max(offset, ulps * mag)
         length = nx * nx + ny * ny + nz * nz  # unit normals (face normals) or zero

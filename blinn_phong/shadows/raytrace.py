@@ -360,9 +360,9 @@ def _hard_rays_numpy(
 
 @functools.lru_cache(maxsize=1)
 def _hard_rays_kernel() -> object | None:
-    """The compiled ray set-up (:func:`blinn_phong.shadows.kernels.hard_shadow_rays`); None without numba."""
+    """The compiled ray set-up (:func:`.ray_setup_kernels.hard_shadow_rays`); None without numba."""
     try:
-        from blinn_phong.shadows.kernels import hard_shadow_rays
+        from blinn_phong.shadows.ray_setup_kernels import hard_shadow_rays
     except Exception:
         return None
     return hard_shadow_rays
@@ -380,7 +380,9 @@ def _hard_shadow(
     """Visibility (1 lit, 0 shadowed) of points for one hard light: one batched occlusion query."""
     kernel = _hard_rays_kernel() if use_compiled(engine) else None
     if engine == "numba" and kernel is None:
-        raise ValueError("engine: 'numba' requested but blinn_phong.shadows.kernels cannot be imported")
+        raise ValueError(
+            "engine: 'numba' requested but blinn_phong.shadows.ray_setup_kernels cannot be imported"
+        )
     if offset < 0 or not np.isfinite(offset):
         raise ValueError(f"offset must be a finite number >= 0, got {offset!r}")
     if kernel is None:
@@ -623,7 +625,9 @@ def area_light_visibility(
     o = _offset_origins(p, n, centre - p, eff)
     kernel = _area_rays_kernel() if compiled else None
     if engine == "numba" and kernel is None:
-        raise ValueError("engine: 'numba' requested but blinn_phong.shadows.kernels cannot be imported")
+        raise ValueError(
+            "engine: 'numba' requested but blinn_phong.shadows.ray_setup_kernels cannot be imported"
+        )
     o32 = (o - scene.centre).astype(np.float32)  # the same origins for every sample
     d32 = np.empty((len(p), 3), np.float32)
     t32 = np.empty(len(p), np.float32)
@@ -644,9 +648,9 @@ def area_light_visibility(
 
 @functools.lru_cache(maxsize=1)
 def _area_rays_kernel() -> object | None:
-    """The compiled area-light ray set-up (``shadow_kernels.area_light_rays``); None without numba."""
+    """The compiled area-light ray set-up (``ray_setup_kernels.area_light_rays``); None without numba."""
     try:
-        from blinn_phong.shadows.kernels import area_light_rays
+        from blinn_phong.shadows.ray_setup_kernels import area_light_rays
     except Exception:
         return None
     return area_light_rays

@@ -47,11 +47,11 @@ FRESH = CHILD.replace(
     r'''
 pipeline.warm_kernels("AUTO")
 from blinn_phong.shadows import ray_culling
-from blinn_phong.shadows import kernels as shadow_kernels
+from blinn_phong.shadows import ray_setup_kernels
 targets = [
     o for o in gc.get_objects()
     if isinstance(o, numba.core.dispatcher.Dispatcher)
-    and o.py_func.__module__ in ("blinn_phong.shadows.ray_culling", "blinn_phong.shadows.kernels")
+    and o.py_func.__module__ in ("blinn_phong.shadows.ray_culling", "blinn_phong.shadows.ray_setup_kernels")
 ]
 for dispatcher in targets:
     dispatcher._cache.disable()  # these compile inside the frame

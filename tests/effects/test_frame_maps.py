@@ -4,7 +4,7 @@ When every shadowed light of an opaque one-sample frame uses a shadow map, the f
 looks each pixel's world point up itself, and a point light's cube is rendered only over the
 texels the *visible triangles* can be looked up in. Checked here:
 
-* the rectangles of :func:`blinn_phong.shadows.kernels.receiver_triangle_rects` hold every
+* the rectangles of :func:`blinn_phong.shadows.map_receiver_kernels.receiver_triangle_rects` hold every
   texel that a look-up of any point on the triangles reads — recomputed with numpy from the
   formulas of :func:`blinn_phong.shadows.maps.shadow_visibility` (``_reference_taps``) at random
   points of the triangles, their corners and edges, for triangles inside one face's cone,
@@ -34,7 +34,7 @@ pytest.importorskip("numba")
 
 from blinn_phong.frame import pipeline
 from blinn_phong.shadows import frame_maps  # imports numba
-from blinn_phong.shadows.kernels import receiver_triangle_rects
+from blinn_phong.shadows.map_receiver_kernels import receiver_triangle_rects
 
 
 def _triangles_around_the_light(rng: np.random.Generator) -> np.ndarray:
@@ -259,8 +259,6 @@ def test_a_look_up_outside_the_rendered_texels_shades_the_frame_again(
 ) -> None:
     # rectangles cut to their upper half: the look-ups of the lower half leave them, the kernel
     # says so, and the frame is shaded again from the general path's visibilities
-    from blinn_phong.shadows import kernels as shadow_kernels
-
     def halved(*args: object) -> np.ndarray:
         rects = receiver_triangle_rects(*args)  # type: ignore[arg-type]
         rects[:, 1] = np.where(rects[:, 0] <= rects[:, 1], (rects[:, 0] + rects[:, 1]) // 2, rects[:, 1])
@@ -273,7 +271,7 @@ def test_a_look_up_outside_the_rendered_texels_shades_the_frame_again(
     monkeypatch.setattr(
         pipeline, "_winner_visibility", lambda *a: general_calls.append(a) or general_path(*a)
     )
-    monkeypatch.setattr(shadow_kernels, "receiver_triangle_rects", halved)
+    monkeypatch.setattr(frame_maps, "receiver_triangle_rects", halved)
     fused = bp.render(scene, 160, 120, **options)
     assert len(general_calls) == 1  # the miss was seen
     monkeypatch.setattr(pipeline, "_IN_KERNEL_MAPS", False)

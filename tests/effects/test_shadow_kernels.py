@@ -1,6 +1,7 @@
 """The compiled shadow kernels against the numpy reference, and ray-traced shadows far from the origin.
 
-* Shadow maps: :mod:`blinn_phong.shadows.kernels` renders the maps and looks them up with the
+* Shadow maps: :mod:`blinn_phong.shadows.map_render_kernels` renders the maps and
+  :mod:`blinn_phong.shadows.map_lookup_kernels` looks them up with the
   same formulas as the numpy reference in :mod:`blinn_phong.shadows.maps`. The only arithmetic
   that differs is the 4×4 transform (a BLAS product in the reference, a fixed summation
   order in the kernel), so map depths agree to 1e-12 (observed: ≤ 1e-13) and coverage is
@@ -173,7 +174,7 @@ def test_visibility_at_inside_another_compiled_kernel(kind):
     """A shading kernel can look shadows up per fragment: ``visibility_at`` with ``shadow_lookup``."""
     import numba
 
-    from blinn_phong.shadows.kernels import visibility_at
+    from blinn_phong.shadows.map_lookup_kernels import visibility_at
     from blinn_phong.shadows.maps import shadow_lookup
 
     @numba.njit

@@ -2,7 +2,7 @@
 
 ``light_visibility("shadow_map")`` with the compiled engine renders no cube face that no
 receiver uses, and the others only over a rectangle holding every texel the receivers' look-ups
-read (:func:`blinn_phong.shadows.kernels.receiver_visibility_compiled`; a single map, directional
+read (:func:`blinn_phong.shadows.map_receiver_kernels.receiver_visibility_compiled`; a single map, directional
 or spot, is rendered whole by the same kernels, and checked here too). A texel's depth is the
 minimum over the triangles covering it — the same whether or not its neighbours are rendered —
 and each look-up reads only texels inside its face's rectangle, so:
@@ -141,7 +141,8 @@ def _reference_taps(light, points, normals, kernel, normal_offset):
 @pytest.mark.parametrize("kernel", PCF_KERNELS)
 @pytest.mark.parametrize("normal_offset", [0.0, 0.05])
 def test_receiver_rectangles_hold_every_texel_the_reference_reads(kind, kernel, normal_offset):
-    from blinn_phong.shadows.kernels import KERNEL_CODES, _receiver_rects
+    from blinn_phong.shadows.map_lookup_kernels import KERNEL_CODES
+    from blinn_phong.shadows.map_receiver_kernels import _receiver_rects
 
     light = LIGHTS[kind]
     points, normals = _receivers("below")
