@@ -44,14 +44,16 @@ _nearest_run: object = None
 #: The lighting equation's compiled per-point function, set by :func:`_plain_kernel`.
 _point_terms: object = None
 _plain_row: object = None
-_map_row: object = None
+_map_row_nearest: object = None
+_map_row_filtered: object = None
 
 
 @functools.lru_cache(maxsize=1)
 def _row_kernels() -> None:
     """Compile-on-demand dispatchers of the fused frame kernel's rows, set as module globals:
-    ``_plain_row`` (a row's shading, resolve and writes) and ``_map_row`` (a row's shadow-map
-    look-ups, compiled only when a frame has shadow maps)."""
+    ``_plain_row`` (a row's shading, resolve and writes) and ``_map_row_nearest`` /
+    ``_map_row_filtered`` (a row's shadow-map look-ups, nearest texel only or with the filters too,
+    compiled only when a frame has shadow maps)."""
     import hashlib
     import math
 
@@ -356,73 +358,87 @@ def _row_kernels() -> None:
 
     plain_row = numba.njit(cache=True, error_model="numpy")(plain_row)
     # module globals, not closure variables (as _point_terms: the disk cache's key)
-    global _plain_row, _map_row
+    global _plain_row, _map_row_nearest, _map_row_filtered
     _plain_row = plain_row
 
-    @numba.njit(cache=True, error_model="numpy")
-    def map_row(
-        row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source, triangles, world, maps,
-        r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
-    ):  # fmt: skip  # pragma: no cover - compiled
-        # The row's covered pixels first: each winner's depth and barycentrics (read back by
-        # plain_row), its world point (as winner_surface) and its visibility per light
-        # (map_lookup_kernels.visibility_at, opaque winners only, no normal offset), in runs over the
-        # row (map_lookup_kernels.nearest_run: tight loops of divisions), or per point
-        # (stacked_visibility: the PCF kernels). Compiled only for frames with shadow maps.
-        m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
-        n_lit = m_first.shape[0]
-        no_faces = np.zeros(0, np.int8)
-        # nearest_run's integers and flag as int64 / bool variables, never literals: a literal
-        # (0, False) is a type of its own, and would compile specialisations of nearest_run
-        # apart from the one the general path's look-up (_lookup_nearest_share) compiles
-        zero = np.int64(0)
-        no_reuse = no_faces.shape[0] != 0
-        n_cov = zero
-        for col in range(width):
-            o = index[row * width + col]
-            if o < 0:
-                continue
-            depth, b0, b1, b2 = _winner_point(
-                o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
-            )
-            r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
-            src = source[o]
-            v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
-            for k in range(3):
-                r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
-            n_cov += 1
-        for i_light in range(n_lit):
-            f0 = m_first[i_light]
-            if f0 < 0:
-                for j in range(n_cov):
-                    r_vis[j, i_light] = 1.0
-                continue
-            cube = 1 if m_faces[i_light] == 6 else 0
-            if m_kernel[i_light] == 0:
-                _nearest_run(
-                    r_pts, zero, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, no_reuse,
-                    r_vis, i_light, zero, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
-                )  # fmt: skip
-                continue
-            for j in range(n_cov):
-                r_vis[j, i_light] = _stacked_visibility(
-                    r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
-                    m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
-                    m_rects, m_miss,
-                )  # fmt: skip
+    def make_map_row(filtered: bool) -> object:
+        def map_row(
+            row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source, triangles, world, maps,
+            r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
+        ):  # fmt: skip  # pragma: no cover - compiled
+            # The row's covered pixels first: each winner's depth and barycentrics (read back by
+            # plain_row), its world point (as winner_surface) and its visibility per light
+            # (map_lookup_kernels.visibility_at, opaque winners only, no normal offset), in runs over the
+            # row (map_lookup_kernels.nearest_run: tight loops of divisions), or per point
+            # (stacked_visibility: the PCF kernels). Compiled only for frames with shadow maps.
+            m_depth, m_vp, m_vz, m_first, m_faces, m_pos, m_kernel, m_rects, m_miss = maps
+            n_lit = m_first.shape[0]
+            no_faces = np.zeros(0, np.int8)
+            # nearest_run's integers and flag as int64 / bool variables, never literals: a literal
+            # (0, False) is a type of its own, and would compile specialisations of nearest_run
+            # apart from the one the general path's look-up (_lookup_nearest_share) compiles
+            zero = np.int64(0)
+            no_reuse = no_faces.shape[0] != 0
+            n_cov = zero
+            for col in range(width):
+                o = index[row * width + col]
+                if o < 0:
+                    continue
+                depth, b0, b1, b2 = _winner_point(
+                    o, col + 0.5, row + 0.5, xe, ye, area, ea, eb, ec, z, w, weights
+                )
+                r_bary[n_cov, 0], r_bary[n_cov, 1], r_bary[n_cov, 2], r_bary[n_cov, 3] = depth, b0, b1, b2
+                src = source[o]
+                v0, v1, v2 = triangles[src, 0], triangles[src, 1], triangles[src, 2]
+                for k in range(3):
+                    r_pts[n_cov, k] = _interpolated(world, v0, v1, v2, b0, b1, b2, k)  # as winner_surface
+                n_cov += 1
+            for i_light in range(n_lit):
+                f0 = m_first[i_light]
+                if f0 < 0:
+                    for j in range(n_cov):
+                        r_vis[j, i_light] = 1.0
+                    continue
+                cube = 1 if m_faces[i_light] == 6 else 0
+                if m_kernel[i_light] == 0:
+                    _nearest_run(
+                        r_pts, zero, n_cov, m_depth, m_vp, f0, cube, m_pos[i_light], no_faces, no_reuse,
+                        r_vis, i_light, zero, s_qx, s_qy, s_qz, s_cw, s_face, m_rects, m_miss,
+                    )  # fmt: skip
+                    continue
+                if filtered:  # a constant: the nearest-only variant never compiles stacked_visibility
+                    for j in range(n_cov):
+                        r_vis[j, i_light] = _stacked_visibility(
+                            r_pts[j, 0], r_pts[j, 1], r_pts[j, 2], 0.0, 0.0, 0.0,
+                            m_depth, m_vp, m_vz, f0, cube, m_pos[i_light], 0.0, m_kernel[i_light],
+                            m_rects, m_miss,
+                        )  # fmt: skip
 
-    _map_row = map_row
+        return map_row
+
+    # Two variants, cached apart by name: frames whose maps are all looked up at the nearest
+    # texel (the default) do not compile the percentage-closer filters (stacked_visibility).
+    for filtered in (False, True):
+        variant = make_map_row(filtered)
+        variant.__qualname__ += ".filtered" if filtered else ".nearest"  # type: ignore[attr-defined]
+        compiled = numba.njit(cache=True, error_model="numpy")(variant)
+        if filtered:
+            _map_row_filtered = compiled
+        else:
+            _map_row_nearest = compiled
 
 
-@functools.lru_cache(maxsize=2)
-def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
-    """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself.
+@functools.lru_cache(maxsize=3)
+def _plain_kernel(with_maps: bool = False, filtered: bool = False) -> object:  # a numba dispatcher
+    """The fused frame kernel; ``with_maps``: the variant that looks shadow maps up itself, at the
+    nearest texel only, or with percentage-closer filters too (``filtered``).
 
-    Two variants of the short loop over a share of rows, so that a frame without shadow maps
-    does not compile the shadow-map look-ups (``map_row``, ``map_lookup_kernels.nearest_run`` and
-    ``stacked_visibility``, about 5 s of compilation): the branch on the constant ``with_maps``
-    is removed before numba types the function, and the variants are cached apart (their names
-    and closure values differ). Both call the same row function (compiled once)."""
+    Variants of the short loop over a share of rows, so that a frame without shadow maps does
+    not compile the shadow-map look-ups (``map_row``, ``map_lookup_kernels.nearest_run``, about
+    3 s of compilation), and one with nearest look-ups only not the filters
+    (``stacked_visibility``, about 1 s): the branches on the constants are removed before numba
+    types the function, and the variants are cached apart (their names and closure values
+    differ). All call the same row function (compiled once)."""
     import numba
 
     _row_kernels()
@@ -453,10 +469,16 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
             row = row_order[i_row]
             if with_maps:
                 if n_lit > 0:
-                    _map_row(
-                        row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source,
-                        geometry[0], world, maps, r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
-                    )  # fmt: skip
+                    if filtered:
+                        _map_row_filtered(
+                            row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source,
+                            geometry[0], world, maps, r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
+                        )  # fmt: skip
+                    else:
+                        _map_row_nearest(
+                            row, width, index, xe, ye, area, ea, eb, ec, z, w, weights, source,
+                            geometry[0], world, maps, r_bary, r_pts, r_vis, s_qx, s_qy, s_qz, s_cw, s_face,
+                        )  # fmt: skip
             covered += _plain_row(
                 row, width, from_winners, index, tri, bary, frag_depth, frag_front,
                 source, sub_front, xe, ye, area, ea, eb, ec, z, w, weights, two_sided,
@@ -467,12 +489,12 @@ def _plain_kernel(with_maps: bool = False) -> object:  # a numba dispatcher
             )  # fmt: skip
         return covered
 
-    variant = "maps" if with_maps else "plain"
+    variant = ("maps_filtered" if filtered else "maps") if with_maps else "plain"
     plain.__qualname__ += f".{variant}"
     return numba.njit(cache=True, nogil=True)(plain)
 
 
-def _run_plain(*args: object, with_maps: bool = False) -> int:
+def _run_plain(*args: object, with_maps: bool = False, filtered: bool = False) -> int:
     """Run the fused kernel: the frame's rows in shares on threads
     (:func:`compositing._threads.run_shares`; the kernel releases the GIL).
 
@@ -485,7 +507,7 @@ def _run_plain(*args: object, with_maps: bool = False) -> int:
 
     from compositing._threads import run_shares
 
-    kernel = _plain_kernel(with_maps)
+    kernel = _plain_kernel(with_maps, with_maps and filtered)
     width, height, row_order, *rest = args
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
@@ -678,5 +700,6 @@ def shade_plain_winners_compiled(
             visibility is not None or maps is not None, vis, vis_mean, rank, stack, world, 0, _NO_INDEX, 0, 0,
             *out, *_group_args(groups, len(lights[0]), setup.height, setup.width, len(materials[0])),
             with_maps=maps is not None,
+            filtered=maps is not None and bool(np.any(np.asarray(stack[6]) != 0)),  # a PCF kernel
         )
     )  # fmt: skip
