@@ -44,6 +44,7 @@ from blinn_phong.geometry.raster import interpolate, rasterize, resolve_nearest
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import Camera, DirectionalLight, Material, Mesh, PointLight, Scene, look_at
 from blinn_phong.shadows import volume as sv
+from blinn_phong.shadows import volume_counting, volume_mesh
 from blinn_phong.shadows.visibility import light_visibility
 
 __all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
@@ -64,7 +65,7 @@ def _new_receivers(fn):
     proofs kept, but the receivers are new arrays (no tile binning of earlier calls to reuse)."""
 
     def call():
-        sv._BINNING.clear()
+        volume_counting._BINNING.clear()
         return fn()
 
     return call
@@ -72,9 +73,9 @@ def _new_receivers(fn):
 
 def _cold(fn):
     def call():
-        sv._TOPOLOGY_CACHE.clear()
+        volume_mesh._TOPOLOGY_CACHE.clear()
         sv._DERIVED_CACHE.clear()
-        sv._BINNING.clear()
+        volume_counting._BINNING.clear()
         return fn()
 
     return call
@@ -85,7 +86,7 @@ def _caches() -> tuple:
     digests, and Embree's BVH."""
     from blinn_phong.shadows import raytrace
 
-    return sv._TOPOLOGY_CACHE, sv._DERIVED_CACHE, sv._DIGESTS, raytrace._SCENE_CACHE
+    return volume_mesh._TOPOLOGY_CACHE, sv._DERIVED_CACHE, volume_mesh._DIGESTS, raytrace._SCENE_CACHE
 
 
 def _snapshot() -> list:
@@ -199,7 +200,7 @@ def frame(width: int, height: int, repeat: int) -> dict:
 
     def run_with(name: str, shadows: str, cold: bool):
         def call():
-            sv._BINNING.clear()
+            volume_counting._BINNING.clear()
             stages[name] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return _restored(call, empty if cold else warm)

@@ -1,4 +1,4 @@
-"""Compiled helpers of the shadow-volume kernels (:mod:`blinn_phong.shadows.volume`), at module level.
+"""Compiled helpers of the shadow-volume kernels (:mod:`blinn_phong.shadows.volume_kernels`), at module level.
 
 numba keys a cached kernel on the values it closes over; a kernel closing over another compiled
 function (a dispatcher, pickled with a per-process identity) misses the disk cache and is

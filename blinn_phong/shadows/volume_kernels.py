@@ -1,0 +1,561 @@
+"""Shadow volumes' compiled (numba) kernels: receiver projection and tile binning, each tile's
+receiver depths, volume-triangle set-up, the stencil count, and a frame's pixel tiles.
+
+Every expression is written out in the same order as its numpy twin in
+:mod:`blinn_phong.shadows.volume_setup` (:func:`~blinn_phong.shadows.volume_setup._project_numpy`,
+:func:`~blinn_phong.shadows.volume_setup._transform`, :func:`~blinn_phong.shadows.volume_setup._setup`),
+without fused multiply-adds, so both engines produce bit-identical set-ups and therefore identical
+counts. The kernels' inlined helpers are module-level functions of
+:mod:`blinn_phong.shadows._volume_helpers` (so that numba's disk cache serves the callers).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+
+def _jit(parallel: bool, **options: object) -> object:
+    """``numba.njit(parallel=parallel, cache=True, **options)`` for a kernel built both serial
+    and parallel, each variant cached under its own name.
+
+    numba's on-disk cache files a function under its qualified name and keys each entry by the
+    function's bytecode and closure values, not by its compile options: the serial and parallel
+    builds of one kernel would share an entry, and whichever was compiled first would be loaded
+    for both (a parallel kernel then runs on one thread). The variant's name is therefore made
+    part of the function's qualified name before it is compiled.
+    """
+    import numba
+
+    def build(fn: object) -> object:
+        fn.__qualname__ = f"{fn.__qualname__}.{'parallel' if parallel else 'serial'}"  # type: ignore[attr-defined]
+        return numba.njit(parallel=parallel, cache=True, **options)(fn)
+
+    return build
+
+
+@functools.lru_cache(maxsize=2)
+def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
+    import numba
+
+    from blinn_phong.shadows import _volume_helpers as vh  # module-level helpers: numba caches the callers
+
+    @_jit(parallel, fastmath=False)
+    def count(
+        n_bands,
+        ny,
+        nx,
+        xmin,
+        ymin,
+        cw,
+        ch,
+        cx0,
+        cx1,
+        cy0,
+        cy1,
+        ex,
+        ey,
+        edx,
+        edy,
+        esign,
+        etie,
+        z0,
+        x0,
+        y0,
+        gx,
+        gy,
+        front,
+        bx0,
+        bx1,
+        by0,
+        by1,
+        px,
+        py,
+        pz,
+        cell_start,
+        zlo,
+        zhi,
+        fit,
+        order,
+        zfail,
+        visibility,
+        slack_x,
+        slack_y,
+        counts,
+        out_counts,
+        out_vis,
+    ):  # pragma: no cover - compiled
+        # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
+        # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
+        # residuals from it (see ``tile_depths``). Returns (counts, visibility) in the receivers'
+        # input order (``order`` maps sorted → input): with ``visibility`` an empty count array
+        # and 1.0 where the count is 0, else 0.0; without it the counts and an empty array.
+        # slack_x/slack_y: how far a receiver may lie outside its tile (0 when binned from these
+        # very positions; see ``project_binned``): every tile is widened by as much, plus 1e-9
+        # of its size for rounding of the binning. counts (m,) int64: scratch, zeroed here by the
+        # band that owns each receiver; out_counts (m,) or out_vis (m,): the result, every entry
+        # written (the caller allocates them: numpy's memory is reused between frames, without
+        # the page faults of fresh memory).
+        n_cells = nx * ny
+        whole = np.zeros(n_cells, np.int64)  # counts added to every receiver of a tile at once
+        wx = 1e-9 * cw + slack_x
+        wy = 1e-9 * ch + slack_y
+        # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
+        # gets a share of the busy rows whatever the threads' static split of the bands
+        for band in numba.prange(n_bands):
+            for row in range(band, ny, n_bands):
+                for k in range(cell_start[row * nx], cell_start[(row + 1) * nx]):
+                    counts[k] = 0
+            for t in range(front.shape[0]):
+                if cx0[t] > cx1[t] or cy0[t] > cy1[t]:
+                    continue
+                # the face's fields as scalars (the same values: the same arithmetic below)
+                ex0, ex1, ex2 = ex[t, 0], ex[t, 1], ex[t, 2]
+                ey0, ey1, ey2 = ey[t, 0], ey[t, 1], ey[t, 2]
+                dx0, dx1, dx2 = edx[t, 0], edx[t, 1], edx[t, 2]
+                dy0, dy1, dy2 = edy[t, 0], edy[t, 1], edy[t, 2]
+                es0, es1, es2 = esign[t, 0], esign[t, 1], esign[t, 2]
+                et0, et1, et2 = etie[t, 0], etie[t, 1], etie[t, 2]
+                zt, xt, yt, gxt, gyt = z0[t], x0[t], y0[t], gx[t], gy[t]
+                lx, hx, ly, hy = bx0[t], bx1[t], by0[t], by1[t]
+                ft = front[t]
+                step = -ft if zfail else ft
+                # a small face (within 2 × 2 tiles): its rows need no clipping to their strips, and
+                # it is not worth testing against each tile's corners (it seldom covers a tile)
+                single = cx1[t] - cx0[t] <= 1 and cy1[t] - cy0[t] <= 1
+                if n_bands == 1:
+                    lo = cy0[t]
+                else:  # the first row >= cy0 of this band
+                    d = band - cy0[t] % n_bands
+                    lo = cy0[t] + (d + n_bands if d < 0 else d)
+                for row in range(lo, cy1[t] + 1, n_bands):
+                    c_lo = cx0[t]
+                    c_hi = cx1[t]
+                    if not single:
+                        # the face's x-extent inside this row of tiles: its edges clipped to the strip
+                        sy0 = ymin + row * ch - wy
+                        sy1 = ymin + (row + 1) * ch + wy
+                        span_lo, span_hi = vh.edge_span(ex0, ey0, dx0, dy0, sy0, sy1, np.inf, -np.inf)
+                        span_lo, span_hi = vh.edge_span(ex1, ey1, dx1, dy1, sy0, sy1, span_lo, span_hi)
+                        span_lo, span_hi = vh.edge_span(ex2, ey2, dx2, dy2, sy0, sy1, span_lo, span_hi)
+                        if span_lo > span_hi:
+                            continue
+                        pad = wx + 1e-12 * (abs(span_lo) + abs(span_hi))
+                        c_lo = max(c_lo, int(np.floor((span_lo - pad - xmin) / cw)))
+                        c_hi = min(c_hi, int(np.floor((span_hi + pad - xmin) / cw)))
+                    for col in range(c_lo, c_hi + 1):
+                        cell = row * nx + col
+                        s0 = cell_start[cell]
+                        s1 = cell_start[cell + 1]
+                        if s0 == s1:
+                            continue
+                        # the tile's rectangle, widened to hold every receiver binned into it
+                        ax = xmin + col * cw - wx
+                        bx = xmin + (col + 1) * cw + wx
+                        ay = ymin + row * ch - wy
+                        by = ymin + (row + 1) * ch + wy
+                        # the face's depth over the part of the tile inside its bounding box (no
+                        # receiver outside that box is counted) against the receivers' depths:
+                        # their range, then (when the ranges overlap) their plane and residuals
+                        rx0 = max(ax, lx)
+                        rx1 = min(bx, hx)
+                        ry0 = max(ay, ly)
+                        ry1 = min(by, hy)
+                        lo_z, hi_z = vh.depth_range(zt, xt, yt, gxt, gyt, rx0, rx1, ry0, ry1)
+                        all_nearer = hi_z < zlo[cell]
+                        none_nearer = lo_z > zhi[cell]
+                        if not (all_nearer or none_nearer):
+                            lo_g, hi_g = vh.plane_gap(
+                                zt, xt, yt, gxt, gyt, fit[cell, 0], fit[cell, 1], fit[cell, 2],
+                                xmin + (col + 0.5) * cw, ymin + (row + 0.5) * ch, rx0, rx1, ry0, ry1,
+                            )  # fmt: skip
+                            all_nearer = hi_g < fit[cell, 3]
+                            none_nearer = lo_g > fit[cell, 4]
+                        # a face behind every receiver (z-pass) or in front of all (z-fail) counts
+                        # at none of them, whatever it covers
+                        if all_nearer if zfail else none_nearer:
+                            continue
+                        inside_all = False
+                        if not single:  # tile against the face: outside one edge, or inside all three
+                            out0, in0 = vh.edge_box(ex0, ey0, dx0, dy0, es0, ax, bx, ay, by)
+                            out1, in1 = vh.edge_box(ex1, ey1, dx1, dy1, es1, ax, bx, ay, by)
+                            out2, in2 = vh.edge_box(ex2, ey2, dx2, dy2, es2, ax, bx, ay, by)
+                            if out0 or out1 or out2:
+                                continue
+                            inside_all = in0 and in1 and in2
+                        if inside_all and (none_nearer if zfail else all_nearer):
+                            whole[cell] += -ft if zfail else ft
+                            continue
+                        # the tile's receivers one by one (views of the tile: indices from 0
+                        # compile to plain loads)
+                        xs = px[s0:s1]
+                        ys = py[s0:s1]
+                        zs = pz[s0:s1]
+                        cs = counts[s0:s1]
+                        for j in range(xs.shape[0]):
+                            x = xs[j]
+                            y = ys[j]
+                            if x < lx or x > hx or y < ly or y > hy:
+                                continue
+                            e = dx0 * (y - ey0) - dy0 * (x - ex0)
+                            if not (es0 * e > 0 or (e == 0 and et0)):
+                                continue
+                            e = dx1 * (y - ey1) - dy1 * (x - ex1)
+                            if not (es1 * e > 0 or (e == 0 and et1)):
+                                continue
+                            e = dx2 * (y - ey2) - dy2 * (x - ex2)
+                            if not (es2 * e > 0 or (e == 0 and et2)):
+                                continue
+                            depth = zt + (gxt * (x - xt) + gyt * (y - yt))
+                            # z-fail counts −front where the face is not nearer, z-pass +front where
+                            # it is: one update (the loop compiles to masked vector code)
+                            if (depth < zs[j]) != zfail:
+                                cs[j] += step
+            for row in range(band, ny, n_bands):
+                for cell in range(row * nx, (row + 1) * nx):
+                    for k in range(cell_start[cell], cell_start[cell + 1]):
+                        c = counts[k] + whole[cell]
+                        if visibility:
+                            out_vis[order[k]] = 1.0 if c == 0 else 0.0
+                        else:
+                            out_counts[order[k]] = c
+        return out_counts, out_vis
+
+    return count
+
+
+@functools.lru_cache(maxsize=2)
+def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
+    """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up, each
+    tile's receiver depths, and the projection into an earlier binning's order."""
+    import numba
+
+    from blinn_phong.shadows import _volume_helpers as vh  # module-level helpers: numba caches the callers
+
+    @_jit(parallel)
+    def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
+        m = p.shape[0]
+        px = np.empty(m)
+        py = np.empty(m)
+        pz = np.empty(m)
+        n_chunks = 64
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
+        # per chunk: min/max of x and y, min of w, 1 if an input was not finite, (unused) 0, 0
+        stats = np.zeros((n_chunks, 8))
+        size = (m + n_chunks - 1) // n_chunks
+        for chunk in numba.prange(n_chunks):
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            for i in range(chunk * size, min(m, (chunk + 1) * size)):
+                if not vh.finite_input(p, n, moved, i):
+                    bad = 1.0
+                x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                px[i] = x
+                py[i] = y
+                pz[i] = z
+                xlo = min(xlo, x)
+                xhi = max(xhi, x)
+                ylo = min(ylo, y)
+                yhi = max(yhi, y)
+                wlo = min(wlo, w)
+            stats[chunk, 0] = xlo
+            stats[chunk, 1] = xhi
+            stats[chunk, 2] = ylo
+            stats[chunk, 3] = yhi
+            stats[chunk, 4] = wlo
+            stats[chunk, 5] = bad
+        return px, py, pz, stats
+
+    @_jit(parallel)
+    def project_binned(
+        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny,
+        sx, sy, sz,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
+        at ``k``, written into ``sx``, ``sy``, ``sz``), with how far any receiver now lies outside
+        its tile (a receiver moved for another light may cross a border: the kernel widens every
+        tile by as much), and each tile's depths (``tile_depths``)."""
+        mat = vh.matrix_entries(vp)
+        lv = (light_vec[0], light_vec[1], light_vec[2])
+        # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
+        # largest distance of a receiver outside its tile along x and along y
+        stats = np.zeros((ny, 8))
+        zlo = np.full(nx * ny, np.inf)
+        zhi = np.full(nx * ny, -np.inf)
+        fit = np.zeros((nx * ny, 5))
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
+        for i_row in numba.prange(ny):
+            row = spread[i_row]
+            xlo = np.inf
+            xhi = -np.inf
+            ylo = np.inf
+            yhi = -np.inf
+            wlo = np.inf
+            bad = 0.0
+            out_x = 0.0
+            out_y = 0.0
+            ty0 = ymin + row * ch
+            ty1 = ymin + (row + 1) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                tx0 = xmin + (cell - row * nx) * cw
+                tx1 = xmin + (cell - row * nx + 1) * cw
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
+                # views of the tile (indices from 0: plain loads and stores); an index from
+                # ``order`` is a valid row, taken unsigned (no negative-index handling)
+                ks = order[k0:k1]
+                xs = sx[k0:k1]
+                ys = sy[k0:k1]
+                zs = sz[k0:k1]
+                for k in range(k1 - k0):
+                    i = np.uint64(ks[k])
+                    if not vh.finite_input(p, n, moved, i):
+                        bad = 1.0
+                    x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                    xs[k] = x
+                    ys[k] = y
+                    zs[k] = z
+                    xlo = min(xlo, x)
+                    xhi = max(xhi, x)
+                    ylo = min(ylo, y)
+                    yhi = max(yhi, y)
+                    wlo = min(wlo, w)
+                    out_x = max(out_x, tx0 - x, x - tx1)
+                    out_y = max(out_y, ty0 - y, y - ty1)
+                # the tile's depths while its receivers are at hand (as ``tile_depths``)
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(xs, ys, zs, xmin + (cell - row * nx + 0.5) * cw, ymin + (row + 0.5) * ch)
+                )
+            stats[row, 0] = xlo
+            stats[row, 1] = xhi
+            stats[row, 2] = ylo
+            stats[row, 3] = yhi
+            stats[row, 4] = wlo
+            stats[row, 5] = bad
+            stats[row, 6] = out_x
+            stats[row, 7] = out_y
+        return sx, sy, sz, stats, zlo, zhi, fit
+
+    @numba.njit(cache=True)
+    def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Stable counting sort of the receivers by tile."""
+        m = px.shape[0]
+        n_cells = nx * ny
+        cell = np.empty(m, np.int64)
+        cell_start = np.zeros(n_cells + 1, np.int64)
+        # a reciprocal instead of a division: a receiver on a tile border may land in either tile,
+        # which the kernel's tile tests allow for (they widen each tile by 1e-9 of its size)
+        icw = 1.0 / cw
+        ich = 1.0 / ch
+        for i in range(m):
+            fx = (px[i] - xmin) * icw
+            fy = (py[i] - ymin) * ich
+            cx = np.int64(fx) if fx < nx else nx - 1
+            cy = np.int64(fy) if fy < ny else ny - 1
+            c = max(cy, 0) * nx + max(cx, 0)
+            cell[i] = c
+            cell_start[c + 1] += 1
+        for c in range(n_cells):
+            cell_start[c + 1] += cell_start[c]
+        fill = cell_start[:n_cells].copy()
+        order = np.empty(m, np.int64)
+        sx = np.empty(m)
+        sy = np.empty(m)
+        sz = np.empty(m)
+        for i in range(m):
+            c = cell[i]
+            k = fill[c]
+            fill[c] = k + 1
+            order[k] = i
+            sx[k] = px[i]
+            sy[k] = py[i]
+            sz[k] = pz[i]
+        return order, cell_start, sx, sy, sz
+
+    @_jit(parallel)
+    def tile_depths(px, py, pz, cell_start, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+        """Per tile its receivers' depth range (zlo, zhi), and a least-squares depth plane
+        ``a + (b·(x − xc) + c·(y − yc))`` about the tile's centre (xc, yc) with the lowest and
+        highest residual ``z − plane`` of its receivers, widened past rounding: (n_cells, 5) rows
+        (a, b, c, r_lo, r_hi). Any plane would do (the residuals are measured); a good one lets
+        the kernel settle a tile whose receivers lie on one surface (a ground under its own
+        light cap) without testing each receiver."""
+        n_cells = nx * ny
+        zlo = np.full(n_cells, np.inf)
+        zhi = np.full(n_cells, -np.inf)
+        fit = np.zeros((n_cells, 5))
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
+        for i_row in numba.prange(ny):
+            row = spread[i_row]
+            yc = ymin + (row + 0.5) * ch
+            for cell in range(row * nx, (row + 1) * nx):
+                k0 = cell_start[cell]
+                k1 = cell_start[cell + 1]
+                if k0 == k1:
+                    continue
+                xc = xmin + (cell - row * nx + 0.5) * cw
+                zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
+                    vh.tile_fit(px[k0:k1], py[k0:k1], pz[k0:k1], xc, yc)
+                )
+        return zlo, zhi, fit
+
+    @_jit(parallel)
+    def to_clip(src, vp, guard):  # pragma: no cover - compiled
+        """Which homogeneous world triangles cross the near plane or the guard band once moved
+        to clip space by ``vp`` (as ``setup`` transforms them): those are clipped first."""
+        todo = np.zeros(src.shape[0], np.bool_)
+        for t in numba.prange(src.shape[0]):
+            for v in range(3):
+                xc, yc, zc, wc = vh.clip_vertex(src, vp, True, t, v)
+                gw = guard * wc
+                if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
+                    todo[t] = True
+        return todo
+
+    @_jit(parallel)
+    def setup(
+        src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y,
+        ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front, cx0, cx1, cy0, cy1, bx0, bx1, by0, by1,
+    ):  # fmt: skip  # pragma: no cover - compiled
+        """Per triangle the fields of :class:`_Setup` (see :func:`_setup`), written into the
+        given arrays (``_setup_arrays``): first the homogeneous world triangles ``src``, moved to
+        clip space by ``vp`` (those flagged in ``todo`` by ``to_clip`` are left empty), then the
+        clip-space triangles ``cut`` (the flagged ones, clipped). Triangles with w ≤ 0 or zero or
+        non-finite area are left empty too (an empty triangle: ``cx0 > cx1``, its edges unset). A
+        triangle's tiles are those its bounding box meets once widened by the receivers' slack
+        (see ``count``)."""
+        n_src = src.shape[0]
+        s = n_src + cut.shape[0]
+        for t in numba.prange(s):
+            for i in range(3):
+                etie[t, i] = False
+            z0[t] = 0.0
+            x0[t] = 0.0
+            y0[t] = 0.0
+            gx[t] = 0.0
+            gy[t] = 0.0
+            front[t] = 0
+            cx0[t] = 1
+            cx1[t] = 0
+            cy0[t] = 1
+            cy1[t] = 0
+            bx0[t] = 0.0
+            bx1[t] = 0.0
+            by0[t] = 0.0
+            by1[t] = 0.0
+            if t < n_src and todo[t]:
+                continue
+            transform = t < n_src
+            tri = src if transform else cut
+            k = np.int64(t) if transform else np.int64(t) - n_src  # (a parallel loop's index is unsigned)
+            c00, c01, c02, c03 = vh.clip_vertex(tri, vp, transform, k, 0)
+            c10, c11, c12, c13 = vh.clip_vertex(tri, vp, transform, k, 1)
+            c20, c21, c22, c23 = vh.clip_vertex(tri, vp, transform, k, 2)
+            if not (c03 > 0 and c13 > 0 and c23 > 0):
+                continue
+            xa = c00 / c03
+            xb = c10 / c13
+            xc_ = c20 / c23
+            ya = c01 / c03
+            yb = c11 / c13
+            yc_ = c21 / c23
+            za = c02 / c03
+            zb = c12 / c13
+            zc_ = c22 / c23
+            area = (xb - xa) * (yc_ - ya) - (xc_ - xa) * (yb - ya)
+            if area == 0 or not np.isfinite(area):
+                continue
+            sgn = 1.0 if area > 0 else -1.0
+            for i in range(3):
+                if i == 0:
+                    xp, yp, xq, yq = xa, ya, xb, yb
+                elif i == 1:
+                    xp, yp, xq, yq = xb, yb, xc_, yc_
+                else:
+                    xp, yp, xq, yq = xc_, yc_, xa, ya
+                canonical = (xp < xq) or (xp == xq and yp < yq)
+                if canonical:
+                    sx, sy, tx, ty = xp, yp, xq, yq
+                else:
+                    sx, sy, tx, ty = xq, yq, xp, yp
+                ex[t, i] = sx
+                ey[t, i] = sy
+                edx[t, i] = tx - sx
+                edy[t, i] = ty - sy
+                es = sgn * (1.0 if canonical else -1.0)
+                esign[t, i] = es
+                ddx = -edy[t, i] * es
+                ddy = edx[t, i] * es
+                etie[t, i] = ddx > 0 or (ddx == 0 and ddy > 0)
+            gx[t] = ((zb - za) * (yc_ - ya) - (zc_ - za) * (yb - ya)) / area
+            gy[t] = ((xb - xa) * (zc_ - za) - (xc_ - xa) * (zb - za)) / area
+            z0[t] = za
+            x0[t] = xa
+            y0[t] = ya
+            front[t] = 1 if area > 0 else -1
+            lo_x = min(xa, xb, xc_)
+            hi_x = max(xa, xb, xc_)
+            lo_y = min(ya, yb, yc_)
+            hi_y = max(ya, yb, yc_)
+            fx0 = np.floor((lo_x - slack_x - xmin) / cw)
+            fx1 = np.floor((hi_x + slack_x - xmin) / cw)
+            fy0 = np.floor((lo_y - slack_y - ymin) / ch)
+            fy1 = np.floor((hi_y + slack_y - ymin) / ch)
+            cx0[t] = np.int64(min(max(fx0, 0.0), float(nx)))
+            cx1[t] = np.int64(min(max(fx1, -1.0), float(nx - 1)))
+            cy0[t] = np.int64(min(max(fy0, 0.0), float(ny)))
+            cy1[t] = np.int64(min(max(fy1, -1.0), float(ny - 1)))
+            pad_x = 1e-9 * (max(abs(xa), abs(xb), abs(xc_)) + 1.0)
+            pad_y = 1e-9 * (max(abs(ya), abs(yb), abs(yc_)) + 1.0)
+            bx0[t] = lo_x - pad_x
+            bx1[t] = hi_x + pad_x
+            by0[t] = lo_y - pad_y
+            by1[t] = hi_y + pad_y
+
+    return project, bin_points, setup, tile_depths, project_binned, to_clip
+
+
+@functools.lru_cache(maxsize=1)
+def _pixel_binning_kernel() -> object:  # a numba dispatcher
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def pixel_bins(rank, width, height, tile, nx, ny, order):  # pragma: no cover - compiled
+        # counting sort of the covered pixels (rank ≥ 0) by tile: tile column col // tile, tile
+        # row from the bottom (normalised y grows upwards, pixel rows downwards); each row of
+        # tiles (its own cells) counted and filled in parallel, in row-major order within a tile,
+        # into the first entries of ``order`` (width·height entries: room for every pixel)
+        n_cells = nx * ny
+        cell_start = np.zeros(n_cells + 1, np.int64)
+        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # tile rows interleaved over the threads
+        for i_band in numba.prange(ny):
+            band = spread[i_band]
+            cy = ny - 1 - band
+            for row in range(band * tile, min(height, (band + 1) * tile)):
+                for col in range(width):
+                    if rank[row * width + col] >= 0:
+                        cell_start[cy * nx + col // tile + 1] += 1
+        for c in range(n_cells):
+            cell_start[c + 1] += cell_start[c]
+        for i_band in numba.prange(ny):
+            band = spread[i_band]
+            cy = ny - 1 - band
+            fill = cell_start[cy * nx : cy * nx + nx].copy()
+            for row in range(band * tile, min(height, (band + 1) * tile)):
+                for col in range(width):
+                    r = rank[row * width + col]
+                    if r >= 0:
+                        c = col // tile
+                        order[fill[c]] = r
+                        fill[c] += 1
+        return order[: cell_start[n_cells]], cell_start
+
+    return pixel_bins
