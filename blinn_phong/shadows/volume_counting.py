@@ -36,10 +36,29 @@ _PARALLEL_FACES = 10_000  # fewer volume triangles are set up on one thread
 
 
 def _threads() -> int:
-    """Threads a compiled parallel loop runs on (numba's setting)."""
-    import numba
+    """Threads the compiled kernels run on (:func:`compositing._threads.thread_count`: numba's
+    setting): the number of bands of tile rows the count is split into."""
+    from compositing._threads import thread_count
 
-    return max(1, int(numba.get_num_threads()))
+    return thread_count()
+
+
+def _shares(kernel: object, n: int, threaded: bool, *args: object) -> None:
+    """``kernel(items, *args)`` for the indices ``range(n)``: in shares on threads
+    (:func:`compositing._threads.in_shares`) when ``threaded``, else at once on this thread (a
+    small job: handing shares to threads would cost more than it saves)."""
+    if threaded:
+        from compositing._threads import in_shares
+
+        in_shares(kernel, n, *args)  # type: ignore[arg-type]
+    else:
+        kernel(np.arange(n, dtype=np.int64), *args)  # type: ignore[operator]
+
+
+def _spread(ny: int) -> np.ndarray:
+    """Rows ``0..ny-1`` interleaved (every 16th row, then the next, ...): contiguous shares of
+    this order spread the busy rows of the screen over the threads."""
+    return np.argsort(np.arange(ny) % 16, kind="stable")
 
 
 def stencil_counts(
@@ -130,9 +149,9 @@ def _projected(
     receiver is behind the camera or a point or normal is not finite."""
     m = len(p)
     if numba_path:
-        # small jobs run serially: a parallel region costs more than it saves on a busy machine
-        parallel = m >= _PARALLEL_RECEIVERS
-        kernels = _fast_kernels(parallel)
+        # small jobs run on this thread: shares on threads cost more than they save
+        threaded = m >= _PARALLEL_RECEIVERS
+        kernels = _fast_kernels()
         key = vp.tobytes()
         cached = _BINNING[0] if reuse and _BINNING else None
         same = cached is not None and cached[0]() is p and cached[1]() is n and cached[2] == key
@@ -141,12 +160,19 @@ def _projected(
             same = True
         if same and len(cached[4]) == m:
             grid, order, cell_start = cached[3:]
-            sx, sy, sz, stats, *depths = kernels[4](
-                p, n, light_vec, directional, offset, moved, vp, order, cell_start, *grid,
-                np.empty(m), np.empty(m), np.empty(m),
+            nx, ny = grid[4], grid[5]
+            sx, sy, sz = np.empty(m), np.empty(m), np.empty(m)
+            stats = np.zeros((ny, 8))
+            depths = (np.full(nx * ny, np.inf), np.full(nx * ny, -np.inf), np.zeros((nx * ny, 5)))
+            _shares(
+                kernels[4], ny, threaded, _spread(ny), p, n, light_vec, directional, offset, moved, vp, order,
+                cell_start, *grid, sx, sy, sz, stats, *depths,
             )  # fmt: skip
         else:
-            px, py, pz, stats = kernels[0](p, n, light_vec, directional, offset, moved, vp)
+            px, py, pz = np.empty(m), np.empty(m), np.empty(m)
+            stats = np.zeros((64, 8))  # per chunk of receivers
+            args = (p, n, light_vec, directional, offset, moved, vp, px, py, pz, stats)
+            _shares(kernels[0], 64, threaded, *args)
             cached = None
         bad = bool(stats[:, 5].any())
         w_ok = bool(stats[:, 4].min() > 0) if m else True
@@ -204,12 +230,19 @@ def pixel_binning(
     nx, ny = -(-width // tile), -(-height // tile)
     cw, ch = 2.0 * tile / width, 2.0 * tile / height
     grid = (-1.0, 1.0 - ny * ch, cw, ch, nx, ny)
-    # the order is written into numpy's memory (reused between frames without fresh page faults)
-    order, cell_start = _pixel_binning_kernel()(
-        np.ascontiguousarray(rank, dtype=np.int64), int(width), int(height), int(tile), nx, ny,
-        np.empty(width * height, np.int64),
-    )  # fmt: skip
-    return grid, order, cell_start
+    # a counting sort: each band of pixel rows counts its row of tiles, the counts are summed up,
+    # then each band fills its tiles; the order is written into numpy's memory (reused between
+    # frames without fresh page faults)
+    kernel = _pixel_binning_kernel()
+    threaded = width * height >= _PARALLEL_RECEIVERS
+    args = (np.ascontiguousarray(rank, dtype=np.int64), int(width), int(height), int(tile), nx, ny)
+    cell_start = np.zeros(nx * ny + 1, np.int64)
+    order = np.empty(width * height, np.int64)
+    spread = _spread(ny)
+    _shares(kernel, ny, threaded, spread, False, *args, cell_start, order)
+    np.cumsum(cell_start, out=cell_start)
+    _shares(kernel, ny, threaded, spread, True, *args, cell_start, order)
+    return grid, order[: cell_start[-1]], cell_start
 
 
 _NO_CLIP = np.zeros((0, 3, 4))  # no clipped triangles (one array type for the set-up kernel)
@@ -240,27 +273,35 @@ def _count(
     grid = rec.grid
     xmin, ymin, cw, ch, nx, ny = grid
     slack_x, slack_y = rec.slack
-    parallel = len(rec.x) >= _PARALLEL_RECEIVERS
-    tile_depths = _fast_kernels(parallel)[3]
-    # a small volume is set up on one thread (no parallel region to wait for)
-    _, _, setup, _, _, to_clip = _fast_kernels(len(vol) >= _PARALLEL_FACES)
-    todo = to_clip(vol, vp, guard)
+    threaded = len(rec.x) >= _PARALLEL_RECEIVERS
+    _, _, setup, tile_depths, _, to_clip = _fast_kernels()
+    # a small volume is set up on this thread (no shares to hand to threads)
+    faces_threaded = len(vol) >= _PARALLEL_FACES
+    todo = np.zeros(len(vol), np.bool_)
+    _shares(to_clip, len(vol), faces_threaded, vol, vp, guard, todo)
     # the few faces crossing the near plane or the guard band: clipped, then set up after the rest
     cut = _clip(_transform(vol[todo], vp), guard) if todo.any() else _NO_CLIP
     fields = _setup_arrays(len(vol) + len(cut))
-    setup(vol, cut, todo, vp, *grid, slack_x, slack_y, *fields)
+    _shares(setup, len(vol) + len(cut), faces_threaded, vol, cut, todo, vp, *grid, slack_x, slack_y, *fields)
     st = _Setup(*fields)
     depths = rec.depths
-    zlo, zhi, fit = depths if depths is not None else tile_depths(rec.x, rec.y, rec.z, rec.cell_start, *grid)
-    # small jobs run serially: a parallel region costs more than it saves on a busy machine
-    n_bands = min(ny, _threads()) if parallel else 1
+    if depths is None:
+        depths = (np.full(nx * ny, np.inf), np.full(nx * ny, -np.inf), np.zeros((nx * ny, 5)))
+        _shares(
+            tile_depths, ny, threaded, _spread(ny), rec.x, rec.y, rec.z, rec.cell_start, xmin, ymin, cw, ch,
+            nx, *depths,
+        )  # fmt: skip
+    zlo, zhi, fit = depths
+    # small jobs run on this thread: shares on threads cost more than they save
+    n_bands = min(ny, _threads()) if threaded else 1
     m = len(rec.x)
-    counts, lit = _kernel(parallel)(
-        n_bands, ny, nx, xmin, ymin, cw, ch,
+    counts, lit = np.empty(0 if visibility else m, np.int64), np.empty(m if visibility else 0)
+    _shares(
+        _kernel(), n_bands, threaded, n_bands, ny, nx, xmin, ymin, cw, ch,
         st.cx0, st.cx1, st.cy0, st.cy1, st.ex, st.ey, st.edx, st.edy, st.esign, st.etie,
         st.z0, st.x0, st.y0, st.gx, st.gy, st.front, st.bx0, st.bx1, st.by0, st.by1,
         rec.x, rec.y, rec.z, rec.cell_start, zlo, zhi, fit, rec.order, zfail, visibility,
         slack_x, slack_y,
-        np.empty(m, np.int64), np.empty(0 if visibility else m, np.int64), np.empty(m if visibility else 0),
+        np.empty(m, np.int64), counts, lit,
     )  # fmt: skip
     return lit if visibility else counts

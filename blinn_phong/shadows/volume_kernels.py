@@ -16,33 +16,24 @@ import functools
 import numpy as np
 
 
-def _jit(parallel: bool, **options: object) -> object:
-    """``numba.njit(parallel=parallel, cache=True, **options)`` for a kernel built both serial
-    and parallel, each variant cached under its own name.
-
-    numba's on-disk cache files a function under its qualified name and keys each entry by the
-    function's bytecode and closure values, not by its compile options: the serial and parallel
-    builds of one kernel would share an entry, and whichever was compiled first would be loaded
-    for both (a parallel kernel then runs on one thread). The variant's name is therefore made
-    part of the function's qualified name before it is compiled.
-    """
+def _njit() -> object:
+    """``numba.njit`` for a share kernel: a serial loop over the indices it is given that releases
+    the GIL (:func:`compositing._threads.in_shares` runs shares of them on threads) under numpy's
+    error model (a division is not tested for zero, so LLVM optimises the loops as it does a
+    parallel loop's body). Every index writes its own outputs: no write races, and the results do
+    not depend on the number of threads or shares."""
     import numba
 
-    def build(fn: object) -> object:
-        fn.__qualname__ = f"{fn.__qualname__}.{'parallel' if parallel else 'serial'}"  # type: ignore[attr-defined]
-        return numba.njit(parallel=parallel, cache=True, **options)(fn)
-
-    return build
+    return numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
-@functools.lru_cache(maxsize=2)
-def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
-    import numba
-
+@functools.lru_cache(maxsize=1)
+def _kernel() -> object:  # a numba dispatcher
     from blinn_phong.shadows import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
-    @_jit(parallel, fastmath=False)
+    @_njit()
     def count(
+        bands,
         n_bands,
         ny,
         nx,
@@ -86,7 +77,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         out_counts,
         out_vis,
     ):  # pragma: no cover - compiled
-        # Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]] lie in tile c;
+        # Counts the receivers of the bands ``bands`` (of ``n_bands``: band b owns the tile rows b,
+        # b + n_bands, ...). Receivers arrive sorted by tile: px[cell_start[c]:cell_start[c + 1]]
+        # lie in tile c;
         # zlo/zhi: each tile's receiver depth range; fit: its receivers' depth plane and their
         # residuals from it (see ``tile_depths``). Returns (counts, visibility) in the receivers'
         # input order (``order`` maps sorted → input): with ``visibility`` an empty count array
@@ -102,8 +95,9 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
         wx = 1e-9 * cw + slack_x
         wy = 1e-9 * ch + slack_y
         # band b owns the tile rows b, b + n_bands, b + 2·n_bands, ...: interleaved, so every band
-        # gets a share of the busy rows whatever the threads' static split of the bands
-        for band in numba.prange(n_bands):
+        # gets a share of the busy rows
+        for i_band in range(bands.shape[0]):
+            band = bands[i_band]
             for row in range(band, ny, n_bands):
                 for k in range(cell_start[row * nx], cell_start[(row + 1) * nx]):
                     counts[k] = 0
@@ -220,32 +214,33 @@ def _kernel(parallel: bool = True) -> object:  # a numba dispatcher
                             out_vis[order[k]] = 1.0 if c == 0 else 0.0
                         else:
                             out_counts[order[k]] = c
-        return out_counts, out_vis
+        return 0
 
     return count
 
 
-@functools.lru_cache(maxsize=2)
-def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
+@functools.lru_cache(maxsize=1)
+def _fast_kernels() -> tuple[object, ...]:
     """Compiled receiver projection, tile binning (counting sort), volume-triangle set-up, each
     tile's receiver depths, and the projection into an earlier binning's order."""
     import numba
 
     from blinn_phong.shadows import _volume_helpers as vh  # module-level helpers: numba caches the callers
 
-    @_jit(parallel)
-    def project(p, n, light_vec, directional, offset, moved, vp):  # pragma: no cover - compiled
+    @_njit()
+    def project(
+        chunks, p, n, light_vec, directional, offset, moved, vp, px, py, pz, stats
+    ):  # pragma: no cover - compiled
+        """The chunks ``chunks`` of the receivers (``stats.shape[0]`` chunks in all) projected into
+        ``px``, ``py``, ``pz``; per chunk into ``stats`` (zeroed by the caller): min/max of x and
+        y, min of w, 1 if an input was not finite, (unused) 0, 0."""
         m = p.shape[0]
-        px = np.empty(m)
-        py = np.empty(m)
-        pz = np.empty(m)
-        n_chunks = 64
+        n_chunks = stats.shape[0]
         mat = vh.matrix_entries(vp)
         lv = (light_vec[0], light_vec[1], light_vec[2])
-        # per chunk: min/max of x and y, min of w, 1 if an input was not finite, (unused) 0, 0
-        stats = np.zeros((n_chunks, 8))
         size = (m + n_chunks - 1) // n_chunks
-        for chunk in numba.prange(n_chunks):
+        for i_chunk in range(chunks.shape[0]):
+            chunk = chunks[i_chunk]
             xlo = np.inf
             xhi = -np.inf
             ylo = np.inf
@@ -270,28 +265,24 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             stats[chunk, 3] = yhi
             stats[chunk, 4] = wlo
             stats[chunk, 5] = bad
-        return px, py, pz, stats
+        return 0
 
-    @_jit(parallel)
+    @_njit()
     def project_binned(
-        p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch, nx, ny,
-        sx, sy, sz,
+        rows, spread, p, n, light_vec, directional, offset, moved, vp, order, cell_start, xmin, ymin, cw, ch,
+        nx, ny, sx, sy, sz, stats, zlo, zhi, fit,
     ):  # fmt: skip  # pragma: no cover - compiled
         """:func:`project` into an earlier binning's order (sorted by tile: receiver ``order[k]``
         at ``k``, written into ``sx``, ``sy``, ``sz``), with how far any receiver now lies outside
         its tile (a receiver moved for another light may cross a border: the kernel widens every
-        tile by as much), and each tile's depths (``tile_depths``)."""
+        tile by as much), and each tile's depths (``tile_depths``), for the tile rows
+        ``spread[rows]``. Per row of tiles into ``stats`` (zeroed by the caller): min/max of x and
+        y, min of w, 1 if an input was not finite, and the largest distance of a receiver outside
+        its tile along x and along y; ``zlo``, ``zhi`` (∞ and −∞) and ``fit`` as ``tile_depths``."""
         mat = vh.matrix_entries(vp)
         lv = (light_vec[0], light_vec[1], light_vec[2])
-        # per row of tiles: min/max of x and y, min of w, 1 if an input was not finite, and the
-        # largest distance of a receiver outside its tile along x and along y
-        stats = np.zeros((ny, 8))
-        zlo = np.full(nx * ny, np.inf)
-        zhi = np.full(nx * ny, -np.inf)
-        fit = np.zeros((nx * ny, 5))
-        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
-        for i_row in numba.prange(ny):
-            row = spread[i_row]
+        for i_row in range(rows.shape[0]):
+            row = spread[rows[i_row]]
             xlo = np.inf
             xhi = -np.inf
             ylo = np.inf
@@ -342,7 +333,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             stats[row, 5] = bad
             stats[row, 6] = out_x
             stats[row, 7] = out_y
-        return sx, sy, sz, stats, zlo, zhi, fit
+        return 0
 
     @numba.njit(cache=True)
     def bin_points(px, py, pz, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
@@ -380,21 +371,19 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             sz[k] = pz[i]
         return order, cell_start, sx, sy, sz
 
-    @_jit(parallel)
-    def tile_depths(px, py, pz, cell_start, xmin, ymin, cw, ch, nx, ny):  # pragma: no cover - compiled
+    @_njit()
+    def tile_depths(
+        rows, spread, px, py, pz, cell_start, xmin, ymin, cw, ch, nx, zlo, zhi, fit
+    ):  # pragma: no cover - compiled
         """Per tile its receivers' depth range (zlo, zhi), and a least-squares depth plane
         ``a + (b·(x − xc) + c·(y − yc))`` about the tile's centre (xc, yc) with the lowest and
         highest residual ``z − plane`` of its receivers, widened past rounding: (n_cells, 5) rows
         (a, b, c, r_lo, r_hi). Any plane would do (the residuals are measured); a good one lets
         the kernel settle a tile whose receivers lie on one surface (a ground under its own
-        light cap) without testing each receiver."""
-        n_cells = nx * ny
-        zlo = np.full(n_cells, np.inf)
-        zhi = np.full(n_cells, -np.inf)
-        fit = np.zeros((n_cells, 5))
-        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # rows interleaved over the threads
-        for i_row in numba.prange(ny):
-            row = spread[i_row]
+        light cap) without testing each receiver. For the tile rows ``spread[rows]``, into ``zlo``,
+        ``zhi`` (∞ and −∞ where a tile is empty) and ``fit``."""
+        for i_row in range(rows.shape[0]):
+            row = spread[rows[i_row]]
             yc = ymin + (row + 0.5) * ch
             for cell in range(row * nx, (row + 1) * nx):
                 k0 = cell_start[cell]
@@ -405,24 +394,25 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 zlo[cell], zhi[cell], fit[cell, 0], fit[cell, 1], fit[cell, 2], fit[cell, 3], fit[cell, 4] = (
                     vh.tile_fit(px[k0:k1], py[k0:k1], pz[k0:k1], xc, yc)
                 )
-        return zlo, zhi, fit
+        return 0
 
-    @_jit(parallel)
-    def to_clip(src, vp, guard):  # pragma: no cover - compiled
-        """Which homogeneous world triangles cross the near plane or the guard band once moved
-        to clip space by ``vp`` (as ``setup`` transforms them): those are clipped first."""
-        todo = np.zeros(src.shape[0], np.bool_)
-        for t in numba.prange(src.shape[0]):
+    @_njit()
+    def to_clip(faces, src, vp, guard, todo):  # pragma: no cover - compiled
+        """Which homogeneous world triangles (of ``faces``) cross the near plane or the guard band
+        once moved to clip space by ``vp`` (as ``setup`` transforms them): those are clipped
+        first (``todo``, False where they do not, set by the caller)."""
+        for i_face in range(faces.shape[0]):
+            t = faces[i_face]
             for v in range(3):
                 xc, yc, zc, wc = vh.clip_vertex(src, vp, True, t, v)
                 gw = guard * wc
                 if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
                     todo[t] = True
-        return todo
+        return 0
 
-    @_jit(parallel)
+    @_njit()
     def setup(
-        src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y,
+        faces, src, cut, todo, vp, xmin, ymin, cw, ch, nx, ny, slack_x, slack_y,
         ex, ey, edx, edy, esign, etie, z0, x0, y0, gx, gy, front, cx0, cx1, cy0, cy1, bx0, bx1, by0, by1,
     ):  # fmt: skip  # pragma: no cover - compiled
         """Per triangle the fields of :class:`_Setup` (see :func:`_setup`), written into the
@@ -431,10 +421,10 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
         clip-space triangles ``cut`` (the flagged ones, clipped). Triangles with w ≤ 0 or zero or
         non-finite area are left empty too (an empty triangle: ``cx0 > cx1``, its edges unset). A
         triangle's tiles are those its bounding box meets once widened by the receivers' slack
-        (see ``count``)."""
+        (see ``count``). Sets the triangles ``faces`` of ``src`` then ``cut``, numbered on."""
         n_src = src.shape[0]
-        s = n_src + cut.shape[0]
-        for t in numba.prange(s):
+        for i_face in range(faces.shape[0]):
+            t = faces[i_face]
             for i in range(3):
                 etie[t, i] = False
             z0[t] = 0.0
@@ -455,7 +445,7 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
                 continue
             transform = t < n_src
             tri = src if transform else cut
-            k = np.int64(t) if transform else np.int64(t) - n_src  # (a parallel loop's index is unsigned)
+            k = t if transform else t - n_src
             c00, c01, c02, c03 = vh.clip_vertex(tri, vp, transform, k, 0)
             c10, c11, c12, c13 = vh.clip_vertex(tri, vp, transform, k, 1)
             c20, c21, c22, c23 = vh.clip_vertex(tri, vp, transform, k, 2)
@@ -519,43 +509,40 @@ def _fast_kernels(parallel: bool = True) -> tuple[object, ...]:
             bx1[t] = hi_x + pad_x
             by0[t] = lo_y - pad_y
             by1[t] = hi_y + pad_y
+        return 0
 
     return project, bin_points, setup, tile_depths, project_binned, to_clip
 
 
 @functools.lru_cache(maxsize=1)
 def _pixel_binning_kernel() -> object:  # a numba dispatcher
-    import numba
-
-    @numba.njit(parallel=True, cache=True)
-    def pixel_bins(rank, width, height, tile, nx, ny, order):  # pragma: no cover - compiled
+    @_njit()
+    def pixel_bins(
+        bands, spread, fill, rank, width, height, tile, nx, ny, cell_start, order
+    ):  # pragma: no cover - compiled
         # counting sort of the covered pixels (rank ≥ 0) by tile: tile column col // tile, tile
-        # row from the bottom (normalised y grows upwards, pixel rows downwards); each row of
-        # tiles (its own cells) counted and filled in parallel, in row-major order within a tile,
-        # into the first entries of ``order`` (width·height entries: room for every pixel)
-        n_cells = nx * ny
-        cell_start = np.zeros(n_cells + 1, np.int64)
-        spread = np.argsort(np.arange(ny) % 16, kind="mergesort")  # tile rows interleaved over the threads
-        for i_band in numba.prange(ny):
-            band = spread[i_band]
+        # row from the bottom (normalised y grows upwards, pixel rows downwards). Each band of
+        # pixel rows (``spread[bands]``) owns its row of tiles: without ``fill``, counted into
+        # ``cell_start[c + 1]`` (zeroed by the caller, who then sums it up); with ``fill``, its
+        # pixels' ranks written in row-major order within a tile from ``cell_start`` on, into
+        # ``order`` (room for every pixel)
+        for i_band in range(bands.shape[0]):
+            band = spread[bands[i_band]]
             cy = ny - 1 - band
-            for row in range(band * tile, min(height, (band + 1) * tile)):
-                for col in range(width):
-                    if rank[row * width + col] >= 0:
-                        cell_start[cy * nx + col // tile + 1] += 1
-        for c in range(n_cells):
-            cell_start[c + 1] += cell_start[c]
-        for i_band in numba.prange(ny):
-            band = spread[i_band]
-            cy = ny - 1 - band
-            fill = cell_start[cy * nx : cy * nx + nx].copy()
+            if not fill:
+                for row in range(band * tile, min(height, (band + 1) * tile)):
+                    for col in range(width):
+                        if rank[row * width + col] >= 0:
+                            cell_start[cy * nx + col // tile + 1] += 1
+                continue
+            at = cell_start[cy * nx : cy * nx + nx].copy()
             for row in range(band * tile, min(height, (band + 1) * tile)):
                 for col in range(width):
                     r = rank[row * width + col]
                     if r >= 0:
                         c = col // tile
-                        order[fill[c]] = r
-                        fill[c] += 1
-        return order[: cell_start[n_cells]], cell_start
+                        order[at[c]] = r
+                        at[c] += 1
+        return 0
 
     return pixel_bins

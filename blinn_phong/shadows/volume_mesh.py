@@ -271,30 +271,18 @@ def _hash_kernels() -> tuple[object, object, object, object]:
 def _pair_kernel() -> object:  # a numba dispatcher
     import numba
 
-    @numba.njit(parallel=True, cache=True)
-    def pair_by_vertex(a, b, nv):  # pragma: no cover - compiled
-        """``pair``'s results for directed edges ``a[e] → b[e]`` from the edges grouped by start
-        vertex (a stable counting sort, so a group lists its edges in input order): an edge's
-        own count is how often its end appears in its start's group, its twin's the same with
-        the ends swapped, the twin's first index the first such edge."""
-        m = a.shape[0]
-        start = np.zeros(nv + 1, np.int64)
-        for e in range(m):
-            start[a[e] + 1] += 1
-        for v in range(nv):
-            start[v + 1] += start[v]
-        fill = start[:nv].copy()
-        end = np.empty(m, np.int64)
-        index = np.empty(m, np.int64)
-        for e in range(m):
-            k = fill[a[e]]
-            fill[a[e]] = k + 1
-            end[k] = b[e]
-            index[k] = e
-        own = np.empty(m, np.int64)
-        twin_count = np.empty(m, np.int64)
-        twin_first = np.empty(m, np.int64)
-        for e in numba.prange(m):
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def pair_by_vertex(
+        edges, a, b, start, end, index, own, twin_count, twin_first
+    ):  # pragma: no cover - compiled
+        """``pair``'s results for the directed edges ``a[e] → b[e]`` of ``edges`` (a share of
+        them: each writes its own entries), from the edges grouped by start vertex (a stable
+        sort, so a group lists its edges in input order: vertex ``v``'s ends are
+        ``end[start[v]:start[v + 1]]``, their edges ``index[...]``): an edge's own count is how
+        often its end appears in its start's group, its twin's the same with the ends swapped,
+        the twin's first index the first such edge."""
+        for i in range(edges.shape[0]):
+            e = edges[i]
             u = a[e]
             v = b[e]
             c = 0
@@ -311,7 +299,7 @@ def _pair_kernel() -> object:  # a numba dispatcher
                     c += 1
             twin_count[e] = c
             twin_first[e] = f
-        return own, twin_count, twin_first
+        return 0
 
     return pair_by_vertex
 
@@ -328,7 +316,15 @@ def _pair_edges(a: np.ndarray, b: np.ndarray, nv: int) -> tuple[np.ndarray, np.n
     by start vertex, or a hash table where some vertex has a very high degree."""
     degree = np.bincount(a, minlength=nv).astype(np.float64)
     if float(degree @ degree) <= _GROUP_STEPS_PER_EDGE * max(len(a), 1):
-        return _pair_kernel()(a, b, nv)
+        from compositing._threads import in_shares
+
+        m = len(a)
+        index = np.argsort(a, kind="stable")  # the edges grouped by start vertex, in input order
+        start = np.zeros(nv + 1, np.int64)
+        np.cumsum(np.bincount(a, minlength=nv), out=start[1:])
+        own, twin_count, twin_first = np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m, np.int64)
+        in_shares(_pair_kernel(), m, a, b, start, b[index], index, own, twin_count, twin_first)  # type: ignore[arg-type]
+        return own, twin_count, twin_first
     return _hash_kernels()[1](a * nv + b, b * nv + a)
 
 

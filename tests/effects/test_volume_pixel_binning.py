@@ -23,7 +23,6 @@ import blinn_phong as bp
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.shadows import volume as sv
 from blinn_phong.shadows import volume_counting as vc
-from blinn_phong.shadows import volume_kernels as vk
 from blinn_phong.shadows import volume_mesh as vm
 
 pytest.importorskip("numba")
@@ -124,19 +123,12 @@ def test_the_frame_passes_its_pixel_tiles_to_every_volume(monkeypatch: pytest.Mo
     assert len(seen) == 3 and all(b is not None and len(b) == 3 for b in seen)
 
 
-def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
-    """numba's on-disk cache files a kernel under its qualified name and keys it by bytecode and
-    closure, not by compile options: unless named apart, the serial and the parallel build of a
-    kernel would share one cache entry (the first compiled would serve both, and a parallel
-    kernel could run on one thread). Each variant has its own index file, and both count alike
-    (set-up, tile depths and counting, serial against threaded)."""
-    kernels = [(vk._kernel(False), vk._kernel(True))]
-    kernels += list(zip(vk._fast_kernels(False), vk._fast_kernels(True), strict=True))
-    for serial, parallel in kernels:
-        if not parallel.targetoptions.get("parallel"):  # one build only (the tile sort)
-            continue
-        assert serial._cache._cache_file._index_path != parallel._cache._cache_file._index_path  # cache files
-        assert ".serial" in serial.py_func.__qualname__ and ".parallel" in parallel.py_func.__qualname__
+def test_one_thread_and_shares_on_threads_count_alike(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled kernels are serial loops over the items they are given (bands of tile rows,
+    rows, faces); a large job runs them in shares on threads, each share writing its own
+    outputs. Set-up, tile depths and counting give the same counts either way (the tile rows in
+    three bands, whatever the machine's threads)."""
+    monkeypatch.setattr(vc, "_threads", lambda: 3)
     scene = _scene()
     points, normals, _rank = _receivers(scene)
     tris = pipeline._world_triangles(scene, pipeline._world_vertices(scene))
@@ -146,13 +138,9 @@ def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
     rec = vc._projected(points, normals, light_vec, directional, 1e-4, True, vp, True)
     volume = vm.shadow_volume_triangles(tris, light, caps=True)
     counts = {}
-    for parallel in (False, True):
-        saved = vc._PARALLEL_RECEIVERS, vc._PARALLEL_FACES
-        try:  # the receivers' and the volume's sizes pick the builds: force each in turn
-            vc._PARALLEL_RECEIVERS = 0 if parallel else len(points) + 1
-            vc._PARALLEL_FACES = 0 if parallel else len(volume) + 1
-            counts[parallel] = vc._count(volume, vp, rec, zfail=True)
-        finally:
-            vc._PARALLEL_RECEIVERS, vc._PARALLEL_FACES = saved
+    for threaded in (False, True):  # the receivers' and the volume's sizes decide: force each in turn
+        monkeypatch.setattr(vc, "_PARALLEL_RECEIVERS", 0 if threaded else len(points) + 1)
+        monkeypatch.setattr(vc, "_PARALLEL_FACES", 0 if threaded else len(volume) + 1)
+        counts[threaded] = vc._count(volume, vp, rec, zfail=True)
     assert np.any(counts[False] != 0) and np.any(counts[False] == 0)  # lit and shadowed receivers
     np.testing.assert_array_equal(counts[True], counts[False])
