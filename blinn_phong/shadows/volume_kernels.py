@@ -247,10 +247,12 @@ def _fast_kernels() -> tuple[object, ...]:
             yhi = -np.inf
             wlo = np.inf
             bad = 0.0
-            for i in range(chunk * size, min(m, (chunk + 1) * size)):
-                if not vh.finite_input(p, n, moved, i):
+            for i_signed in range(chunk * size, min(m, (chunk + 1) * size)):
+                i = np.uint64(i_signed)  # a valid row, taken unsigned (no negative-index handling)
+                q0, q1, q2, n0, n1, n2 = p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2]
+                if not vh.finite_input(q0, q1, q2, n0, n1, n2, moved):
                     bad = 1.0
-                x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                x, y, z, w = vh.project_point(q0, q1, q2, n0, n1, n2, lv, directional, offset, moved, mat)
                 px[i] = x
                 py[i] = y
                 pz[i] = z
@@ -308,9 +310,10 @@ def _fast_kernels() -> tuple[object, ...]:
                 zs = sz[k0:k1]
                 for k in range(k1 - k0):
                     i = np.uint64(ks[k])
-                    if not vh.finite_input(p, n, moved, i):
+                    q0, q1, q2, n0, n1, n2 = p[i, 0], p[i, 1], p[i, 2], n[i, 0], n[i, 1], n[i, 2]
+                    if not vh.finite_input(q0, q1, q2, n0, n1, n2, moved):
                         bad = 1.0
-                    x, y, z, w = vh.project_point(p, n, lv, directional, offset, moved, mat, i)
+                    x, y, z, w = vh.project_point(q0, q1, q2, n0, n1, n2, lv, directional, offset, moved, mat)
                     xs[k] = x
                     ys[k] = y
                     zs[k] = z

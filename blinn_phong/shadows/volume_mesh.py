@@ -123,14 +123,27 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     return _topology_with_key(tris)[0]
 
 
-def _digest(tris: np.ndarray) -> bytes:
-    """A 128-bit content digest of a float64 array (the cache key of its topology): BLAKE2b, or
-    with numba four interleaved splitmix64 lanes per 64-bit half, seeded differently (a cache
-    key against accidental collisions, not an adversary; it is several times faster)."""
-    flat = np.ascontiguousarray(tris).reshape(-1)
+#: Casters of fewer triangles are welded, paired, split into components and digested by the
+#: numpy reference (a few milliseconds; the same topology, tested), so that a scene of small
+#: meshes compiles none of those kernels (about 1 s of compilation in the first process on a
+#: machine, ``docs/compile.md``); larger casters use the compiled kernels.
+_NUMPY_BELOW = 5_000
+
+
+def _compiled(n_triangles: int) -> bool:
+    """Whether the topology of ``n_triangles`` casters is built by the compiled kernels."""
     from blinn_phong._numba import numba_available
 
-    if not numba_available():
+    return n_triangles >= _NUMPY_BELOW and numba_available()
+
+
+def _digest(tris: np.ndarray) -> bytes:
+    """A 128-bit content digest of a float64 array (the cache key of its topology): BLAKE2b, or
+    compiled (:func:`_compiled`) four interleaved splitmix64 lanes per 64-bit half, seeded
+    differently (a cache key against accidental collisions, not an adversary; it is several
+    times faster)."""
+    flat = np.ascontiguousarray(tris).reshape(-1)
+    if not _compiled(len(flat) // 9):
         return hashlib.blake2b(flat.data, digest_size=16).digest()
     lanes = _hash_kernels()[3](flat.view(np.uint64))
     return b"%d:" % len(flat) + lanes.tobytes()
@@ -331,9 +344,7 @@ def _pair_edges(a: np.ndarray, b: np.ndarray, nv: int) -> tuple[np.ndarray, np.n
 def _components(n: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Connected components of n nodes joined by edges (rows[i], cols[i]): each node's label is
     the smallest node index of its component (the same on both engines)."""
-    from blinn_phong._numba import numba_available
-
-    if numba_available():
+    if _compiled(n):
         return _hash_kernels()[2](n, rows.astype(np.int64), cols.astype(np.int64))
     parent = np.arange(n)
     while True:  # hook larger roots under smaller ones, then jump pointers until flat
@@ -354,9 +365,7 @@ def _weld(flat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Merge bit-identical rows of (m, 3) float64: (unique rows, index of each input row)."""
     flat = np.ascontiguousarray(flat + 0.0)  # -0.0 and 0.0 weld together
     bits = flat.view(np.uint64).reshape(-1, 3)
-    from blinn_phong._numba import numba_available
-
-    if numba_available():
+    if _compiled(len(flat) // 3):
         representative, inverse = _hash_kernels()[0](bits)
         return flat[representative], inverse
 
@@ -390,9 +399,7 @@ def _analyse(tris: np.ndarray) -> Topology:
     a = faces[idx][:, [0, 1, 2]].ravel()
     b = faces[idx][:, [1, 2, 0]].ravel()
     owner = np.repeat(idx, 3)
-    from blinn_phong._numba import numba_available
-
-    if numba_available():
+    if _compiled(n):
         own_count, twin_count, twin_first = _pair_edges(a, b, nv)
         has_twin = twin_first >= 0
         twin_at = np.maximum(twin_first, 0)

@@ -332,6 +332,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
     tris = np.concatenate(
         [world_triangles(scene), (p + 3.0)[t[:, ::-1]], fin, third, fin[:1]]  # + inside-out sphere
     )
+    monkeypatch.setattr(sv, "_NUMPY_BELOW", 0)  # compiled whatever the size
     if pairing == "hashed":
         monkeypatch.setattr(sv, "_GROUP_STEPS_PER_EDGE", 0)
     compiled = sv._analyse(tris)
