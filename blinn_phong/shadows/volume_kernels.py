@@ -5,8 +5,14 @@ Every expression is written out in the same order as its numpy twin in
 :mod:`blinn_phong.shadows.volume_setup` (:func:`~blinn_phong.shadows.volume_setup._project_numpy`,
 :func:`~blinn_phong.shadows.volume_setup._transform`, :func:`~blinn_phong.shadows.volume_setup._setup`),
 without fused multiply-adds, so both engines produce bit-identical set-ups and therefore identical
-counts. The kernels' inlined helpers are module-level functions of
+counts. The kernels' helpers are module-level functions of
 :mod:`blinn_phong.shadows._volume_helpers` (so that numba's disk cache serves the callers).
+
+Each kernel is one serial build (compiling numba's parallel loops cost several times as much)
+that loops over the items it is given — bands of tile rows, rows, faces, chunks of receivers —
+and releases the GIL: :mod:`blinn_phong.shadows.volume_counting` runs shares of the items on
+threads (:func:`compositing._threads.in_shares`), or all of them on the calling thread for a
+small job. Each item writes its own outputs, so results do not depend on the threads.
 """
 
 from __future__ import annotations
