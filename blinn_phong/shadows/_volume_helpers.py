@@ -77,21 +77,17 @@ def finite_input(q0, q1, q2, n0, n1, n2, moved):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", cache=True)
-def clip_vertex(src, vp, transform, t, v):  # pragma: no cover - compiled
-    """Vertex ``v`` of triangle ``t`` in clip coordinates (x, y, z, w): with ``transform``, the
-    homogeneous world vertex moved by ``vp`` (each row summed in :func:`_transform`'s order),
-    else as stored."""
-    x = src[t, v, 0]
-    y = src[t, v, 1]
-    z = src[t, v, 2]
-    w = src[t, v, 3]
+def clip_vertex(x, y, z, w, m, transform):  # pragma: no cover - compiled
+    """A vertex (x, y, z, w) in clip coordinates: with ``transform``, the homogeneous world vertex
+    moved by the view-projection matrix (``m``: :func:`matrix_entries`; each row summed in
+    :func:`blinn_phong.shadows.volume_setup._transform`'s order), else as given."""
     if not transform:
         return x, y, z, w
     return (
-        ((x * vp[0, 0] + y * vp[0, 1]) + z * vp[0, 2]) + w * vp[0, 3],
-        ((x * vp[1, 0] + y * vp[1, 1]) + z * vp[1, 2]) + w * vp[1, 3],
-        ((x * vp[2, 0] + y * vp[2, 1]) + z * vp[2, 2]) + w * vp[2, 3],
-        ((x * vp[3, 0] + y * vp[3, 1]) + z * vp[3, 2]) + w * vp[3, 3],
+        ((x * m[0] + y * m[1]) + z * m[2]) + w * m[3],
+        ((x * m[4] + y * m[5]) + z * m[6]) + w * m[7],
+        ((x * m[8] + y * m[9]) + z * m[10]) + w * m[11],
+        ((x * m[12] + y * m[13]) + z * m[14]) + w * m[15],
     )
 
 

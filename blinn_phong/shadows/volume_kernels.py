@@ -409,14 +409,21 @@ def _fast_kernels() -> tuple[object, ...]:
     def to_clip(faces, src, vp, guard, todo):  # pragma: no cover - compiled
         """Which homogeneous world triangles (of ``faces``) cross the near plane or the guard band
         once moved to clip space by ``vp`` (as ``setup`` transforms them): those are clipped
-        first (``todo``, False where they do not, set by the caller)."""
+        first (``todo``, written for each of ``faces``)."""
+        m = vh.matrix_entries(vp)
         for i_face in range(faces.shape[0]):
-            t = faces[i_face]
+            t = np.uint64(faces[i_face])  # a valid index, taken unsigned (no negative-index handling)
+            inside = True
             for v in range(3):
-                xc, yc, zc, wc = vh.clip_vertex(src, vp, True, t, v)
+                u = np.uint64(v)
+                xc, yc, zc, wc = vh.clip_vertex(
+                    src[t, u, 0], src[t, u, 1], src[t, u, 2], src[t, u, 3], m, True
+                )
                 gw = guard * wc
-                if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
-                    todo[t] = True
+                inside = inside and (
+                    zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0
+                )
+            todo[t] = not inside
         return 0
 
     @_njit()
@@ -432,8 +439,10 @@ def _fast_kernels() -> tuple[object, ...]:
         triangle's tiles are those its bounding box meets once widened by the receivers' slack
         (see ``count``). Sets the triangles ``faces`` of ``src`` then ``cut``, numbered on."""
         n_src = src.shape[0]
+        m = vh.matrix_entries(vp)
         for i_face in range(faces.shape[0]):
-            t = faces[i_face]
+            t_signed = faces[i_face]
+            t = np.uint64(t_signed)  # a valid index, taken unsigned (no negative-index handling)
             for i in range(3):
                 etie[t, i] = False
             z0[t] = 0.0
@@ -450,14 +459,20 @@ def _fast_kernels() -> tuple[object, ...]:
             bx1[t] = 0.0
             by0[t] = 0.0
             by1[t] = 0.0
-            if t < n_src and todo[t]:
+            if t_signed < n_src and todo[t]:
                 continue
-            transform = t < n_src
+            transform = t_signed < n_src
             tri = src if transform else cut
-            k = t if transform else t - n_src
-            c00, c01, c02, c03 = vh.clip_vertex(tri, vp, transform, k, 0)
-            c10, c11, c12, c13 = vh.clip_vertex(tri, vp, transform, k, 1)
-            c20, c21, c22, c23 = vh.clip_vertex(tri, vp, transform, k, 2)
+            k = np.uint64(t_signed if transform else t_signed - n_src)
+            c00, c01, c02, c03 = vh.clip_vertex(
+                tri[k, 0, 0], tri[k, 0, 1], tri[k, 0, 2], tri[k, 0, 3], m, transform
+            )
+            c10, c11, c12, c13 = vh.clip_vertex(
+                tri[k, 1, 0], tri[k, 1, 1], tri[k, 1, 2], tri[k, 1, 3], m, transform
+            )
+            c20, c21, c22, c23 = vh.clip_vertex(
+                tri[k, 2, 0], tri[k, 2, 1], tri[k, 2, 2], tri[k, 2, 3], m, transform
+            )
             if not (c03 > 0 and c13 > 0 and c23 > 0):
                 continue
             xa = c00 / c03

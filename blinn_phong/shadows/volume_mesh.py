@@ -123,10 +123,10 @@ def analyse_topology(world_triangles: np.ndarray) -> Topology:
     return _topology_with_key(tris)[0]
 
 
-#: Casters of fewer triangles are welded, paired, split into components and digested by the
-#: numpy reference (a few milliseconds; the same topology, tested), so that a scene of small
-#: meshes compiles none of those kernels (about 1 s of compilation in the first process on a
-#: machine, ``docs/compile.md``); larger casters use the compiled kernels.
+#: Casters of fewer triangles are welded, paired and split into components by the numpy
+#: reference (a few milliseconds, once per caster geometry; the same topology, tested), so that
+#: a scene of small meshes compiles none of those kernels (about 0.8 s of compilation in the
+#: first process on a machine, ``docs/compile.md``); larger casters use the compiled kernels.
 _NUMPY_BELOW = 5_000
 
 
@@ -139,11 +139,13 @@ def _compiled(n_triangles: int) -> bool:
 
 def _digest(tris: np.ndarray) -> bytes:
     """A 128-bit content digest of a float64 array (the cache key of its topology): BLAKE2b, or
-    compiled (:func:`_compiled`) four interleaved splitmix64 lanes per 64-bit half, seeded
-    differently (a cache key against accidental collisions, not an adversary; it is several
-    times faster)."""
+    with numba four interleaved splitmix64 lanes per 64-bit half, seeded differently (a cache
+    key against accidental collisions, not an adversary; it is several times faster, and taken
+    at every call on an array that may change)."""
     flat = np.ascontiguousarray(tris).reshape(-1)
-    if not _compiled(len(flat) // 9):
+    from blinn_phong._numba import numba_available
+
+    if not numba_available():
         return hashlib.blake2b(flat.data, digest_size=16).digest()
     lanes = _hash_kernels()[3](flat.view(np.uint64))
     return b"%d:" % len(flat) + lanes.tobytes()
