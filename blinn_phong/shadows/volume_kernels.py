@@ -412,18 +412,15 @@ def _fast_kernels() -> tuple[object, ...]:
         first (``todo``, written for each of ``faces``)."""
         m = vh.matrix_entries(vp)
         for i_face in range(faces.shape[0]):
-            t = np.uint64(faces[i_face])  # a valid index, taken unsigned (no negative-index handling)
-            inside = True
+            t = faces[i_face]
+            todo[t] = False
             for v in range(3):
-                u = np.uint64(v)
                 xc, yc, zc, wc = vh.clip_vertex(
-                    src[t, u, 0], src[t, u, 1], src[t, u, 2], src[t, u, 3], m, True
+                    src[t, v, 0], src[t, v, 1], src[t, v, 2], src[t, v, 3], m, True
                 )
                 gw = guard * wc
-                inside = inside and (
-                    zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0
-                )
-            todo[t] = not inside
+                if not (zc + wc >= 0 and gw - xc >= 0 and xc + gw >= 0 and gw - yc >= 0 and yc + gw >= 0):
+                    todo[t] = True
         return 0
 
     @_njit()
