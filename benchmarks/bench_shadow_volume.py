@@ -46,6 +46,7 @@ from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import Camera, Material, Mesh, Scene
 from blinn_phong.model.transforms import look_at
 from blinn_phong.shadows import volume as sv
+from blinn_phong.shadows import volume_counting, volume_mesh
 from blinn_phong.shadows.methods import light_visibility
 
 __all__ = ["chart", "crossover", "frame", "run", "same_scenes"]
@@ -66,7 +67,7 @@ def _new_receivers(fn):
     proofs kept, but the receivers are new arrays (no tile binning of earlier calls to reuse)."""
 
     def call():
-        sv._BINNING.clear()
+        volume_counting._BINNING.clear()
         return fn()
 
     return call
@@ -74,9 +75,9 @@ def _new_receivers(fn):
 
 def _cold(fn):
     def call():
-        sv._TOPOLOGY_CACHE.clear()
+        volume_mesh._TOPOLOGY_CACHE.clear()
         sv._DERIVED_CACHE.clear()
-        sv._BINNING.clear()
+        volume_counting._BINNING.clear()
         return fn()
 
     return call
@@ -87,7 +88,7 @@ def _caches() -> tuple:
     digests, and Embree's BVH."""
     from blinn_phong.shadows import raytrace
 
-    return sv._TOPOLOGY_CACHE, sv._DERIVED_CACHE, sv._DIGESTS, raytrace._SCENE_CACHE
+    return volume_mesh._TOPOLOGY_CACHE, sv._DERIVED_CACHE, volume_mesh._DIGESTS, raytrace._SCENE_CACHE
 
 
 def _snapshot() -> list:
@@ -201,7 +202,7 @@ def frame(width: int, height: int, repeat: int) -> dict:
 
     def run_with(name: str, shadows: str, cold: bool):
         def call():
-            sv._BINNING.clear()
+            volume_counting._BINNING.clear()
             stages[name] = render(scene, width, height, shadows=shadows).stats.seconds
 
         return _restored(call, empty if cold else warm)

@@ -681,11 +681,11 @@ def uncached(fn: Callable[[], bp.RenderResult]) -> Callable[[], bp.RenderResult]
     caches emptied first: every frame builds its BVH and its volumes, as the first frame of a
     scene or every frame of an animation does (``render()`` reuses both while the same
     triangles come back)."""
-    from blinn_phong.shadows import raytrace
+    from blinn_phong.shadows import raytrace, volume_mesh
     from blinn_phong.shadows import volume as shadow_volume
     def run() -> bp.RenderResult:
         raytrace._SCENE_CACHE.clear()
-        shadow_volume._TOPOLOGY_CACHE.clear()
+        volume_mesh._TOPOLOGY_CACHE.clear()
         shadow_volume._DERIVED_CACHE.clear()
         return fn()
 

@@ -8,7 +8,7 @@
 * :func:`weld_rows` — merge equal rows of an (m, 3) integer array with an open-addressing hash
   table (linear probing over :func:`mix` of the three entries): the distinct rows in order of
   first occurrence, without a sort. Used by :mod:`blinn_phong.geometry._mesh_kernels` (vertices in one
-  grid cell) and :mod:`blinn_phong.shadows.volume` (bit-identical float64 positions).
+  grid cell) and :mod:`blinn_phong.shadows.volume_mesh` (bit-identical float64 positions).
 
 The compiled functions live at module level (numba's disk cache keys a closure's functions by
 their pickled cells, which differ from one process to the next) and exist only when numba

@@ -273,7 +273,7 @@ def _visibility_at(
     ``mesh_of``: (N,) the scene mesh of each point; given to the compiled engine, ray-traced
     hard shadows trace only the rays that may be occluded (:func:`_traced_hard`).
     ``binning``: the points' screen tiles for shadow volumes
-    (:func:`blinn_phong.shadows.volume.pixel_binning` of a frame's pixels), or None.
+    (:func:`blinn_phong.shadows.volume_counting.pixel_binning` of a frame's pixels), or None.
     With ``scene.light_links`` (``mesh_of`` required) each light with blockers is computed
     against them alone and receiver masks zero their lights
     (:func:`blinn_phong.model.linking.linked_visibility`).
@@ -518,7 +518,7 @@ def _winner_visibility(
     )
     binning = None
     if any(c.method == "shadow_volume" for _, c in lit):  # type: ignore[attr-defined]
-        from blinn_phong.shadows.volume import pixel_binning
+        from blinn_phong.shadows.volume_counting import pixel_binning
 
         binning = pixel_binning(rank, setup.width, setup.height)  # type: ignore[attr-defined]  # the pixels' tiles: no sort
     visibility = _visibility_at(prepared.scene, lit, verts, points, normals, True, mesh_of, binning)

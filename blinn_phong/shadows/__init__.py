@@ -1,9 +1,11 @@
-"""Which light reaches which point: shadow maps, planar, ray-traced, soft and volume shadows.
+"""Which light reaches which point: one module per shadow method behind one registry.
 
-:mod:`.visibility` (numpy, and the dispatch per method); compiled shadow maps:
-:mod:`.map_render_kernels` (drawing the depth maps), :mod:`.map_lookup_kernels` (look-ups and
-percentage-closer filtering), :mod:`.map_receiver_kernels` (maps rendered only where receivers read
-them) and :mod:`.frame_maps` (a frame's maps, looked up in the fused pass); :mod:`.volume` (stencil
-shadow volumes); :mod:`.raytrace` (Embree rays), :mod:`.ray_setup_kernels` (their compiled set-up)
-and :mod:`.ray_culling` (which rays need tracing).
-Imports :mod:`blinn_phong.model` and :mod:`blinn_phong.geometry`."""
+:mod:`.methods` is the registry (``METHODS``, ``light_visibility``, ``frame_visibility``) of the
+methods, each a :class:`.method.ShadowMethod`: :mod:`.planar`, :mod:`.maps` (shadow maps;
+compiled in :mod:`.map_render_kernels`, :mod:`.map_lookup_kernels`, :mod:`.map_receiver_kernels`,
+and looked up inside the fused frame by :mod:`.frame_maps`), :mod:`.ray_traced` (with
+:mod:`.raytrace`, Embree's rays, :mod:`.ray_setup_kernels` and :mod:`.ray_culling`),
+:mod:`.soft` and :mod:`.volume` (stencil shadow volumes, built by :mod:`.volume_mesh`, counted by
+:mod:`.volume_counting` with :mod:`.volume_setup` and :mod:`.volume_kernels`).
+:mod:`.transmittance` gives the coloured shadows of transparent casters. Imports
+:mod:`blinn_phong.model` and :mod:`blinn_phong.geometry`."""

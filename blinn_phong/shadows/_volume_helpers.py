@@ -1,4 +1,4 @@
-"""Compiled helpers of the shadow-volume kernels (:mod:`blinn_phong.shadows.volume`), at module level.
+"""Compiled helpers of the shadow-volume kernels (:mod:`blinn_phong.shadows.volume_kernels`), at module level.
 
 numba keys a cached kernel on the values it closes over; a kernel closing over another compiled
 function (a dispatcher, pickled with a per-process identity) misses the disk cache and is
@@ -12,7 +12,7 @@ import numba
 import numpy as np
 
 __all__ = [
-    "component",
+    "clip_vertex",
     "depth_range",
     "edge_box",
     "edge_span",
@@ -36,18 +36,15 @@ def matrix_entries(vp):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", cache=True)
-def project_point(p, n, light_vec, directional, offset, moved, m, i):  # pragma: no cover - compiled
-    """Receiver ``i`` moved ``offset`` along its normal towards the light's side (when ``moved``),
-    as normalised-device (x, y, z) and clip w (the numpy engine's expressions, in their order).
-    ``light_vec``: the light's (x, y, z) as a tuple; ``m``: :func:`matrix_entries` of the
-    view-projection matrix."""
-    q0 = p[i, 0]
-    q1 = p[i, 1]
-    q2 = p[i, 2]
+def project_point(
+    q0, q1, q2, n0, n1, n2, light_vec, directional, offset, moved, m
+):  # pragma: no cover - compiled
+    """A receiver at (q0, q1, q2) with normal (n0, n1, n2) moved ``offset`` along its normal
+    towards the light's side (when ``moved``), as normalised-device (x, y, z) and clip w (the
+    numpy engine's expressions, in their order). ``light_vec``: the light's (x, y, z) as a tuple;
+    ``m``: :func:`matrix_entries` of the view-projection matrix. Scalars, not the arrays: an
+    array passed to an inlined helper is reference-counted at every call."""
     if moved:
-        n0 = n[i, 0]
-        n1 = n[i, 1]
-        n2 = n[i, 2]
         if directional:
             t0 = -light_vec[0]
             t1 = -light_vec[1]
@@ -71,31 +68,26 @@ def project_point(p, n, light_vec, directional, offset, moved, m, i):  # pragma:
 
 
 @numba.njit(inline="always", cache=True)
-def finite_input(p, n, moved, i):  # pragma: no cover - compiled
-    """False when receiver ``i`` (or, when ``moved``, its normal) has a NaN or infinite coordinate."""
-    if not (np.isfinite(p[i, 0]) and np.isfinite(p[i, 1]) and np.isfinite(p[i, 2])):
+def finite_input(q0, q1, q2, n0, n1, n2, moved):  # pragma: no cover - compiled
+    """False when a receiver (q0, q1, q2) (or, when ``moved``, its normal (n0, n1, n2)) has a NaN
+    or infinite coordinate."""
+    if not (np.isfinite(q0) and np.isfinite(q1) and np.isfinite(q2)):
         return False
-    return not moved or (np.isfinite(n[i, 0]) and np.isfinite(n[i, 1]) and np.isfinite(n[i, 2]))
+    return not moved or (np.isfinite(n0) and np.isfinite(n1) and np.isfinite(n2))
 
 
 @numba.njit(inline="always", cache=True)
-def component(src, vp, transform, t, v, r):  # pragma: no cover - compiled
-    if transform:  # as _transform sums it
-        return ((src[t, v, 0] * vp[r, 0] + src[t, v, 1] * vp[r, 1]) + src[t, v, 2] * vp[r, 2]) + src[
-            t, v, 3
-        ] * vp[r, 3]
-    return src[t, v, r]
-
-
-@numba.njit(inline="always", cache=True)
-def clip_vertex(src, vp, transform, t, v):  # pragma: no cover - compiled
-    """Vertex ``v`` of triangle ``t`` in clip coordinates (x, y, z, w): :func:`component` of
-    each row."""
+def clip_vertex(x, y, z, w, m, transform):  # pragma: no cover - compiled
+    """A vertex (x, y, z, w) in clip coordinates: with ``transform``, the homogeneous world vertex
+    moved by the view-projection matrix (``m``: :func:`matrix_entries`; each row summed in
+    :func:`blinn_phong.shadows.volume_setup._transform`'s order), else as given."""
+    if not transform:
+        return x, y, z, w
     return (
-        component(src, vp, transform, t, v, 0),
-        component(src, vp, transform, t, v, 1),
-        component(src, vp, transform, t, v, 2),
-        component(src, vp, transform, t, v, 3),
+        ((x * m[0] + y * m[1]) + z * m[2]) + w * m[3],
+        ((x * m[4] + y * m[5]) + z * m[6]) + w * m[7],
+        ((x * m[8] + y * m[9]) + z * m[10]) + w * m[11],
+        ((x * m[12] + y * m[13]) + z * m[14]) + w * m[15],
     )
 
 
@@ -142,7 +134,7 @@ def plane_gap(z0, x0, y0, gx, gy, a, b, c, xc, yc, ax, bx, ay, by):  # pragma: n
     return lo - margin, hi + margin
 
 
-@numba.njit(inline="always", cache=True)
+@numba.njit(cache=True)
 def edge_span(ex, ey, dx, dy, sy0, sy1, lo, hi):  # pragma: no cover - compiled
     """(lo, hi) widened by the x-extent of the edge from (ex, ey) along (dx, dy) clipped to the
     strip sy0 ≤ y ≤ sy1 (unchanged when the edge misses the strip)."""
@@ -162,7 +154,7 @@ def edge_span(ex, ey, dx, dy, sy0, sy1, lo, hi):  # pragma: no cover - compiled
     return min(lo, xa, xb), max(hi, xa, xb)
 
 
-@numba.njit(inline="always", cache=True)
+@numba.njit(cache=True)
 def edge_box(ex, ey, dx, dy, es, ax, bx, ay, by):  # pragma: no cover - compiled
     """The rectangle [ax, bx] × [ay, by] against the inside of one edge (``es·E > 0``, E the edge
     function from (ex, ey) along (dx, dy)), past rounding: (wholly outside, wholly inside)."""

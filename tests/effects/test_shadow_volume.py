@@ -21,14 +21,9 @@ from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.model.scene import Camera, Mesh
 from blinn_phong.model.transforms import look_at
-from blinn_phong.shadows.volume import (
-    analyse_topology,
-    shadow_volume_triangles,
-    shadow_volume_visibility,
-    silhouette_edges,
-    stencil_counts,
-    zpass_is_safe,
-)
+from blinn_phong.shadows.volume import shadow_volume_visibility, zpass_is_safe
+from blinn_phong.shadows.volume_counting import stencil_counts
+from blinn_phong.shadows.volume_mesh import analyse_topology, shadow_volume_triangles, silhouette_edges
 
 from .volume_scenes import (
     HEIGHT,
@@ -97,7 +92,7 @@ def test_camera_inside_volume_zfail_matches_embree(caster, light_name):
 def test_engines_count_identically(method, parallel, monkeypatch):
     """Integer counts from the same float expressions: numba and numpy agree exactly (deterministic),
     on one thread and with the tile rows interleaved between threads (forced on this small image)."""
-    import blinn_phong.shadows.volume as sv
+    import blinn_phong.shadows.volume_counting as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -123,7 +118,7 @@ def test_tile_shortcuts_count_as_each_receiver(light_name, method, parallel, mon
     tiles from each tile's depth range and depth plane; the numpy engine tests every receiver.
     The counts agree exactly (integers from the same float expressions), and the quad's cap,
     in front of the ground below it, really counts there."""
-    import blinn_phong.shadows.volume as sv
+    import blinn_phong.shadows.volume_counting as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -160,7 +155,7 @@ def test_a_reused_binning_counts_as_a_fresh_one(parallel, monkeypatch):
     light's tile order; even a stale order (the arrays changed in place) counts exactly as a
     fresh binning does, since every tile's bounds and depths are measured again (on one thread
     and with the tile rows split between threads)."""
-    import blinn_phong.shadows.volume as sv
+    import blinn_phong.shadows.volume_counting as sv
 
     if parallel:
         monkeypatch.setattr(sv, "_PARALLEL_RECEIVERS", 0)
@@ -330,7 +325,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
     degrees are high) and sorting (numpy) build the same volumes, bit for bit — also for
     non-manifold input: a triangle given twice, and an edge shared by three faces."""
     import blinn_phong._numba
-    import blinn_phong.shadows.volume as sv
+    import blinn_phong.shadows.volume_mesh as sv
 
     scene = scene_with(casters("pair") + casters("torus") + casters("box"), LIGHTS["point"], outside_camera())
     p, t, _ = uv_sphere(12, 6)
@@ -339,6 +334,7 @@ def test_topology_is_the_same_without_numba(monkeypatch, pairing):
     tris = np.concatenate(
         [world_triangles(scene), (p + 3.0)[t[:, ::-1]], fin, third, fin[:1]]  # + inside-out sphere
     )
+    monkeypatch.setattr(sv, "_NUMPY_BELOW", 0)  # compiled whatever the size
     if pairing == "hashed":
         monkeypatch.setattr(sv, "_GROUP_STEPS_PER_EDGE", 0)
     compiled = sv._analyse(tris)

@@ -1,4 +1,5 @@
-"""Shadow volumes counted over a frame's pixel tiles (:func:`blinn_phong.shadows.volume.pixel_binning`).
+"""Shadow volumes counted over a frame's pixel tiles
+(:func:`blinn_phong.shadows.volume_counting.pixel_binning`).
 
 A frame's receivers are its pixels' surface points, which the camera projects onto the pixel
 centres, so a grid of pixel blocks bins them without projecting or sorting. Checked here:
@@ -21,6 +22,8 @@ import pytest
 import blinn_phong as bp
 from blinn_phong.model.primitives import grid_plane, uv_sphere
 from blinn_phong.shadows import volume as sv
+from blinn_phong.shadows import volume_counting as vc
+from blinn_phong.shadows import volume_mesh as vm
 
 pytest.importorskip("numba")
 
@@ -68,7 +71,7 @@ def _receivers(scene: bp.Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_pixel_tiles_hold_their_pixels_points() -> None:
     scene = _scene()
     points, _, rank = _receivers(scene)
-    grid, order, cell_start = sv.pixel_binning(rank, W, H, tile=6)
+    grid, order, cell_start = vc.pixel_binning(rank, W, H, tile=6)
     xmin, ymin, cw, ch, nx, ny = grid
     assert (nx, ny) == (25, 17)
     np.testing.assert_array_equal(np.sort(order), np.arange(len(points)))  # a permutation
@@ -88,7 +91,7 @@ def test_pixel_tiles_hold_their_pixels_points() -> None:
     np.testing.assert_allclose(x[rank[covered]], 2 * (col + 0.5) / W - 1, atol=1e-9)
     np.testing.assert_allclose(y[rank[covered]], 1 - 2 * (row + 0.5) / H, atol=1e-9)
     with pytest.raises(ValueError, match="rank: expected 150×100"):
-        sv.pixel_binning(rank[:-1], W, H)
+        vc.pixel_binning(rank[:-1], W, H)
 
 
 @pytest.mark.parametrize("light_index", [0, 1, 2])
@@ -98,8 +101,8 @@ def test_counting_over_pixel_tiles_equals_counting_over_sorted_tiles(light_index
     points, normals, rank = _receivers(scene)
     tris = pipeline._world_triangles(scene)
     light = scene.lights[light_index]
-    binning = sv.pixel_binning(rank, W, H)
-    sv._BINNING.clear()  # no earlier binning to reuse: sorted from the projections
+    binning = vc.pixel_binning(rank, W, H)
+    vc._BINNING.clear()  # no earlier binning to reuse: sorted from the projections
     sorted_tiles = sv.shadow_volume_visibility(
         light, tris, points, normals, camera=scene.camera, stencil=stencil, engine="numba"
     )
@@ -120,35 +123,24 @@ def test_the_frame_passes_its_pixel_tiles_to_every_volume(monkeypatch: pytest.Mo
     assert len(seen) == 3 and all(b is not None and len(b) == 3 for b in seen)
 
 
-def test_serial_and_parallel_kernels_are_cached_apart_and_count_alike() -> None:
-    """numba's on-disk cache files a kernel under its qualified name and keys it by bytecode and
-    closure, not by compile options: unless named apart, the serial and the parallel build of a
-    kernel would share one cache entry (the first compiled would serve both, and a parallel
-    kernel could run on one thread). Each variant has its own index file, and both count alike
-    (set-up, tile depths and counting, serial against threaded)."""
-    kernels = [(sv._kernel(False), sv._kernel(True))]
-    kernels += list(zip(sv._fast_kernels(False), sv._fast_kernels(True), strict=True))
-    for serial, parallel in kernels:
-        if not parallel.targetoptions.get("parallel"):  # one build only (the tile sort)
-            continue
-        assert serial._cache._cache_file._index_path != parallel._cache._cache_file._index_path  # cache files
-        assert ".serial" in serial.py_func.__qualname__ and ".parallel" in parallel.py_func.__qualname__
+def test_one_thread_and_shares_on_threads_count_alike(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled kernels are serial loops over the items they are given (bands of tile rows,
+    rows, faces); a large job runs them in shares on threads, each share writing its own
+    outputs. Set-up, tile depths and counting give the same counts either way (the tile rows in
+    three bands, whatever the machine's threads)."""
+    monkeypatch.setattr(vc, "_threads", lambda: 3)
     scene = _scene()
     points, normals, _rank = _receivers(scene)
     tris = pipeline._world_triangles(scene, pipeline._world_vertices(scene))
     vp = scene.camera.projection @ scene.camera.view
     light = scene.lights[0]
-    light_vec, directional = sv._light(light)
-    rec = sv._projected(points, normals, light_vec, directional, 1e-4, True, vp, True)
-    volume = sv.shadow_volume_triangles(tris, light, caps=True)
+    light_vec, directional = vm._light(light)
+    rec = vc._projected(points, normals, light_vec, directional, 1e-4, True, vp, True)
+    volume = vm.shadow_volume_triangles(tris, light, caps=True)
     counts = {}
-    for parallel in (False, True):
-        saved = sv._PARALLEL_RECEIVERS, sv._PARALLEL_FACES
-        try:  # the receivers' and the volume's sizes pick the builds: force each in turn
-            sv._PARALLEL_RECEIVERS = 0 if parallel else len(points) + 1
-            sv._PARALLEL_FACES = 0 if parallel else len(volume) + 1
-            counts[parallel] = sv._count(volume, vp, rec, zfail=True)
-        finally:
-            sv._PARALLEL_RECEIVERS, sv._PARALLEL_FACES = saved
+    for threaded in (False, True):  # the receivers' and the volume's sizes decide: force each in turn
+        monkeypatch.setattr(vc, "_PARALLEL_RECEIVERS", 0 if threaded else len(points) + 1)
+        monkeypatch.setattr(vc, "_PARALLEL_FACES", 0 if threaded else len(volume) + 1)
+        counts[threaded] = vc._count(volume, vp, rec, zfail=True)
     assert np.any(counts[False] != 0) and np.any(counts[False] == 0)  # lit and shadowed receivers
     np.testing.assert_array_equal(counts[True], counts[False])

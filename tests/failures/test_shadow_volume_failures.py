@@ -21,14 +21,9 @@ import pytest
 from blinn_phong.model.lights import DirectionalLight, PointLight
 from blinn_phong.model.scene import Camera, Mesh
 from blinn_phong.model.transforms import look_at
-from blinn_phong.shadows.volume import (
-    analyse_topology,
-    shadow_volume_triangles,
-    shadow_volume_visibility,
-    silhouette_edges,
-    stencil_counts,
-    zpass_is_safe,
-)
+from blinn_phong.shadows.volume import shadow_volume_visibility, zpass_is_safe
+from blinn_phong.shadows.volume_counting import stencil_counts
+from blinn_phong.shadows.volume_mesh import analyse_topology, shadow_volume_triangles, silhouette_edges
 from tests.effects.volume_scenes import (
     HEIGHT,
     LIGHTS,
