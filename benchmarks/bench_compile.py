@@ -7,6 +7,8 @@ the first one left — warm: every kernel is loaded. Cases (320×180, the quick 
 sphere on a grey floor under a sun and a point light, unless stated):
 
 * ``plain``: no shadows, no transparency (the plain z-buffer frame), 4 samples;
+* ``plain_one_sample``: the same at 1 sample, the fused pass (the baseline of the one-sample
+  method cases: what a method's first use adds to the plain frame);
 * ``shadows_<method>``: each shadow method (``planar``, ``shadow_map``, ``ray_traced``,
   ``shadow_volume``, ``soft``) for both lights, 1 sample;
 * ``transparency_<method>``: each transparency method, with a transparent sphere, 1 sample;
@@ -91,6 +93,7 @@ def python_blocks(text: str) -> list[str]:
 
 def _python_cases() -> dict[str, str]:
     cases = {"plain": SCENE + 'bp.render(opaque, 320, 180, samples=4, shadows="none")\n'}
+    cases["plain_one_sample"] = SCENE + 'bp.render(opaque, 320, 180, shadows="none")\n'
     for method in SHADOW_METHODS:
         shadows = 'bp.ShadowOptions("soft", radius=0.3)' if method == "soft" else repr(method)
         cases[f"shadows_{method}"] = SCENE + f"bp.render(opaque, 320, 180, shadows={shadows})\n"
