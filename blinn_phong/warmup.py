@@ -46,6 +46,7 @@ CASES: tuple[tuple[str, str, dict[str, object]], ...] = (
     ("fog", "opaque", {"shadows": "none", "fog": "exp"}),
     ("shadow map and fog", "opaque", {"shadows": "shadow_map", "fog": "exp"}),
     ("textures", "textured", {"shadows": "none"}),
+    ("cryptomatte", "opaque", {"shadows": "none", "cryptomatte": "object"}),
 )
 
 #: The size of the warm-up frames (pixels): small, as the kernels do not depend on it.
@@ -155,6 +156,8 @@ def warm(
         kwargs = dict(options)
         if kwargs.get("fog") == "exp":
             kwargs["fog"] = bp.Fog(mode="exp", density=0.1)
+        if kwargs.get("cryptomatte") == "object":
+            kwargs["cryptomatte"] = bp.Cryptomatte({"object": ["Sphere", "Floor"]})
         started = time.perf_counter()
         bp.render(scenes[scene], *SIZE, engine="numba", **kwargs)  # type: ignore[arg-type]
         seconds[name] = time.perf_counter() - started

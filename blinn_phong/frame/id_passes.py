@@ -23,6 +23,7 @@ object split into one mesh per material) add up in the same entry.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -141,20 +142,45 @@ def passes_from_winners(
         width: image width.
     """
     # One surface per pixel, coverage 1: each layer's first pass holds (ID, 1) where covered and
-    # zeros elsewhere, written whole (what coverage_passes gives for these entries, without
-    # ranking or scattering); the other passes are zeros.
-    covered = winner >= 0
-    mesh = triangle_mesh[source][np.where(covered, winner, 0)]  # (one gather over the pixels)
+    # zeros elsewhere (what coverage_passes gives for these entries, without ranking or
+    # scattering); the other passes are zeros. Every pass lies in one allocation: at this size a
+    # fresh mapping whose pages stay zero until written (a frame-sized array would often reuse
+    # freed memory, cleared byte by byte).
+    layers = {layer: pass_names(layer, request.levels) for layer in request.names}
+    block = np.zeros((sum(map(len, layers.values())), height, width, 4), np.float32)
+    first = np.cumsum([0] + [len(names) for names in layers.values()])[:-1].astype(np.int64)
+    tables = np.array([request.ids(layer) for layer in layers], np.float32).reshape(len(layers), -1)
+    sub_mesh = np.ascontiguousarray(triangle_mesh[source], dtype=np.int64)
+    winner = np.ascontiguousarray(winner, dtype=np.int64)
+    from compositing._threads import in_shares
+
+    in_shares(_winner_ids_kernel(), height, width, winner, sub_mesh, tables, first, block)
     out: dict[str, np.ndarray] = {}
-    for layer in request.names:
-        names = pass_names(layer, request.levels)
-        first = np.zeros((height, width, 4), np.float32)
-        flat = first.reshape(-1, 4)
-        flat[:, 0] = np.where(covered, request.ids(layer)[mesh], np.float32(0.0))
-        flat[:, 1] = covered
-        out[names[0]] = first
-        out.update((name, np.zeros((height, width, 4), np.float32)) for name in names[1:])
+    for start, names in zip(first, layers.values(), strict=True):
+        out.update(zip(names, block[start : start + len(names)], strict=True))
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def _winner_ids_kernel() -> object:  # a numba dispatcher
+    """``kernel(rows, width, winner, sub_mesh, tables, first, block)``: for the pixels of ``rows``
+    covered by a winner, each layer's ID of the winner's mesh and coverage 1 into the layer's
+    first pass (``block[first[layer]]``); a serial loop on shares of rows (nogil)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def winner_ids(rows, width, winner, sub_mesh, tables, first, block):  # pragma: no cover - compiled
+        for row in rows:
+            for col in range(width):
+                o = winner[row * width + col]
+                if o < 0:
+                    continue
+                mesh = sub_mesh[o]
+                for layer in range(tables.shape[0]):
+                    block[first[layer], row, col, 0] = tables[layer, mesh]
+                    block[first[layer], row, col, 1] = 1.0
+
+    return winner_ids
 
 
 def passes_from_fragments(
