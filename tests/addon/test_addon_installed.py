@@ -111,14 +111,16 @@ if install == "1":
     # width of a convex hull (scipy.spatial.ConvexHull): a 0.03-wide slat above a floor, sun above.
     primitives = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.primitives")
     model = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.scene")
+    lights = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.lights")
+    transforms = importlib.import_module({PACKAGE!r} + ".blinn_phong.model.transforms")
     planner = importlib.import_module({PACKAGE!r} + ".blinn_phong.planning.planner")
     move = np.eye(4)
     move[2, 3] = 0.6
     slat = model.Mesh(*primitives.box((0.015, 1.3, 0.01)), transform=move)
     floor = model.Mesh(*primitives.grid_plane(1, 1, (4.0, 4.0)))
     camera = model.Camera.perspective(
-        40.0, 1.0, 0.5, 40.0, view=model.look_at((0, -6, 5), (0, 0, 0.5), (0, 0, 1)))
-    sun = model.DirectionalLight((0.0, 0.0, -1.0))
+        40.0, 1.0, 0.5, 40.0, view=transforms.look_at((0, -6, 5), (0, 0, 0.5), (0, 0, 1)))
+    sun = lights.DirectionalLight((0.0, 0.0, -1.0))
     geometry = planner.shadow_map_geometry(model.Scene((floor, slat), (sun,), camera), 0)
     found["feature"] = geometry.feature
     found["convex_hull_from"] = sys.modules["scipy.spatial"].__file__
