@@ -25,6 +25,16 @@ from blinn_phong.planning import calibration
 from blinn_phong.planning.bounds import _FogRange, _lowest_opacity, _shadow_weight
 from blinn_phong.planning.choice import Choice, _Frame
 from blinn_phong.shadows.method import embree_available
+from blinn_phong.shadows.methods import METHODS, NONE
+
+# The methods this planner decides between, by their registered facts (blinn_phong.shadows.methods):
+# the one that carries transparent casters' colour, the exact one that casts rays with Embree and
+# the one standing in for it without Embree, the shadow map and the planar projection.
+_COLOURED = next(m for m in METHODS.values() if m.coloured)
+_TRACED = METHODS["ray_traced"]
+_VOLUME = METHODS[str(_TRACED.without_embree)]
+_MAP = METHODS["shadow_map"]
+_PLANAR = METHODS["planar"]
 
 _EPS = 1e-9
 
@@ -149,23 +159,23 @@ def _plan_shadow(
 ) -> Choice:
     light = scene.lights[index]
     if isinstance(light, AmbientLight):
-        return Choice("none", "an ambient light has no direction and casts no shadow")
+        return Choice(NONE.name, "an ambient light has no direction and casts no shadow")
     pairs = _shadow_pairs(scene, facts, light)
     if not pairs:
         return Choice(
-            "none",
+            NONE.name,
             "no occluder between the light and anything: every shadow volume misses the other meshes "
             "and no mesh can shade itself (each is planar, or convex and never lit from inside)",
         )
     pairs, why_not = _linked_pairs(scene, index, pairs)
     if not pairs:
-        return Choice("none", why_not)
+        return Choice(NONE.name, why_not)
     receivers = {b for _, b in pairs}
     casters = {a for a, _ in pairs}
     see_through = _see_through_casters(scene, casters)
     if see_through and embree_available():
         return Choice(
-            "ray_traced",
+            _COLOURED.name,
             f"meshes {', '.join(map(str, see_through))} cast shadows and let light through: ray-traced "
             "shadows are the exact method (planar, shadow-map and shadow-volume shadows are binary)",
             predicted_steps=0.0,
@@ -186,14 +196,14 @@ def _plan_shadow(
                     ok = False
             if ok and not embree_available():
                 return Choice(
-                    "shadow_volume",
+                    _VOLUME.name,
                     f"{NO_EMBREE}, instead of planar projected shadows (which test points against the "
                     f"casters with it); only the plane of mesh {min(receivers)} receives shadows",
                     predicted_steps=0.0,
                 )
             if ok:
                 return Choice(
-                    "planar",
+                    _PLANAR.name,
                     f"only the plane of mesh {min(receivers)} receives shadows and every caster lies between "
                     "it and the light: projected (fake) shadows are exact",
                     {"plane": tuple(float(v) for v in oriented)},
@@ -247,20 +257,20 @@ def _plan_shadow(
         traced_share=share,
     )
     exact_cost = 1.0 if exact.relative_cost is None else exact.relative_cost
-    if pick["method"] == "shadow_map" and pick["predicted_cost"] < exact_cost:
+    if pick["method"] == _MAP.name and pick["predicted_cost"] < exact_cost:
         res, cost = pick["resolution"], pick["predicted_cost"]
         return Choice(
-            "shadow_map",
+            _MAP.name,
             f"{what}; a {res}² shadow map: every pixel within the light's contribution {worst:.3g} steps "
             f"≤ tolerance {tolerance:g}; texel {span / res:.3g} ≤ half the thinnest caster seen from the "
             f"light ({feature:.3g}); predicted mean {pick['predicted_mean']:.2g} steps, cost {cost:.2f}× "
             f"ray tracing for {frame.receivers} receiver samples"
-            + (f" (shadow volumes: {exact_cost:.2f}×)" if exact.method == "shadow_volume" else ""),
+            + (f" (shadow volumes: {exact_cost:.2f}×)" if exact.method == _VOLUME.name else ""),
             {"resolution": res},
             predicted_steps=worst,
             relative_cost=cost,
         )
-    if pick["method"] == "shadow_map":
+    if pick["method"] == _MAP.name:
         return replace(
             exact,
             reason=f"{exact.reason}; the cheapest shadow map resolving every caster ({pick['resolution']}²) "
@@ -300,7 +310,7 @@ def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
         "; coloured shadows: …"
         (``ray_traced``) or "; transparent meshes … cast full shadows" (the binary methods) appended.
     """
-    if choice.method == "none":
+    if choice.method == NONE.name:
         return choice
     from blinn_phong.shadows.transmittance import mesh_shadow_transmittance
 
@@ -313,7 +323,7 @@ def coloured_shadow_reason(scene: Scene, choice: Choice) -> Choice:
     if not lets_through:
         return choice
     which = ", ".join(str(i) for i in lets_through)
-    if choice.method == "ray_traced":
+    if choice.method == _COLOURED.name:
         return replace(choice, reason=f"{choice.reason}; coloured shadows: light crossing transparent "
                        f"meshes {which} keeps their transmittance per RGB channel")  # fmt: skip
     return replace(choice, reason=f"{choice.reason}; transparent meshes {which} cast full shadows "
@@ -385,19 +395,19 @@ def _exact_shadow(
     if not embree_available():
         predicted = f" (predicted {costs['shadow_volume'] * 1e3:.3g} ms {where})" if costs is not None else ""
         return Choice(
-            "shadow_volume",
+            _VOLUME.name,
             f"{what}: {NO_EMBREE}, instead of ray tracing{predicted}",
             predicted_steps=0.0,
             relative_cost=None if costs is None else costs["ratio"],
         )
     if costs is None:
         return Choice(
-            "ray_traced", f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
+            _TRACED.name, f"{what}: ray-traced shadows are exact", predicted_steps=0.0, relative_cost=1.0
         )
-    volume, traced, ratio = costs["shadow_volume"] * 1e3, costs["ray_traced"] * 1e3, costs["ratio"]
+    volume, traced, ratio = costs[_VOLUME.cost_model] * 1e3, costs[_TRACED.cost_model] * 1e3, costs["ratio"]
     if ratio < 1.0 and worst > tolerance:
         return Choice(
-            "ray_traced",
+            _TRACED.name,
             f"{what}: ray-traced shadows are exact; shadow volumes, predicted faster ({volume:.3g} ms "
             f"against {traced:.3g} ms, {ratio:.2f}×, {where}), may classify a grazing sample differently, "
             f"where a pixel changes by the light's whole contribution, up to {worst:.3g} steps > tolerance "
@@ -407,7 +417,7 @@ def _exact_shadow(
         )
     if ratio < 1.0:
         return Choice(
-            "shadow_volume",
+            _VOLUME.name,
             f"{what}: shadow volumes are exact and predicted faster than Embree ray tracing, "
             f"{volume:.3g} ms against {traced:.3g} ms ({ratio:.2f}×) {where}; a sample they classify "
             f"differently changes a pixel by at most {worst:.3g} steps ≤ tolerance {tolerance:g}",
@@ -415,7 +425,7 @@ def _exact_shadow(
             relative_cost=ratio,
         )
     return Choice(
-        "ray_traced",
+        _TRACED.name,
         f"{what}: ray-traced shadows are exact and predicted faster than shadow volumes, "
         f"{traced:.3g} ms against {volume:.3g} ms ({ratio:.2f}× ray tracing) {where}",
         predicted_steps=0.0,
