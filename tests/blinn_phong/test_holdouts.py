@@ -119,3 +119,40 @@ def test_holdout_with_a_transparent_material_is_opaque() -> None:
 def test_holdout_flag_is_checked() -> None:
     with pytest.raises(TypeError, match=r"Mesh\.holdout"):
         rectangle(0, 1, 0, 1, -1.0, _emitter(E), holdout="yes")
+
+
+def test_world_goes_behind_a_transparent_pane_but_not_behind_the_holdout() -> None:
+    """A half-transparent pane over part of a holdout: with the world composited behind (Film →
+    Transparent off, :mod:`blinn_phong.frame.background`), each pixel is
+    ``pane + (1 − α_pane)·(0 where held out, else the world)`` (``over``; Cycles: a path through
+    the pane that meets a holdout adds its throughput to the holdout, not the world's colour), with
+    the pane's colour from a render of the pane alone and the held-out share in closed form."""
+    from blinn_phong.frame.background import holdout_coverage, holdout_request, world_behind
+
+    camera = bp.Camera.orthographic(0, W, 0, H, 0.1, 10.0)
+    hold = rectangle(*HOLD, -2.0, _emitter((1.0, 1.0, 1.0)), holdout=True)
+    pane = rectangle(4.0, W + 1, -1, H + 1, -1.0, _emitter((0.9, 0.3, 0.1), 0.5))
+    world = np.array([0.05, 0.1, 0.2, 1.0], np.float32)
+    alone = bp.render(
+        bp.Scene([pane], [], camera, ambient=(0, 0, 0)), W, H, transparency="a_buffer", shadows="none"
+    ).rgba.astype(np.float64)
+    held = _inside_fraction(HOLD, 1)[..., None]
+    expected = alone + (1.0 - alone[..., 3:]) * (1.0 - held) * world
+    assert 0 < alone[0, -1, 3] < 1 and held.any() and (held[..., 0] * alone[..., 3] > 0).any()
+    # no Cryptomatte asked for; the object layer (a free layer measures); every layer (the object
+    # layer's IDs of the holdout measure)
+    every = bp.Cryptomatte({k: ["Hold", "Pane"] for k in ("object", "material", "asset")}, 6)
+    for asked in (None, bp.Cryptomatte({"object": ["Hold", "Pane"]}, 6), every):
+        scene = bp.Scene([hold, pane], [], camera, ambient=(0, 0, 0))
+        request = holdout_request(scene.meshes, asked)
+        result = bp.render(scene, W, H, transparency="a_buffer", shadows="none", cryptomatte=request.request)
+        held_coverage = holdout_coverage(result.passes, request)
+        got = world_behind(result.rgba, world, held_coverage)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
+        crypto = [p for p in result.passes if p.startswith("Crypto")]
+        if asked is None:
+            assert crypto == []  # the measurement's own passes are removed
+        elif asked is every:
+            assert len(crypto) == 9  # all kept
+        else:
+            assert sorted(crypto) == ["CryptoObject00", "CryptoObject01", "CryptoObject02"]
