@@ -5,7 +5,9 @@ premultiplied RGBA in the last axis, shape ``(..., 4)``, row 0 at the top.
 Image files: :mod:`compositing.io`. Input checks: :mod:`compositing.validate`.
 """
 
-from . import _kernel_cache  # noqa: F401  (registers this package's kernels with the per-user cache)
+# _kernel_cache registers this package's kernels with the per-user cache; _threads makes OpenMP's
+# threads sleep between numba's parallel loops (its docstring says why)
+from . import _kernel_cache, _threads  # noqa: F401
 from .alpha import premultiply, unpremultiply
 from .factors import ALL_OPERATORS, EXTRA_OPERATORS, FACTORS, OPERATORS, PORTER_DUFF
 from .operators import composite, resolve_operator

@@ -31,7 +31,13 @@ from blinn_phong.geometry.normals import vertex_normals
 from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
 from blinn_phong.model.scene import Mesh, Scene
 
-__all__ = ["coordinate_tolerance", "point_triangle_distances"]
+__all__ = [
+    "TriangleBalls",
+    "coordinate_tolerance",
+    "nearest_triangle_distance",
+    "point_triangle_distances",
+    "triangle_balls",
+]
 
 _EPS = 1e-9
 
@@ -68,6 +74,28 @@ class _MeshFacts:
         """(T, 3, 3) world triangles (computed on demand)."""
         hom = np.c_[self.mesh.positions, np.ones(len(self.mesh.positions))]
         return (hom @ self.mesh.transform.T)[:, :3][self.mesh.triangles]
+
+    @functools.cached_property
+    def balls(self) -> TriangleBalls:
+        """The world triangles with their bounding balls (computed once per facts)."""
+        return triangle_balls(self.tris)
+
+
+@dataclass(frozen=True)
+class TriangleBalls:
+    """Triangles with the ball around each one's centroid through its farthest corner."""
+
+    tris: np.ndarray  # (T, 3, 3) corners
+    centre: np.ndarray  # (T, 3) centroids
+    radius: np.ndarray  # (T,) distance from the centroid to the farthest corner
+
+
+def triangle_balls(triangles: np.ndarray) -> TriangleBalls:
+    """:class:`TriangleBalls` of (T, 3, 3) ``triangles`` (float64)."""
+    tri = np.asarray(triangles, dtype=np.float64)
+    centre = tri.mean(axis=1)
+    rel = tri - centre[:, None]
+    return TriangleBalls(tri, centre, np.sqrt(np.einsum("tkc,tkc->tk", rel, rel).max(axis=1)))
 
 
 def coordinate_tolerance(positions: np.ndarray) -> float:
@@ -671,3 +699,32 @@ def point_triangle_distances(triangles: np.ndarray, point: np.ndarray) -> np.nda
     plane_distance = np.where(inside, np.abs(height), np.inf)
     best[good] = np.minimum(best[good], plane_distance)
     return best
+
+
+def nearest_triangle_distance(triangles: np.ndarray | TriangleBalls, point: np.ndarray) -> float:
+    """The smallest of :func:`point_triangle_distances`, exactly, without computing most of them.
+
+    Args:
+        triangles: (T, 3, 3) corners (any one space, e.g. world or eye space), or their
+            :class:`TriangleBalls` (e.g. a mesh's cached :attr:`_MeshFacts.balls`).
+        point: (3,) a point of the same space.
+
+    Returns ``inf`` for no triangles. Every point of a triangle lies in the ball around its
+    centroid ``m`` through its farthest corner (radius ``ρ``), so its distance is at least
+    ``|p − m| − ρ``; the nearest corner of all is a point of the triangles, so the answer is at
+    most that corner's distance ``u``. Only triangles with ``|p − m| − ρ ≤ u`` (with a margin of
+    10⁻⁹ of the scene's scale for rounding) can hold the nearest point, and only their exact
+    distances are computed: the same minimum, for a few dozen of a closed mesh's thousands.
+    """
+    balls = triangles if isinstance(triangles, TriangleBalls) else triangle_balls(triangles)
+    p = np.asarray(point, dtype=np.float64)
+    if len(balls.tris) == 0:
+        return math.inf
+    to_centre = balls.centre - p
+    lower = np.sqrt(np.einsum("tc,tc->t", to_centre, to_centre)) - balls.radius
+    nearest = int(np.argmin(lower))  # a triangle whose corners are among the nearest
+    corners = balls.tris[lower <= lower[nearest] + 2.0 * balls.radius[nearest]] - p
+    upper = float(np.sqrt(np.einsum("tkc,tkc->tk", corners, corners).min()))
+    margin = 1e-9 * max(upper + float(balls.radius.max()), 1e-300)
+    keep = lower <= upper + margin
+    return float(point_triangle_distances(balls.tris[keep], p).min())

@@ -159,12 +159,15 @@ def _kernel() -> object:  # a numba dispatcher
         n_bands, fine_w, fine_h, selected, x0, x1, y0, y1, a, b, c, top_left, xe, ye, area, z, source
     ):  # pragma: no cover - compiled
         n_keys = fine_w * fine_h
-        zbuf = np.full(n_keys, np.inf)
-        winner = np.full(n_keys, -1, np.int64)
+        zbuf = np.empty(n_keys)  # each band clears its own rows: the pages are touched in parallel
+        winner = np.empty(n_keys, np.int64)
         band_h = (fine_h + n_bands - 1) // n_bands
         for band in numba.prange(n_bands):
             r0 = band * band_h
             r1 = min(fine_h, r0 + band_h) - 1
+            for key in range(r0 * fine_w, (r1 + 1) * fine_w):
+                zbuf[key] = np.inf
+                winner[key] = -1
             for s in range(selected.shape[0]):
                 t = selected[s]
                 lo = max(y0[t], r0)

@@ -11,9 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from blinn_phong.geometry.mesh_facts import (
-    _MeshFacts,
-)
+from blinn_phong.geometry.mesh_facts import _MeshFacts, nearest_triangle_distance
 from blinn_phong.model.lights import AmbientLight, DirectionalLight, PointLight, SpotLight
 from blinn_phong.model.scene import Material, Mesh, Scene
 
@@ -21,32 +19,6 @@ _EPS = 1e-9
 
 
 _EXACT_DISTANCE_TRIANGLES = 20_000
-
-
-def _triangle_distances(point: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Euclidean distance from ``point`` (3,) to each triangle of ``tris`` (T, 3, 3), exactly.
-
-    The nearest point of a triangle is the foot of the perpendicular on its plane when that
-    foot lies inside (same side of all three edges), otherwise the nearest point of one of its
-    edges (clamped projection on each segment; Ericson, *Real-Time Collision Detection*, 2005,
-    §5.1.5). Degenerate triangles (zero area) use their edges only.
-    """
-    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
-    n = np.cross(b - a, c - a)
-    nn = np.einsum("ij,ij->i", n, n)
-    ap = point - a
-    inside = nn > 0
-    for p0, p1 in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(p1 - p0, point - p0), n) >= 0
-    plane = np.abs(np.einsum("ij,ij->i", ap, n)) / np.sqrt(np.where(nn > 0, nn, 1.0))
-    best = np.full(len(tris), np.inf)
-    for p0, p1 in ((a, b), (b, c), (c, a)):
-        e = p1 - p0
-        ee = np.einsum("ij,ij->i", e, e)
-        t = np.clip(np.einsum("ij,ij->i", point - p0, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
-        q = p0 + t[:, None] * e - point
-        best = np.minimum(best, np.sqrt(np.einsum("ij,ij->i", q, q)))
-    return np.where(inside, plane, best)
 
 
 def _eye_triangles(f: _MeshFacts, view: np.ndarray) -> np.ndarray:
@@ -64,14 +36,18 @@ def _rigid(view: np.ndarray) -> bool:
 def _nearest_distance(point: np.ndarray, f: _MeshFacts, view: np.ndarray) -> float:
     """A lower bound of the eye-space distance from ``point`` (eye space) to any point of a mesh.
 
-    Exact (:func:`_triangle_distances`) up to :data:`_EXACT_DISTANCE_TRIANGLES` triangles;
-    beyond, the larger of the distances to the eye-space vertices' bounding box and bounding
-    sphere (each contains the mesh, so each is a lower bound). ``inf`` for an empty mesh.
+    Exact (:func:`~blinn_phong.geometry.mesh_facts.nearest_triangle_distance`) up to
+    :data:`_EXACT_DISTANCE_TRIANGLES` triangles (under a rigid view in world space, with the
+    facts' cached triangles: the same distance up to rounding); beyond, the larger of the distances to the
+    eye-space vertices' bounding box and bounding sphere (each contains the mesh, so each is a
+    lower bound). ``inf`` for an empty mesh.
     """
     if f.n_tris == 0 or len(f.world) == 0:
         return math.inf
     if f.n_tris <= _EXACT_DISTANCE_TRIANGLES:
-        return float(_triangle_distances(point, _eye_triangles(f, view)).min())
+        if _rigid(view):  # eye-space distances are world-space ones: the facts' cached triangles
+            return nearest_triangle_distance(f.balls, view[:3, :3].T @ (point - view[:3, 3]))
+        return nearest_triangle_distance(_eye_triangles(f, view), point)
     if _rigid(view):  # distances are those of world space: the world box and ball of the facts
         world = view[:3, :3].T @ (point - view[:3, 3])
         box = float(np.linalg.norm(np.maximum(np.maximum(f.lo - world, world - f.hi), 0.0)))

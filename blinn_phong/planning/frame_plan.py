@@ -14,7 +14,7 @@ import numpy as np
 
 from blinn_phong._checks import choice_error, number
 from blinn_phong.effects.oit import TRANSPARENCY_METHODS
-from blinn_phong.geometry.mesh_facts import point_triangle_distances
+from blinn_phong.geometry.mesh_facts import nearest_triangle_distance
 from blinn_phong.model.fog import Fog
 from blinn_phong.model.lights import AmbientLight
 from blinn_phong.model.scene import SHADINGS, Scene
@@ -207,7 +207,7 @@ def _light_on_caster(scene: Scene, light: object) -> float | None:
         tris = world[mesh.triangles]
         near = ((tris.min(axis=1) - tol <= point) & (point <= tris.max(axis=1) + tol)).all(axis=1)
         if near.any():
-            distance = float(point_triangle_distances(tris[near], point).min())
+            distance = nearest_triangle_distance(tris[near], point)
             if distance <= tol:
                 nearest = min(nearest, distance)
     return None if nearest == np.inf else nearest

@@ -55,3 +55,22 @@ def test_one_thread_runs_once_on_the_caller(monkeypatch: pytest.MonkeyPatch) -> 
 def test_items_must_be_one_dimensional() -> None:
     with pytest.raises(ValueError, match=r"items: expected a 1-D array, got shape \(2, 2\)"):
         _threads.run_shares(len, np.zeros((2, 2)))
+
+
+def _policy_after_import(environment: dict[str, str]) -> str:
+    """OMP_WAIT_POLICY in a fresh interpreter after ``import blinn_phong``, with ``environment``."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"} | environment
+    script = "import os, blinn_phong; print(os.environ.get('OMP_WAIT_POLICY'))"
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    return done.stdout.strip()
+
+
+def test_importing_makes_openmp_threads_sleep_unless_the_process_chose():
+    # the package's pool threads and numba's OpenMP threads share the cores: spinning OpenMP
+    # threads would hold them (compositing._threads' docstring); a chosen policy is kept
+    assert _policy_after_import({}) == "PASSIVE"
+    assert _policy_after_import({"OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"

@@ -15,15 +15,15 @@ import pytest
 
 from blinn_phong.frame.lighting import _light_direction, lights_in_eye_space
 from blinn_phong.frame.render import render
-from blinn_phong.geometry.mesh_facts import _mesh_facts
+from blinn_phong.geometry.mesh_facts import _mesh_facts, nearest_triangle_distance, point_triangle_distances
 from blinn_phong.model.lights import DirectionalLight, PointLight, SpotLight
+from blinn_phong.model.primitives import uv_sphere
 from blinn_phong.model.scene import Material, Mesh
 from blinn_phong.planning.bounds import (
     _fog_range,
     _light_factor_bound,
     _light_factors,
     _shadow_weight,
-    _triangle_distances,
 )
 from blinn_phong.planning.frame_plan import Fog
 from blinn_phong.planning.planner import plan
@@ -70,10 +70,11 @@ def _old_bound(light, facts) -> float:
 
 def test_triangle_distance_matches_closed_forms_and_dense_sampling():
     tri = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
-    assert _triangle_distances(np.array([0.2, 0.2, 3.0]), tri)[0] == pytest.approx(3.0)  # above the face
-    assert _triangle_distances(np.array([-1.0, -1.0, 0.0]), tri)[0] == pytest.approx(math.sqrt(2))  # vertex
-    assert _triangle_distances(np.array([0.5, -2.0, 1.0]), tri)[0] == pytest.approx(math.sqrt(5))  # edge
-    assert _triangle_distances(np.array([1.0, 1.0, 0.0]), tri)[0] == pytest.approx(
+    assert point_triangle_distances(tri, np.array([0.2, 0.2, 3.0]))[0] == pytest.approx(3.0)  # above the face
+    vertex = point_triangle_distances(tri, np.array([-1.0, -1.0, 0.0]))[0]
+    assert vertex == pytest.approx(math.sqrt(2))
+    assert point_triangle_distances(tri, np.array([0.5, -2.0, 1.0]))[0] == pytest.approx(math.sqrt(5))  # edge
+    assert point_triangle_distances(tri, np.array([1.0, 1.0, 0.0]))[0] == pytest.approx(
         math.sqrt(0.5)
     )  # hypotenuse
     rng = np.random.default_rng(3)
@@ -86,10 +87,23 @@ def test_triangle_distance_matches_closed_forms_and_dense_sampling():
     grid = grid + v[None, :, None] * (tris[:, None, 2] - tris[:, None, 0])
     longest = np.max(np.linalg.norm(tris - np.roll(tris, 1, axis=1), axis=2), axis=1)
     for p in rng.normal(size=(8, 3)) * 2:
-        exact = _triangle_distances(p, tris)
+        exact = point_triangle_distances(tris, p)
         sampled = np.linalg.norm(grid - p, axis=2).min(axis=1)
         assert np.all(exact <= sampled + 1e-12)  # a distance to a point of the triangle
         assert np.all(sampled <= exact + longest / n)  # the nearest grid point is within one cell
+
+
+def test_nearest_triangle_distance_is_the_smallest_exact_distance():
+    # the bounding-ball pruning keeps the minimum to the bit: same triangles, same arithmetic
+    rng = np.random.default_rng(11)
+    positions, triangles, _ = uv_sphere(48, 24)
+    sphere = positions[triangles]
+    sizes = rng.uniform(0.01, 2.0, size=(500, 1, 1))
+    soup = rng.normal(size=(500, 3, 3)) * sizes + rng.normal(size=(500, 1, 3)) * 4
+    for tris in (sphere, soup, sphere[:1], np.concatenate([sphere, sphere + 3.0])):
+        for p in [*rng.normal(size=(20, 3)) * 3, tris[0, 0], tris.mean(axis=(0, 1))]:
+            assert nearest_triangle_distance(tris, p) == point_triangle_distances(tris, p).min()
+    assert nearest_triangle_distance(np.zeros((0, 3, 3)), np.zeros(3)) == math.inf
 
 
 # --------------------------------------------------------------------------- att·spot
