@@ -11,7 +11,8 @@ threads spin for a while after each parallel loop (libgomp's default wait policy
 cores the next stage's threads need: on a 2-core machine the second thread of a 640×360 frame's
 shading started 1.5–3 ms late, and the stage took 6.7 ms instead of 4.6 ms. Importing the
 package therefore sets ``OMP_WAIT_POLICY=PASSIVE`` (:func:`prefer_passive_openmp`) unless the
-process already chose a policy; libgomp reads it when numba first starts its threads.
+process already chose a policy; libgomp reads it when numba first starts its threads (too late
+if they were started before the import).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import atexit
 import itertools
 import os
+import sys
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -35,13 +37,20 @@ SHARES_PER_THREAD = 4
 OPENMP_WAIT_POLICY = "PASSIVE"
 
 
-def prefer_passive_openmp() -> str:
+def prefer_passive_openmp() -> str | None:
     """Make OpenMP's threads sleep, not spin, between numba's parallel loops, unless the process
-    chose a policy (``OMP_WAIT_POLICY`` already set): returns the policy in force.
+    chose a policy (``OMP_WAIT_POLICY`` already set).
 
-    Takes effect when libgomp is loaded (numba's first parallel loop in the process), so it runs
-    when the package is imported; a caller that set ``OMP_WAIT_POLICY`` keeps its value.
+    Returns the policy numba's OpenMP threads will follow, or None when they were already
+    started in this process (libgomp reads the variable once, when numba starts its threads:
+    then nothing changes). The variable is set in the process environment, so child processes
+    inherit it, and so does any other OpenMP library loaded later in the process; a caller that
+    set ``OMP_WAIT_POLICY`` before the import keeps its value. Under numba's TBB or workqueue
+    threading layers it has no effect.
     """
+    parallel = sys.modules.get("numba.np.ufunc.parallel")
+    if parallel is not None and getattr(parallel, "_is_initialized", False):
+        return None
     return os.environ.setdefault("OMP_WAIT_POLICY", OPENMP_WAIT_POLICY)
 
 

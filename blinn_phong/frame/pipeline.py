@@ -329,19 +329,21 @@ FrameResult = tuple[FrameImage, int]
 def _empty_frame(height: int, width: int, shadow: bool) -> FrameImage:
     """Uninitialised float32 frame buffers (for a pass that writes every element).
 
-    The buffers are C-contiguous views of one allocation: several fresh buffers of a few MB each
-    are each mapped anew and faulted in page by page while the shading threads write them (about
-    1,800 page faults and 2 ms of a 640×360 frame), where one block is mapped once, with huge
-    pages, or reused by the allocator from the previous frame."""
+    ``rgba`` is an allocation of its own (a caller may keep it alone); depth, normal and the
+    light passes are C-contiguous views of one more. Fresh buffers of a few MB each are mapped
+    anew and faulted in page by page while the shading threads write them (with seven of them,
+    about 1,800 page faults and 2 ms of a 640×360 frame); two are reused by the allocator from
+    the previous frame or mapped with huge pages."""
     names = ("ambient", "diffuse", "specular") + (("shadow",) if shadow else ())
-    shapes = [(4,), (), (3,)] + [(1,) if n == "shadow" else (3,) for n in names]
+    shapes = [(), (3,)] + [(1,) if n == "shadow" else (3,) for n in names]
     sizes = [height * width * (shape[0] if shape else 1) for shape in shapes]
     block = np.empty(sum(sizes), np.float32)
     ends = np.cumsum(sizes)
-    rgba, depth, normal, *passes = (
+    depth, normal, *passes = (
         block[end - size : end].reshape((height, width, *shape))
         for shape, size, end in zip(shapes, sizes, ends, strict=True)
     )
+    rgba = np.empty((height, width, 4), np.float32)
     return FrameImage(rgba, depth, normal, dict(zip(names, passes, strict=True)))
 
 

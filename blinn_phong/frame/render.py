@@ -113,6 +113,10 @@ class RenderResult:
             Holdout meshes are in it as samples ``(0, 0, 0, coverage)``.
         deep_holdout: with ``deep=True`` and a holdout mesh in the scene, those holdout samples
             alone (a :class:`compositing.deep.DeepImage`), else None.
+
+    ``depth``, ``normal`` and ``passes`` of a compiled one-pass frame may be views of one
+    allocation (``rgba`` is always an array of its own): keeping one of them keeps them all; a
+    ``.copy()`` keeps one alone.
     """
 
     rgba: np.ndarray

@@ -77,13 +77,15 @@ class _MeshFacts:
 
     @functools.cached_property
     def balls(self) -> TriangleBalls:
-        """The world triangles with their bounding balls (computed once per facts)."""
+        """The world triangles with their bounding balls (computed once per facts: 104 bytes a
+        triangle, held as long as the facts are cached)."""
         return triangle_balls(self.tris)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TriangleBalls:
-    """Triangles with the ball around each one's centroid through its farthest corner."""
+    """Triangles with the ball around each one's centroid through its farthest corner (read
+    only: ``centre`` and ``radius`` are not recomputed if ``tris`` changes)."""
 
     tris: np.ndarray  # (T, 3, 3) corners
     centre: np.ndarray  # (T, 3) centroids
@@ -91,7 +93,8 @@ class TriangleBalls:
 
 
 def triangle_balls(triangles: np.ndarray) -> TriangleBalls:
-    """:class:`TriangleBalls` of (T, 3, 3) ``triangles`` (float64)."""
+    """:class:`TriangleBalls` of (T, 3, 3) ``triangles`` (as float64; a float64 array is kept,
+    not copied)."""
     tri = np.asarray(triangles, dtype=np.float64)
     centre = tri.mean(axis=1)
     rel = tri - centre[:, None]
@@ -455,7 +458,12 @@ def _mesh_facts(mesh: Mesh) -> _MeshFacts:
     key = (id(mesh.positions), id(mesh.triangles), id(mesh.normals), mesh.transform.tobytes())
     hit = _WORLD_FACTS.get(key)
     if hit is not None and _OBJECT_FACTS.get(key[:3], (None, None))[1] is obj:
-        return hit if hit.mesh is mesh else replace(hit, mesh=mesh)
+        if hit.mesh is mesh:
+            return hit
+        moved = replace(hit, mesh=mesh)
+        if "balls" in hit.__dict__:  # the same world triangles: their cached balls too
+            moved.__dict__["balls"] = hit.__dict__["balls"]
+        return moved
     linear = mesh.transform[:3, :3]
     k = _compiled(len(mesh.triangles))
     if k is None:
@@ -712,9 +720,12 @@ def nearest_triangle_distance(triangles: np.ndarray | TriangleBalls, point: np.n
     Returns ``inf`` for no triangles. Every point of a triangle lies in the ball around its
     centroid ``m`` through its farthest corner (radius ``ρ``), so its distance is at least
     ``|p − m| − ρ``; the nearest corner of all is a point of the triangles, so the answer is at
-    most that corner's distance ``u``. Only triangles with ``|p − m| − ρ ≤ u`` (with a margin of
-    10⁻⁹ of the scene's scale for rounding) can hold the nearest point, and only their exact
-    distances are computed: the same minimum, for a few dozen of a closed mesh's thousands.
+    most that corner's distance ``u``. Only triangles with ``|p − m| − ρ ≤ u`` can hold the
+    nearest point, and only their exact distances are computed: the same minimum, for a few
+    dozen of a closed mesh's thousands. The test keeps a margin of 10⁻⁹ of the distances and
+    sizes involved plus 64 float64 rounding units of the coordinates' magnitude, far above the
+    rounding of ``|p − m| − ρ``. Non-finite coordinates take every triangle (the result is then
+    :func:`point_triangle_distances`'s, NaN included).
     """
     balls = triangles if isinstance(triangles, TriangleBalls) else triangle_balls(triangles)
     p = np.asarray(point, dtype=np.float64)
@@ -722,9 +733,12 @@ def nearest_triangle_distance(triangles: np.ndarray | TriangleBalls, point: np.n
         return math.inf
     to_centre = balls.centre - p
     lower = np.sqrt(np.einsum("tc,tc->t", to_centre, to_centre)) - balls.radius
+    if not np.isfinite(lower).all():
+        return float(point_triangle_distances(balls.tris, p).min())
     nearest = int(np.argmin(lower))  # a triangle whose corners are among the nearest
     corners = balls.tris[lower <= lower[nearest] + 2.0 * balls.radius[nearest]] - p
     upper = float(np.sqrt(np.einsum("tkc,tkc->tk", corners, corners).min()))
-    margin = 1e-9 * max(upper + float(balls.radius.max()), 1e-300)
-    keep = lower <= upper + margin
+    magnitude = max(float(np.abs(p).max()), float(np.abs(balls.centre).max()))
+    margin = 1e-9 * (upper + float(balls.radius.max())) + 64.0 * float(np.finfo(np.float64).eps) * magnitude
+    keep = lower <= upper + max(margin, 1e-300)
     return float(point_triangle_distances(balls.tris[keep], p).min())

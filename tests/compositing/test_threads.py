@@ -1,6 +1,11 @@
-"""compositing._threads.run_shares: shares cover the items once, in order; errors surface."""
+"""compositing._threads: shares cover the items once, in order; errors surface; the OpenMP
+wait policy set at import."""
 
 from __future__ import annotations
+
+import os
+import subprocess
+import sys
 
 import numba
 import numpy as np
@@ -57,20 +62,41 @@ def test_items_must_be_one_dimensional() -> None:
         _threads.run_shares(len, np.zeros((2, 2)))
 
 
-def _policy_after_import(environment: dict[str, str]) -> str:
-    """OMP_WAIT_POLICY in a fresh interpreter after ``import blinn_phong``, with ``environment``."""
-    import os
-    import subprocess
-    import sys
 
+def _after_import(module: str, environment: dict[str, str]) -> list[str]:
+    """In a fresh interpreter with ``environment``: ``OMP_WAIT_POLICY`` after ``import module``,
+    and whether numba's threads had been started by then (they must not: libgomp reads the
+    policy when they start)."""
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"} | environment
-    script = "import os, blinn_phong; print(os.environ.get('OMP_WAIT_POLICY'))"
+    script = (
+        f"import os, sys, {module}\n"
+        "parallel = sys.modules.get('numba.np.ufunc.parallel')\n"
+        "print(os.environ.get('OMP_WAIT_POLICY'), bool(getattr(parallel, '_is_initialized', False)))"
+    )
     done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
-    return done.stdout.strip()
+    return done.stdout.split()
 
 
-def test_importing_makes_openmp_threads_sleep_unless_the_process_chose():
+@pytest.mark.parametrize("module", ["compositing", "blinn_phong"])
+def test_importing_makes_openmp_threads_sleep_unless_the_process_chose(module: str) -> None:
     # the package's pool threads and numba's OpenMP threads share the cores: spinning OpenMP
     # threads would hold them (compositing._threads' docstring); a chosen policy is kept
-    assert _policy_after_import({}) == "PASSIVE"
-    assert _policy_after_import({"OMP_WAIT_POLICY": "ACTIVE"}) == "ACTIVE"
+    assert _after_import(module, {}) == ["PASSIVE", "False"]
+    assert _after_import(module, {"OMP_WAIT_POLICY": "ACTIVE"}) == ["ACTIVE", "False"]
+
+
+def test_the_policy_is_not_claimed_once_numba_threads_run() -> None:
+    # libgomp has read its environment already: nothing can change, and the function says so
+    script = (
+        "import numba, numpy as np\n"
+        "@numba.njit(parallel=True)\n"
+        "def f(a):\n"
+        "    for i in numba.prange(a.size):\n"
+        "        a[i] += 1\n"
+        "f(np.zeros(4))\n"
+        "from compositing._threads import prefer_passive_openmp\n"
+        "print(prefer_passive_openmp())"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    assert done.stdout.split() == ["None"]

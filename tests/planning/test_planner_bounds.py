@@ -104,6 +104,8 @@ def test_nearest_triangle_distance_is_the_smallest_exact_distance():
         for p in [*rng.normal(size=(20, 3)) * 3, tris[0, 0], tris.mean(axis=(0, 1))]:
             assert nearest_triangle_distance(tris, p) == point_triangle_distances(tris, p).min()
     assert nearest_triangle_distance(np.zeros((0, 3, 3)), np.zeros(3)) == math.inf
+    # a non-finite point: every triangle taken, as the full minimum gives it
+    assert math.isnan(nearest_triangle_distance(sphere, np.array([np.nan, 0.0, 0.0])))
 
 
 # --------------------------------------------------------------------------- att·spot
