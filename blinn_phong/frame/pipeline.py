@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from blinn_phong._numba import use_compiled
+from blinn_phong._scratch import carve, carved_bytes
 from blinn_phong.frame.fused import shade_plain_fragments_compiled, shade_plain_winners_compiled
 from blinn_phong.frame.id_passes import Cryptomatte, passes_from_fragments, passes_from_winners
 from blinn_phong.frame.light_groups import LightGroups
@@ -335,14 +336,9 @@ def _empty_frame(height: int, width: int, shadow: bool) -> FrameImage:
     about 1,800 page faults and 2 ms of a 640×360 frame); two are reused by the allocator from
     the previous frame or mapped with huge pages."""
     names = ("ambient", "diffuse", "specular") + (("shadow",) if shadow else ())
-    shapes = [(), (3,)] + [(1,) if n == "shadow" else (3,) for n in names]
-    sizes = [height * width * (shape[0] if shape else 1) for shape in shapes]
-    block = np.empty(sum(sizes), np.float32)
-    ends = np.cumsum(sizes)
-    depth, normal, *passes = (
-        block[end - size : end].reshape((height, width, *shape))
-        for shape, size, end in zip(shapes, sizes, ends, strict=True)
-    )
+    parts = [((height, width), np.float32), ((height, width, 3), np.float32)]
+    parts += [((height, width, 1 if n == "shadow" else 3), np.float32) for n in names]
+    depth, normal, *passes = carve(np.empty(carved_bytes(*parts), np.uint8), *parts)
     rgba = np.empty((height, width, 4), np.float32)
     return FrameImage(rgba, depth, normal, dict(zip(names, passes, strict=True)))
 
